@@ -1,0 +1,126 @@
+"""Encoder counts to wheel and body speeds.
+
+The Roomba / Create 2 reports each wheel's encoder as an unsigned 16-bit
+counter that wraps (``../shared/spec/roomba_oi.md`` section 7). The counts
+are unwrapped with the shortest signed step on the 16-bit ring, which is
+correct in both directions as long as fewer than 32768 ticks (14.5 m of
+wheel travel) pass between two frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lti_motion.exceptions import ShapeError
+
+__all__ = [
+    "TICK_MODULUS",
+    "body_speeds_from_ticks",
+    "tick_deltas",
+    "unwrap_ticks",
+]
+
+#: Encoder counters are 16-bit: they wrap at 65536 ticks.
+TICK_MODULUS = 1 << 16
+
+
+def tick_deltas(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
+    """Signed tick increments between consecutive raw counts.
+
+    Parameters
+    ----------
+    ticks : array_like of int
+        Raw counts (any integer values; taken modulo 65536).
+    axis : int
+        The time axis.
+
+    Returns
+    -------
+    ndarray of int64
+        One element fewer than ``ticks`` along ``axis``:
+        ``((c - p + 32768) mod 65536) - 32768`` (spec section 7.2).
+
+    Examples
+    --------
+    >>> tick_deltas(np.array([65530, 5, 65530])).tolist()
+    [11, -11]
+    """
+    diff = np.diff(np.asarray(ticks, dtype=np.int64), axis=axis)
+    half = TICK_MODULUS // 2
+    return (diff + half) % TICK_MODULUS - half
+
+
+def unwrap_ticks(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
+    """Unwrap raw 16-bit counts into a continuous count starting at the first sample.
+
+    Parameters
+    ----------
+    ticks : array_like of int
+        Raw counts; the first sample along ``axis`` is the origin.
+    axis : int
+        The time axis.
+
+    Returns
+    -------
+    ndarray of int64
+        Same shape as ``ticks``; the first sample along ``axis`` is 0.
+
+    Examples
+    --------
+    >>> unwrap_ticks(np.array([65534, 65535, 0, 1, 0, 65535])).tolist()
+    [0, 1, 2, 3, 2, 1]
+    """
+    ticks = np.asarray(ticks, dtype=np.int64)
+    steps = tick_deltas(ticks, axis=axis)
+    zero_shape = list(ticks.shape)
+    zero_shape[axis] = 1
+    return np.cumsum(np.concatenate([np.zeros(zero_shape, np.int64), steps], axis=axis), axis=axis)
+
+
+def body_speeds_from_ticks(
+    ticks: np.ndarray,
+    t_s: np.ndarray,
+    *,
+    m_per_tick: float,
+    wheel_base_m: float,
+) -> np.ndarray:
+    """Body speeds (v, w) over each frame interval from raw encoder counts.
+
+    Parameters
+    ----------
+    ticks : ndarray of int, shape (n, 2)
+        Raw counts (left, right) of consecutive frames.
+    t_s : ndarray, shape (n,)
+        Frame timestamps [s].
+    m_per_tick : float
+        Encoder scale [m/tick] (paper eq. 13).
+    wheel_base_m : float
+        Distance between the wheels' contact points [m].
+
+    Returns
+    -------
+    ndarray, shape (n - 1, 2)
+        ``v = (vR + vL) / 2`` [m/s] and ``w = (vR - vL) / b`` [rad/s] over
+        each interval (READING-NOTES, Signals).
+
+    Raises
+    ------
+    ShapeError
+        If the shapes do not match.
+    ValueError
+        If timestamps do not increase.
+    """
+    ticks = np.asarray(ticks)
+    t_s = np.asarray(t_s, dtype=float)
+    if ticks.ndim != 2 or ticks.shape[1] != 2 or t_s.shape != (ticks.shape[0],):
+        raise ShapeError(
+            f"expected ticks of shape (n, 2) and t_s of shape (n,), got {ticks.shape} "
+            f"and {t_s.shape}"
+        )
+    dt = np.diff(t_s)
+    if np.any(dt <= 0):
+        raise ValueError(f"timestamps must increase; first bad step at index {np.argmin(dt)}")
+    wheel = tick_deltas(ticks, axis=0) * (m_per_tick / dt[:, None])
+    v = 0.5 * (wheel[:, 1] + wheel[:, 0])
+    w = (wheel[:, 1] - wheel[:, 0]) / wheel_base_m
+    return np.stack([v, w], axis=1)
