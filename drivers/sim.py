@@ -44,7 +44,7 @@ log = logging.getLogger(__name__)
 
 _FLOOR_NAMES = list(FLOORS)
 _FLOOR_TABLE = np.array(
-    [[f.friction, f.slip_scale_m_s, f.rolling_resistance, f.compression, f.roughness_n, f.scrub]
+    [[f.friction, f.slip_ratio, f.rolling_resistance, f.compression, f.roughness_n, f.scrub]
      for f in FLOORS.values()]
 )
 _BLOCK = 1024           # periods per block of pre-drawn noise
@@ -78,6 +78,7 @@ def _params_row(p: RobotParams, floor_default: int) -> np.ndarray:
     ]
     row[K.P_IRANG:K.P_IRANG + 6] = p.ir_angles_rad
     row[K.P_DERR0:K.P_DERR0 + 2] = p.wheel_diameter_errors
+    row[K.P_CASTER] = p.caster_offset_m
     return row
 
 

@@ -46,11 +46,11 @@ class Floor:
         Surface name.
     friction : float
         Peak traction coefficient mu (traction limit = mu * normal force).
-    slip_scale_m_s : float
-        Slip speed at which traction reaches tanh(1) = 76% of its limit [m/s];
+    slip_ratio : float
+        Slip ratio at which traction reaches tanh(1) = 76% of its limit;
         larger means a softer contact that creeps more under load.
     rolling_resistance : float
-        Rolling-resistance coefficient (force = c * weight) of tyres and caster.
+        Rolling-resistance coefficient (force = c * normal force) of tyres and caster.
     compression : float
         Tyre compression: the effective rolling radius is ``r (1 - compression)``,
         so ground travel per encoder tick drops by this fraction.
@@ -58,12 +58,12 @@ class Floor:
         Standard deviation of the random force per wheel the surface applies,
         held over one sensor period [N].
     scrub : float
-        Yaw scrub-resistance coefficient (torque = scrub * weight * b / 2).
+        Tyre twisting resistance when turning (torque = scrub * weight * b / 2).
     """
 
     name: str
     friction: float
-    slip_scale_m_s: float
+    slip_ratio: float
     rolling_resistance: float
     compression: float
     roughness_n: float
@@ -73,12 +73,12 @@ class Floor:
 FLOORS: dict[str, Floor] = {
     f.name: f
     for f in (
-        Floor("hard", friction=0.9, slip_scale_m_s=0.03, rolling_resistance=0.015,
-              compression=0.0, roughness_n=0.05, scrub=0.02),
-        Floor("tile", friction=0.45, slip_scale_m_s=0.03, rolling_resistance=0.012,
-              compression=0.0, roughness_n=0.05, scrub=0.015),
-        Floor("carpet", friction=0.8, slip_scale_m_s=0.06, rolling_resistance=0.05,
-              compression=0.03, roughness_n=0.3, scrub=0.06),
+        Floor("hard", friction=0.9, slip_ratio=0.08, rolling_resistance=0.015,
+              compression=0.0, roughness_n=0.05, scrub=0.005),
+        Floor("tile", friction=0.45, slip_ratio=0.08, rolling_resistance=0.012,
+              compression=0.0, roughness_n=0.05, scrub=0.004),
+        Floor("carpet", friction=0.8, slip_ratio=0.15, rolling_resistance=0.05,
+              compression=0.03, roughness_n=0.3, scrub=0.012),
     )
 }
 
@@ -215,6 +215,8 @@ class RobotParams:
         Radius of gyration of the payload about the centre [m].
     drive_weight_fraction : float
         Fraction of the weight carried by the two drive wheels (the rest on the caster).
+    caster_offset_m : float
+        Distance of the front caster ahead of the wheel axle [m].
     wheel_mass_kg : float
         Rotor and wheel inertia reflected to the rim, ``J / r^2`` [kg].
     motor_k : float
@@ -264,6 +266,7 @@ class RobotParams:
     yaw_inertia_kg_m2: float = 0.055
     payload_radius_m: float = 0.08
     drive_weight_fraction: float = 0.85
+    caster_offset_m: float = 0.13
     wheel_mass_kg: float = 0.4
     motor_k: float = 18.0
     motor_resistance_ohm: float = 2.0

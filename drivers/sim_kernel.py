@@ -19,19 +19,26 @@ Model, per wheel ``i`` (left 0, right 1), all at the wheel rim:
 - DC motor, quasi-static armature: ``i = clip((V - g k u) / R, +-i_max)``,
   force ``g k i``, where ``g`` is the motor's health (1 = nominal);
 - wheel: ``m_w du/dt = F_motor - F_gear(u) - (1 - c) F_trac + F_rough``;
-- contact: slip ``s = (1 - c) u - (v -+ w b / 2)`` and traction
-  ``F_trac = mu N tanh(s / s0)`` (smooth Coulomb limit), with tyre
-  compression ``c`` shrinking the rolling radius;
-- body: ``M dv/dt = F_L + F_R - c_rr M g tanh(v / 0.01)`` and
-  ``I dw/dt = (F_R - F_L) b / 2 - scrub M g (b / 2) tanh(w / 0.05)``;
+- contact: slip speed ``s = (1 - c) u - v_c`` with the contact point's speed
+  ``v_c = v -+ w b / 2``, slip ratio ``kappa = s / max(|(1 - c) u|, |v_c|, 0.05)``
+  and traction ``F_trac = mu N tanh(kappa / kappa0)`` (a smooth traction limit;
+  Pacejka, "Tire and Vehicle Dynamics", 2012, ch. 1: force grows with slip
+  ratio up to a peak), with tyre compression ``c`` shrinking the rolling radius;
+  rolling resistance ``c_rr N`` opposes each wheel's contact motion;
+- body: ``M dv/dt = sum(F_trac - F_roll) - F_caster,x`` and
+  ``I dw/dt = sum(+-b / 2 (F_trac - F_roll)) - x_c F_caster,y - M_twist``, where the
+  front caster at ``x_c`` ahead of the axle rolls against ``c_rr N_caster`` along
+  its own contact velocity ``(v, w x_c)``, and ``M_twist = scrub M g (b / 2)
+  tanh(w / 0.05)`` is the tyres' resistance to twisting in place;
 - pose: the exact constant-speed arc over each mechanical sub-step;
 - encoders count wheel rotation in the commanded direction (up when the
   command is zero), as the Roomba's non-quadrature encoders do
   (``../shared/spec/roomba_oi.md`` section 6.2), so slip is invisible to them.
 
 The mechanics is integrated with semi-implicit Euler at a quarter of the
-controller step; the stiffest mode (slip) has ``h * mu N / s0 * sum(1/m)`` well
-below 1 for every floor, so it neither oscillates nor drifts.
+controller step; each wheel's update is implicit in its own slip (the traction
+force linearised about the current slip), which keeps the stiff, light wheel
+mode stable at low speed, where the slip-ratio contact is stiffest.
 """
 
 from __future__ import annotations
@@ -63,7 +70,8 @@ N_STATE = 19
  P_RADIUS, P_IRR, P_IRREF, P_IRNOISE, P_FLOOR0) = range(29)
 P_IRANG = 29    # 29..34: light-bump sensor angles [rad]
 P_DERR0 = 35    # 35, 36: relative wheel-diameter errors (left, right)
-N_PARAMS = 37
+P_CASTER = 37   # caster offset ahead of the axle [m]
+N_PARAMS = 38
 
 # --- per-period inputs (fault schedule) ----------------------------------------
 PP_FLOOR, PP_PAYLOAD, PP_GAIN0, PP_DELAY, PP_STUCK0, PP_STALL0 = 0, 1, 2, 4, 5, 7
@@ -74,10 +82,11 @@ NZ_JITTER, NZ_ROUGH0, NZ_IR0 = 0, 1, 3
 N_NOISE = 9     # jitter U(-1/2, 1/2), roughness N(0,1) L/R, IR N(0,1) x 6
 
 # --- floor table columns -------------------------------------------------------
-F_MU, F_S0, F_CRR, F_COMP, F_ROUGH, F_SCRUB = range(6)
+F_MU, F_KAPPA, F_CRR, F_COMP, F_ROUGH, F_SCRUB = range(6)
 
 QUEUE_LEN = 32
 N_MECH = 4
+V_SLIP_REF = 0.05     # speed below which slip is measured against this speed [m/s]
 
 
 @njit(cache=True)
@@ -222,7 +231,8 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
             normal = 0.5 * p[P_FRAC] * mass * GRAVITY
             keep = 1.0 - fl[F_COMP]
             trac_max = fl[F_MU] * normal
-            f_rr = fl[F_CRR] * mass * GRAVITY
+            roll_wheel = fl[F_CRR] * normal
+            roll_caster = fl[F_CRR] * (1.0 - p[P_FRAC]) * mass * GRAVITY
             t_scrub = fl[F_SCRUB] * mass * GRAVITY * half_b
             for s in range(nsub):
                 t = t_k + s * dt
@@ -256,7 +266,8 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                     torque = 0.0
                     for wh in range(2):
                         u = st[U0 + wh]
-                        if pp[PP_STALL0 + wh] > 0.5:
+                        stalled = pp[PP_STALL0 + wh] > 0.5
+                        if stalled:
                             st[U0 + wh] = 0.0
                             u = 0.0
                         kmot = p[P_K] * pp[PP_GAIN0 + wh] * (1.0 if wh == 0 else p[P_BAL])
@@ -265,13 +276,23 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                         f_gear = p[P_BG] * u + p[P_FC] * math.tanh(u / 0.005)
                         side = -1.0 if wh == 0 else 1.0
                         contact = st[V] + side * half_b * st[W]
-                        f_trac = trac_max * math.tanh((keep * u - contact) / fl[F_S0])
+                        # traction from the slip ratio, regularised at low speed
+                        slip = keep * u - contact
+                        vref = max(abs(keep * u), abs(contact), V_SLIP_REF)
+                        th = math.tanh(slip / (fl[F_KAPPA] * vref))
+                        f_trac = trac_max * th
+                        stiff = trac_max * (1.0 - th * th) / (fl[F_KAPPA] * vref)
                         f_rough = fl[F_ROUGH] * nz[NZ_ROUGH0 + wh]
-                        if pp[PP_STALL0 + wh] <= 0.5:
-                            du = (kmot * cur - f_gear - keep * f_trac + f_rough) / p[P_MW]
-                            st[U0 + wh] = u + h * du
-                        f_body += f_trac
-                        torque += side * half_b * f_trac
+                        if not stalled:
+                            # implicit in the wheel's own slip: stable for stiff contacts
+                            du = (h * (kmot * cur - f_gear - keep * f_trac + f_rough)
+                                  / (p[P_MW] + h * keep * keep * stiff))
+                            st[U0 + wh] = u + du
+                            f_trac += stiff * keep * du
+                        # rolling resistance where this wheel meets the floor
+                        f_roll = roll_wheel * math.tanh(contact / 0.01)
+                        f_body += f_trac - f_roll
+                        torque += side * half_b * (f_trac - f_roll)
                         # encoder: rotation counted in the commanded direction
                         direction = -1.0 if st[SP0 + wh] < 0.0 else 1.0
                         dtick = (abs(st[U0 + wh]) * h / (circ * (1.0 + p[P_DERR0 + wh]))
@@ -279,7 +300,11 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                         st[TICK0 + wh] += dtick
                         if pp[PP_STUCK0 + wh] > 0.5:
                             st[OFF0 + wh] += dtick
-                    f_body -= f_rr * math.tanh(st[V] / 0.01)
+                    # front caster: rolling resistance against its contact velocity
+                    cy = st[W] * p[P_CASTER]
+                    cspeed = max(math.sqrt(st[V] * st[V] + cy * cy), 0.01)
+                    f_body -= roll_caster * st[V] / cspeed
+                    torque -= p[P_CASTER] * roll_caster * cy / cspeed
                     torque -= t_scrub * math.tanh(st[W] / 0.05)
                     st[V] += h * f_body / mass
                     st[W] += h * torque / inertia

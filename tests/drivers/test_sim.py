@@ -90,7 +90,7 @@ def test_slip_under_hard_acceleration_shows_in_truth_not_encoders():
 
     tile_accel, tile_cruise = encoder_excess("tile")
     hard_accel, _ = encoder_excess("hard")
-    assert tile_accel > 0.04                  # > 4% of the travel is wheel spin
+    assert tile_accel > 0.03                  # > 3% of the travel is wheel spin
     assert tile_accel > 2 * hard_accel        # the traction limit, not just tyre creep
     assert tile_cruise < 0.01
 
