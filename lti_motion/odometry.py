@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from lti_motion.exceptions import ShapeError
+from lti_motion.kinematics import body_from_wheel
 
 __all__ = [
     "TICK_MODULUS",
@@ -108,7 +109,7 @@ def body_speeds_from_ticks(
     ShapeError
         If the shapes do not match.
     ValueError
-        If timestamps do not increase.
+        If timestamps do not increase, or ``wheel_base_m`` is not positive.
     """
     ticks = np.asarray(ticks)
     t_s = np.asarray(t_s, dtype=float)
@@ -121,6 +122,4 @@ def body_speeds_from_ticks(
     if np.any(dt <= 0):
         raise ValueError(f"timestamps must increase; first bad step at index {np.argmin(dt)}")
     wheel = tick_deltas(ticks, axis=0) * (m_per_tick / dt[:, None])
-    v = 0.5 * (wheel[:, 1] + wheel[:, 0])
-    w = (wheel[:, 1] - wheel[:, 0]) / wheel_base_m
-    return np.stack([v, w], axis=1)
+    return body_from_wheel(wheel, wheel_base_m=wheel_base_m)

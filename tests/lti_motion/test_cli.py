@@ -1,0 +1,23 @@
+"""The command line, run as a user runs it (short horizons)."""
+
+import json
+
+import pytest
+
+from lti_motion.cli import build_parser, main
+
+
+def test_demo_writes_plot_and_metrics(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--seed", "3"]) == 0
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert (tmp_path / "trajectory.png").stat().st_size > 10_000
+    # the encoders cannot see slip or the true wheel geometry: odometry drifts, but not wildly
+    assert 0.0 < metrics["odometry_final_position_error_m"] < 0.5
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_help_and_bad_choices(capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["demo", "--floor", "ice"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'ice'" in capsys.readouterr().err
