@@ -1,0 +1,172 @@
+"""Versioned JSON documents, written atomically and checked on reading.
+
+A saved calibration must survive a crash in the middle of a write and must
+never be read back silently wrong. So a document is
+
+- JSON (no pickle: readable, diffable, safe to load), with a ``"format"``
+  name, an integer ``"version"`` and a ``"sha256"`` of its canonical content;
+- written to a temporary file in the target's directory, flushed and
+  ``fsync``-ed, then moved over the target with ``os.replace`` (atomic on
+  POSIX and Windows), and the directory entry synced;
+- read back with every failure (truncation, damage, another format or
+  version, a hand edit) turned into a :class:`ModelFileError` that says what
+  is wrong.
+
+Floats are written with Python's shortest round-trip representation, so
+arrays come back bit for bit. The schema of a document (which keys it holds)
+belongs to its owner, e.g. :mod:`lti_motion.model`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lti_motion.exceptions import ModelFileError
+
+__all__ = ["decode_array", "encode_array", "read_document", "write_document"]
+
+
+def encode_array(arr: np.ndarray) -> dict[str, Any]:
+    """``{"shape": [...], "data": [...]}`` for a float array (any shape, also empty).
+
+    Examples
+    --------
+    >>> encode_array(np.eye(2))
+    {'shape': [2, 2], 'data': [1.0, 0.0, 0.0, 1.0]}
+    """
+    arr = np.asarray(arr, dtype=float)
+    return {"shape": list(arr.shape), "data": arr.ravel().tolist()}
+
+
+def decode_array(obj: Any, name: str) -> np.ndarray:
+    """Inverse of :func:`encode_array`.
+
+    Raises
+    ------
+    ModelFileError
+        If ``obj`` is not an encoded array or its data does not fill its shape.
+    """
+    try:
+        shape = tuple(int(s) for s in obj["shape"])
+        data = np.array(obj["data"], dtype=float)
+        return data.reshape(shape)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelFileError(f"array {name!r} is damaged ({exc})") from None
+
+
+def _digest(payload: Mapping[str, Any]) -> str:
+    canonical = json.dumps(payload, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def write_document(path: str | os.PathLike, payload: Mapping[str, Any], *, fmt: str,
+                   version: int) -> Path:
+    """Write ``payload`` as a versioned, checksummed JSON document, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        Target file; its directory must exist.
+    payload : mapping
+        JSON-serialisable content (finite floats only); must not use the keys
+        ``"format"``, ``"version"`` or ``"sha256"``.
+    fmt : str
+        Format name.
+    version : int
+        Format version.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        If the payload holds NaN or infinity or is not serialisable.
+    OSError
+        If the file cannot be written; the previous file, if any, is intact
+        and no temporary file is left behind.
+    """
+    path = Path(path)
+    doc = {**payload, "format": fmt, "version": int(version)}
+    doc["sha256"] = _digest(doc)
+    text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    if os.name == "posix":  # make the rename itself durable
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+    return path
+
+
+def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...]) -> dict:
+    """Read a document written by :func:`write_document` and check it.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    fmt : str
+        Expected format name.
+    versions : tuple of int
+        Versions this reader understands.
+
+    Returns
+    -------
+    dict
+        The document (including ``"format"``, ``"version"``, ``"sha256"``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    ModelFileError
+        If the file is not valid UTF-8 JSON (damaged or truncated), is of
+        another format or an unknown version, or its checksum does not match
+        (damaged or edited by hand).
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_bytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelFileError(f"{path} is damaged or truncated: not valid JSON ({exc}); "
+                             "restore it from a backup or calibrate again") from None
+    if not isinstance(doc, dict) or doc.get("format") != fmt:
+        found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise ModelFileError(f"{path} is not a {fmt!r} file (format {found!r})")
+    version = doc.get("version")
+    if isinstance(version, bool) or not isinstance(version, int) or version not in versions:
+        raise ModelFileError(f"{path} has {fmt!r} version {version!r}; this lti-motion reads "
+                             f"version(s) {list(versions)}: upgrade lti-motion or calibrate again")
+    stored = doc.get("sha256")
+    body = {k: v for k, v in doc.items() if k != "sha256"}
+    try:
+        digest = _digest(body)
+    except ValueError as exc:
+        raise ModelFileError(f"{path} is damaged: {exc}") from None
+    if stored != digest:
+        raise ModelFileError(f"{path} is damaged or was edited: its checksum does not match its "
+                             "content; restore it from a backup or calibrate again")
+    return doc

@@ -1,0 +1,154 @@
+"""Tests of lti_motion.fir: FIR from steps and by least squares, state-space simulation.
+
+The synthetic plant is the one of test_arx.py (second-order wheels, 4-sample
+delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
+"""
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from lti_motion.exceptions import CalibrationError, ShapeError
+from lti_motion.excitation import random_held_normal, step_sequence
+from lti_motion.fir import (
+    estimate_fir,
+    fir_from_steps,
+    fir_state_space,
+    markov_parameters,
+    simulate_state_space,
+    simulate_state_space_loop,
+)
+from lti_motion.metrics import fit_percent
+
+DT, BASE, DELAY = 0.015, 0.235, 4
+NOISE = (0.003, 0.02)
+
+
+def wheel_filters():
+    out = []
+    for poles, gain in (((0.8 + 0.15j, 0.8 - 0.15j), 1.0), ((0.75 + 0.2j, 0.75 - 0.2j), 0.95)):
+        den = np.poly(poles).real
+        out.append((np.array([1.0, 0.3]) * gain * den.sum() / 1.3, den))
+    return out
+
+
+def plant(u, rng=None):
+    delayed = np.zeros_like(u)
+    delayed[DELAY:] = u[:-DELAY]
+    wheels = np.column_stack([lfilter(b, a, delayed[:, i]) for i, (b, a) in
+                              enumerate(wheel_filters())])
+    y = np.column_stack([(wheels[:, 1] + wheels[:, 0]) / 2, (wheels[:, 1] - wheels[:, 0]) / BASE])
+    return y if rng is None else y + rng.normal(size=y.shape) * NOISE
+
+
+def true_impulse_response(n):
+    """taps[i, out, in] of the plant."""
+    taps = np.empty((n, 2, 2))
+    for wheel in range(2):
+        u = np.zeros((n, 2))
+        u[0, wheel] = 1.0
+        taps[:, :, wheel] = plant(u)
+    return taps
+
+
+SEQ = step_sequence(amplitude_m_s=0.3, hold_s=1.0, rest_s=1.0, dt_s=DT)
+
+
+def test_noise_free_steps_give_the_true_impulse_response():
+    y = plant(SEQ.commands_m_s)
+    fit = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ)
+    truth = true_impulse_response(80)
+    # exact up to the not-quite-settled level before each falling edge (0.83^66 ~ 5e-6)
+    np.testing.assert_allclose(fit.taps, truth[: fit.n_taps], atol=2e-5)
+    np.testing.assert_allclose(fit.taps[:DELAY], 0.0, atol=2e-5)  # the transport delay
+    # the length is where all four step responses stay within 5 % of their peak of
+    # their final value, plus the margin
+    step = np.cumsum(truth, axis=0)
+    last = max(np.flatnonzero(np.abs(step[:, o, i] - step[-1, o, i])
+                              > 0.05 * np.abs(step[:, o, i]).max())[-1]
+               for o in range(2) for i in range(2))
+    assert fit.n_taps == last + 1 + 2
+    assert fit.source == "steps" and fit.step_responses.shape == (67, 2, 2)
+    np.testing.assert_allclose(fit.step_responses[-1], truth.sum(axis=0), atol=2e-5)
+
+
+def test_noisy_steps_give_a_fir_that_free_runs_above_90_percent(rng):
+    u, y = SEQ.commands_m_s, plant(SEQ.commands_m_s, rng)
+    both = fir_from_steps(u, y, phases=SEQ)
+    rising = fir_from_steps(u, y, phases=SEQ, edges="rising", max_taps=both.n_taps)
+    assert 10 <= both.n_taps <= 30
+    u_val = random_held_normal(n=5000, dt_s=DT, rng=rng, std_m_s=0.2)
+    y_val = plant(u_val, rng)
+    fits = {}
+    for name, fit in (("both", both), ("rising", rising)):
+        ss = fir_state_space(fit.taps)
+        fits[name] = fit_percent(y_val, simulate_state_space(ss.A, ss.B, ss.C, ss.D, u_val)[0])
+    assert np.all(fits["both"] >= 90.0)
+    truth = true_impulse_response(both.n_taps)
+    err_both = np.abs(both.taps - truth).mean()
+    err_rising = np.abs(rising.taps - truth[: rising.n_taps]).mean()
+    assert err_both < err_rising  # averaging the edges halves the noise variance
+
+
+def test_steps_that_do_not_match_the_phases_raise():
+    u = SEQ.commands_m_s.copy()
+    y = plant(u)
+    with pytest.raises(CalibrationError, match="no step of wheel R"):
+        fir_from_steps(u, y, phases=(SEQ.left_on, SEQ.left_off, SEQ.left_off, SEQ.right_off))
+    u[10, 1] = 0.1
+    with pytest.raises(CalibrationError, match="change inside the phase"):
+        fir_from_steps(u, y, phases=SEQ)
+    with pytest.raises(CalibrationError, match="do not fit"):
+        fir_from_steps(u[:100], y[:100], phases=SEQ)
+    with pytest.raises(ShapeError, match="four slices"):
+        fir_from_steps(u, y, phases=SEQ.phases[:3])
+
+
+def test_least_squares_fir_on_random_data(rng):
+    u = random_held_normal(n=6000, dt_s=DT, rng=rng, std_m_s=0.2)
+    fit = estimate_fir([(u, plant(u))], n_taps=36, delay=DELAY)
+    truth = true_impulse_response(fit.n_taps)
+    # only the truncated tail differs: the last tap absorbs it
+    scale = np.abs(truth).max(axis=0)
+    np.testing.assert_allclose(fit.taps[:-1] / scale, truth[:-1] / scale, atol=1e-3)
+    np.testing.assert_allclose(fit.taps[-1] / scale, truth[-1] / scale, atol=1e-2)
+    assert fit.source == "lstsq" and fit.n_taps == 40 and np.all(fit.taps[:DELAY] == 0)
+    with pytest.raises(CalibrationError, match="at least"):
+        estimate_fir([(u[:50], plant(u[:50]))], n_taps=36)
+
+
+def test_fir_realisation_has_the_taps_as_markov_parameters(rng):
+    taps = rng.normal(size=(7, 2, 2))
+    ss = fir_state_space(taps)
+    np.testing.assert_allclose(markov_parameters(ss.A, ss.B, ss.C, ss.D, 10)[:7], taps,
+                               atol=1e-15)
+    np.testing.assert_array_equal(markov_parameters(ss.A, ss.B, ss.C, ss.D, 10)[7:], 0.0)
+    u = rng.normal(size=(50, 2))
+    direct = sum(np.einsum("oi,ni->no", taps[i], np.vstack([np.zeros((i, 2)), u[: 50 - i]]))
+                 for i in range(7))
+    np.testing.assert_allclose(simulate_state_space(*ss[:4], u)[0], direct, atol=1e-12)
+
+
+@pytest.mark.parametrize("nz", [1, 6, 24])
+@pytest.mark.parametrize("n", [1, 5, 127, 128, 129, 700])
+@pytest.mark.parametrize("batch", [(), (3,)])
+def test_block_simulation_equals_the_plain_recursion(rng, nz, n, batch):
+    a = rng.normal(size=(nz, nz))
+    a *= 0.97 / np.abs(np.linalg.eigvals(a)).max()
+    b, c, d = rng.normal(size=(nz, 2)), rng.normal(size=(2, nz)), rng.normal(size=(2, 2))
+    u = rng.normal(size=(*batch, n, 2))
+    z0 = rng.normal(size=(*batch, nz))
+    y_fast, z_fast = simulate_state_space(a, b, c, d, u, z0=z0)
+    y_ref, z_ref = simulate_state_space_loop(a, b, c, d, u, z0=z0)
+    np.testing.assert_allclose(y_fast, y_ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(z_fast, z_ref, rtol=0, atol=1e-9)
+
+
+def test_simulation_checks_shapes(rng):
+    a, b, c, d = np.eye(2) * 0.5, np.ones((2, 2)), np.ones((2, 2)), np.zeros((2, 2))
+    with pytest.raises(ShapeError, match=r"u of shape \(\.\.\., n, 2\)"):
+        simulate_state_space(a, b, c, d, np.zeros((5, 3)))
+    with pytest.raises(ShapeError, match="z0"):
+        simulate_state_space(a, b, c, d, np.zeros((5, 2)), z0=np.zeros(3))
+    y, z = simulate_state_space(a, b, c, d, np.zeros((0, 2)))
+    assert y.shape == (0, 2) and z.shape == (2,)
