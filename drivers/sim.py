@@ -279,6 +279,27 @@ class Simulator:
         out = self._advance(cmd.reshape(self.n, -1, 2))
         return out if self.batch else out.robot(0)
 
+    def place(self, pose: np.ndarray | Sequence[float]) -> None:
+        """Put the robot(s) down at ``pose``, at rest, as a person carrying it would.
+
+        Wheel and body speeds, the speed loop's integrators and pending
+        commands are cleared; encoder counts, time and the fault schedule go on.
+
+        Parameters
+        ----------
+        pose : array_like, shape (3,) or (N, 3)
+            New pose(s) (x m, y m, heading rad).
+        """
+        pose = np.broadcast_to(np.asarray(pose, dtype=float), (self.n, 3))
+        if not np.all(np.isfinite(pose)):
+            raise SimulatorError("place() needs a finite pose")
+        keep = self._state[:, [K.TICK0, K.TICK0 + 1, K.OFF0, K.OFF0 + 1, K.T_NOW]]
+        self._state[:] = 0.0
+        self._state[:, [K.TICK0, K.TICK0 + 1, K.OFF0, K.OFF0 + 1, K.T_NOW]] = keep
+        self._state[:, K.LAST_EFF] = keep[:, -1]
+        self._state[:, :3] = pose
+        self._qinfo[:] = 0
+
     # -- internals --------------------------------------------------------------
 
     def _check_commands(self, cmd: np.ndarray) -> np.ndarray:

@@ -52,7 +52,7 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2",
     from drivers.sim import Simulator
     from drivers.sim_config import get_preset
     from lti_motion.kinematics import integrate_poses
-    from lti_motion.odometry import body_speeds_from_ticks
+    from lti_motion.odometry import body_speeds_from_ticks, stream_clock
 
     params = get_preset(preset)
     start = np.array([1.75, 1.75, 0.0])
@@ -62,9 +62,10 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2",
     print(f"simulating {len(cmd) * params.period_s:.1f} s of driving "
           f"({preset}, {floor} floor, seed {seed}) ...", flush=True)
     log = sim.run(cmd)
-    speeds = body_speeds_from_ticks(log.ticks, log.t_s, m_per_tick=params.m_per_tick,
+    t_s = stream_clock(log.t_s, log.dt_s)
+    speeds = body_speeds_from_ticks(log.ticks, t_s, m_per_tick=params.m_per_tick,
                                     wheel_base_m=params.wheel_base_m)
-    odom = integrate_poses(speeds, np.diff(log.t_s), initial_pose=log.true_pose[0])
+    odom = integrate_poses(speeds, np.diff(t_s), initial_pose=log.true_pose[0])
     truth = log.true_pose
     final_err = float(np.linalg.norm(odom[-1, :2] - truth[-1, :2]))
     closure = float(np.linalg.norm(truth[-1, :2] - start[:2]))

@@ -1,0 +1,115 @@
+"""Calibration by driving, on the simulator, against its ground truth.
+
+These are the acceptance runs of the core-models issue. What they assert is what the
+pipeline reaches today on a simulator that is deliberately not linear; where that falls
+short of the issue's targets (free-run fit of 90%), the test says so in its name and
+guards the level reached, and docs/calibration.md explains the gap.
+"""
+
+import numpy as np
+import pytest
+
+from drivers.sim import Simulator
+from drivers.sim_config import Room, get_preset
+from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
+from lti_motion.excitation import random_held_normal, rotation_in_place
+from lti_motion.odometry import stream_clock, unwrap_ticks
+
+OPEN_FLOOR = (30.0, 30.0, 0.0)    # carried out of the 5 m room: nothing within 25 m
+
+
+def _straight_m_per_tick(params, floor):
+    """The simulator's true ground travel per tick while driving straight at 0.25 m/s."""
+    log = Simulator(params, seed=0, floor=floor, room=Room.empty()).run(np.full((600, 2), 0.25))
+    span = slice(200, None)
+    path = np.linalg.norm(np.diff(log.true_pose[span, :2], axis=0), axis=1).sum()
+    ticks = unwrap_ticks(log.ticks[span])
+    return path / (ticks[-1] - ticks[0]).mean()
+
+
+@pytest.mark.parametrize("floor", ["hard", "carpet"])
+@pytest.mark.parametrize("where", ["cluttered", "one wall"])
+def test_encoder_scale_within_1_percent_from_three_turns(floor, where):
+    p = get_preset("create2")
+    room, pose = ((Room.cluttered(), Room.CALIBRATION_SPOT) if where == "cluttered"
+                  else (Room.single_wall(), (0.0, 0.35, 0.0)))
+    truth = _straight_m_per_tick(p, floor)
+    errors = []
+    for seed in range(3):
+        cmd = rotation_in_place(turns=3.0, wheel_speed_m_s=0.15, wheel_base_m=p.wheel_base_m,
+                                dt_s=p.period_s, margin=0.0)
+        log = Simulator(p, seed=seed, floor=floor, room=room, initial_pose=pose).run(cmd)
+        ticks = unwrap_ticks(log.ticks)
+        period = rotation_period_ticks(log.light_bump, ticks[:, 1] - ticks[:, 0])
+        scale = encoder_scale_m_per_tick(period.period_ticks, wheel_base_m=p.wheel_base_m)
+        errors.append(scale / truth - 1.0)
+        assert period.confidence > 0.9
+    assert np.max(np.abs(errors)) < 0.01, errors
+
+
+@pytest.fixture(scope="module", params=["create2", "paper"])
+def calibrated(request):
+    p = get_preset(request.param)
+    sim = Simulator(p, seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
+
+    def to_open_floor(stage):
+        if stage != "rotation":
+            sim.place(OPEN_FLOOR)
+
+    cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
+                    floor="hard", before_stage=to_open_floor)
+    # validation data never used for fitting: another seed, other commands, same kind
+    u = random_held_normal(n=round(90 / p.period_s), dt_s=p.period_s,
+                           rng=np.random.default_rng(11), std_m_s=0.15, hold_s=(0.5, 2.0))
+    log = Simulator(p, seed=42, room=Room.empty()).run(np.concatenate([np.zeros((60, 2)), u]))
+    val = speeds_from_log(log, m_per_tick=cal.m_per_tick, wheel_base_m=p.wheel_base_m)
+    return p, cal, val
+
+
+def test_no_wall_contact_during_identification(calibrated):
+    _, cal, _ = calibrated
+    assert not cal.logs["steps"].bumps.any() and not cal.logs["excitation"].bumps.any()
+
+
+def test_selected_delay_matches_the_simulators_within_one_sample(calibrated):
+    p, cal, _ = calibrated
+    # the ARX delay is the lag of the first input coefficient; with speeds averaged over
+    # each period, a command delayed by d periods first shows at lag ceil(d) or so
+    assert abs(cal.arx.orders["delay"] - p.delay_periods) <= 1.0
+
+
+def test_models_are_stable_with_positive_definite_noise(calibrated):
+    _, cal, _ = calibrated
+    for model in (cal.arx, cal.fir):
+        assert np.all(np.abs(model.poles()) < 1.0)
+        for cov in (model.Q, model.R):
+            np.testing.assert_allclose(cov, cov.T)
+            assert np.linalg.eigvalsh(cov).min() > 0
+
+
+def test_free_run_fit_on_validation_data_short_of_the_90_percent_target(calibrated):
+    """Reached today: ARX >= 83%, FIR >= 78% for v and w (targets 90% and 85%)."""
+    _, cal, val = calibrated
+    arx_fit = cal.arx.fit_percent([val])
+    fir_fit = cal.fir.fit_percent([val])
+    assert np.all(arx_fit >= 83.0), arx_fit
+    assert np.all(fir_fit >= 78.0), fir_fit
+
+
+def test_stream_clock_removes_host_jitter():
+    log = Simulator("create2", seed=3).run(np.full((100, 2), 0.2))
+    t = stream_clock(log.t_s, log.dt_s)
+    np.testing.assert_allclose(np.diff(t), log.dt_s)
+    assert np.std(np.diff(log.t_s)) > 5e-4
+
+
+def test_place_puts_the_robot_down_at_rest():
+    sim = Simulator("create2", seed=1)
+    sim.run(np.full((100, 2), 0.3))
+    sim.place((1.0, 1.0, 0.5))
+    log = sim.run(np.zeros((20, 2)))
+    # floor roughness shakes a robot at rest by micrometres, nothing more
+    np.testing.assert_allclose(log.true_pose[-1], (1.0, 1.0, 0.5), atol=1e-4)
+    assert np.abs(log.true_body_m_s[:, 0]).max() < 1e-3     # m/s
+    assert np.abs(log.true_body_m_s[:, 1]).max() < 1e-2     # rad/s
