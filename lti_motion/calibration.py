@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -62,11 +62,14 @@ class CalibrationPlan:
     excitation_s, excitation_std_m_s, excitation_mean_m_s : float
         Random excitation: duration [s], standard deviation and mean of the
         wheel commands [m/s]. A zero mean keeps the robot near where it starts.
+    excitation_correlation : float
+        Correlation of successive held values (see
+        :func:`~lti_motion.excitation.random_held_normal`).
     hold_s : tuple of float
-        Range of the random hold durations [s]. Holds of 0.5-2 s rather than
-        0.1-0.8 s keep most of the record out of the traction- and
-        current-limited transients that no linear model follows: on the
-        simulator the free-run fit rises from about 77% to 86% (docs/calibration.md).
+        Range of the random hold durations [s]. Longer holds and correlated
+        levels keep most of the record out of the traction- and
+        current-limited transients that no linear model follows
+        (docs/calibration.md has the measurements).
     validation_fraction : float
         Tail of the excitation held out to choose the ARX order and delay.
     seed : int
@@ -79,8 +82,9 @@ class CalibrationPlan:
     step_hold_s: float = 2.0
     step_rest_s: float = 2.0
     excitation_s: float = 180.0
-    excitation_std_m_s: float = 0.15
+    excitation_std_m_s: float = 0.2
     excitation_mean_m_s: float = 0.0
+    excitation_correlation: float = 0.85
     hold_s: tuple[float, float] = (0.5, 2.0)
     validation_fraction: float = 0.3
     seed: int = 0
@@ -142,13 +146,16 @@ def drive(robot: Robot, commands_m_s: np.ndarray, *,
     return FrameLog.from_frames(frames, dt_s=robot.dt_s)
 
 
-def speeds_from_log(log: FrameLog, *, m_per_tick: float,
-                    wheel_base_m: float) -> tuple[np.ndarray, np.ndarray]:
+def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
+                    encoders: Literal["quadrature", "commanded"] = "commanded",
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """Commands and encoder body speeds, aligned for identification.
 
     Frame ``k`` closes period ``k``, whose command ``u[k]`` went out at its
     start; the body speeds ``y[k]`` are the encoder speeds over that period,
     timed on the robot's sensor clock (:func:`~lti_motion.odometry.stream_clock`).
+    ``encoders="commanded"`` (the default, for the Roomba / Create 2 and the
+    simulator) restores the wheels' direction around reversals.
 
     Returns
     -------
@@ -158,7 +165,8 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float,
         Body speeds (v [m/s], w [rad/s]) over the same periods.
     """
     t_s = stream_clock(log.t_s, log.dt_s)
-    y = body_speeds_from_ticks(log.ticks, t_s, m_per_tick=m_per_tick, wheel_base_m=wheel_base_m)
+    y = body_speeds_from_ticks(log.ticks, t_s, m_per_tick=m_per_tick, wheel_base_m=wheel_base_m,
+                               encoders=encoders)
     return log.cmd_m_s[1:], y
 
 
@@ -229,7 +237,8 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     rng = np.random.default_rng(plan.seed)
     exc_cmd = random_held_normal(n=round(plan.excitation_s / dt), dt_s=dt, rng=rng,
                                  std_m_s=plan.excitation_std_m_s,
-                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s)
+                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s,
+                                 correlation=plan.excitation_correlation)
     if before_stage is not None:
         before_stage("excitation")
     exc_log = drive(robot, np.concatenate([rest, exc_cmd, rest]), progress=stage("excitation"))

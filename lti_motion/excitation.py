@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import lfilter
 
 from lti_motion.exceptions import NonFiniteError, NotExcitedError, ShapeError
 
@@ -164,6 +165,7 @@ def random_held_normal(
     mean_m_s: float = 0.0,
     hold_s: tuple[float, float] = (0.1, 0.8),
     max_m_s: float = 0.5,
+    correlation: float = 0.0,
 ) -> np.ndarray:
     """Normally distributed wheel commands held for random durations (paper III.C).
 
@@ -184,6 +186,14 @@ def random_held_normal(
         ``[hold_s[0], hold_s[1]]`` [s], rounded to whole samples (at least one).
     max_m_s : float
         Commands are clipped to ``[-max_m_s, max_m_s]`` (0.5 m/s on a Create 2).
+    correlation : float
+        Correlation ``rho`` in ``[0, 1)`` between successive held values of a
+        wheel: ``x[i] = mean + rho (x[i-1] - mean) + sqrt(1 - rho^2) std n[i]``,
+        a stationary AR(1) whose values are still normal with the given mean
+        and standard deviation. With ``rho`` near 0.85 the level wanders over
+        the whole range while each step stays moderate, so less of the record
+        is spent in the traction- and current-limited transients no linear
+        model follows (docs/calibration.md).
 
     Returns
     -------
@@ -193,8 +203,8 @@ def random_held_normal(
     Raises
     ------
     ValueError
-        If ``n < 1``, a duration or ``std_m_s`` is not positive, or
-        ``hold_s`` is not increasing.
+        If ``n < 1``, a duration or ``std_m_s`` is not positive,
+        ``hold_s`` is not increasing, or ``correlation`` is outside ``[0, 1)``.
 
     Notes
     -----
@@ -217,13 +227,19 @@ def random_held_normal(
     lo, hi = (float(h) for h in hold_s)
     if not (0 < lo <= hi and math.isfinite(hi)):
         raise ValueError(f"hold_s must be (min, max) with 0 < min <= max, got {hold_s!r}")
+    if not 0.0 <= correlation < 1.0:
+        raise ValueError(f"correlation must be in [0, 1), got {correlation!r}")
     lo_n, hi_n = _samples(lo, dt_s, "hold_s"), _samples(hi, dt_s, "hold_s")
     n_holds = n // lo_n + 1  # enough holds to cover n samples
     out = np.empty((n, 2))
     for wheel in range(2):
         lengths = rng.integers(lo_n, hi_n + 1, size=n_holds)
-        values = rng.normal(float(mean_m_s), std, size=n_holds)
-        out[:, wheel] = np.repeat(values, lengths)[:n]
+        values = rng.normal(0.0, std, size=n_holds)
+        if correlation > 0.0:
+            # stationary AR(1) over the held values (started in its stationary law)
+            values[1:] *= math.sqrt(1.0 - correlation**2)
+            values = lfilter([1.0], [1.0, -correlation], values)
+        out[:, wheel] = np.repeat(values + float(mean_m_s), lengths)[:n]
     return np.clip(out, -limit, limit, out=out)
 
 

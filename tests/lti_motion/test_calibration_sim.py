@@ -1,9 +1,8 @@
 """Calibration by driving, on the simulator, against its ground truth.
 
-These are the acceptance runs of the core-models issue. What they assert is what the
-pipeline reaches today on a simulator that is deliberately not linear; where that falls
-short of the issue's targets (free-run fit of 90%), the test says so in its name and
-guards the level reached, and docs/calibration.md explains the gap.
+These are the acceptance runs of the core-models issue, against the issue's targets, on
+a simulator that is deliberately not linear (docs/calibration.md has the spread over
+seeds and what limits the fit).
 """
 
 import numpy as np
@@ -59,11 +58,16 @@ def calibrated(request):
 
     cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
                     floor="hard", before_stage=to_open_floor)
-    # validation data never used for fitting: another seed, other commands, same kind
-    u = random_held_normal(n=round(90 / p.period_s), dt_s=p.period_s,
-                           rng=np.random.default_rng(11), std_m_s=0.15, hold_s=(0.5, 2.0))
-    log = Simulator(p, seed=42, room=Room.empty()).run(np.concatenate([np.zeros((60, 2)), u]))
-    val = speeds_from_log(log, m_per_tick=cal.m_per_tick, wheel_base_m=p.wheel_base_m)
+    # validation data never used for fitting: three drives of 90 s with other seeds and
+    # other commands of the same kind (one drive alone scatters the fit by about 1 point)
+    plan = CalibrationPlan()
+    rng = np.random.default_rng(11)
+    cmds = np.stack([np.concatenate([np.zeros((60, 2)), random_held_normal(
+        n=round(90 / p.period_s), dt_s=p.period_s, rng=rng, std_m_s=plan.excitation_std_m_s,
+        hold_s=plan.hold_s, correlation=plan.excitation_correlation)]) for _ in range(3)])
+    logs = Simulator(p, n_robots=3, seed=42, room=Room.empty()).run(cmds)
+    val = [speeds_from_log(logs.robot(i), m_per_tick=cal.m_per_tick,
+                           wheel_base_m=p.wheel_base_m) for i in range(3)]
     return p, cal, val
 
 
@@ -88,13 +92,13 @@ def test_models_are_stable_with_positive_definite_noise(calibrated):
             assert np.linalg.eigvalsh(cov).min() > 0
 
 
-def test_free_run_fit_on_validation_data_short_of_the_90_percent_target(calibrated):
-    """Reached today: ARX >= 83%, FIR >= 78% for v and w (targets 90% and 85%)."""
+def test_free_run_fit_on_validation_data(calibrated):
+    """The issue's targets: ARX >= 90%, FIR >= 85% for v and for w, free run."""
     _, cal, val = calibrated
-    arx_fit = cal.arx.fit_percent([val])
-    fir_fit = cal.fir.fit_percent([val])
-    assert np.all(arx_fit >= 83.0), arx_fit
-    assert np.all(fir_fit >= 78.0), fir_fit
+    arx_fit = np.mean([cal.arx.fit_percent([run]) for run in val], axis=0)
+    fir_fit = np.mean([cal.fir.fit_percent([run]) for run in val], axis=0)
+    assert np.all(arx_fit >= 90.0), arx_fit
+    assert np.all(fir_fit >= 85.0), fir_fit
 
 
 def test_stream_clock_removes_host_jitter():

@@ -125,3 +125,18 @@ def test_degenerate_commands_are_not_exciting(rng, make, reason):
     msg = str(info.value)
     assert "condition number" in msg and "random_held_normal" in msg
     assert "drive both" in msg.lower()
+
+
+def test_correlated_levels_keep_the_distribution_and_shrink_the_steps():
+    from lti_motion.excitation import random_held_normal
+
+    kw = {"n": 400_000, "dt_s": 0.015, "std_m_s": 0.1, "hold_s": (0.015, 0.015), "max_m_s": 10.0}
+    white = random_held_normal(rng=np.random.default_rng(0), **kw)
+    corr = random_held_normal(rng=np.random.default_rng(0), correlation=0.85, **kw)
+    np.testing.assert_allclose(corr.std(axis=0), 0.1, rtol=0.03)
+    np.testing.assert_allclose(corr.mean(axis=0), 0.0, atol=0.005)
+    lag1 = np.corrcoef(corr[1:, 0], corr[:-1, 0])[0, 1]
+    assert abs(lag1 - 0.85) < 0.01
+    assert np.diff(corr, axis=0).std() < 0.6 * np.diff(white, axis=0).std()
+    with pytest.raises(ValueError, match=r"correlation must be in \[0, 1\)"):
+        random_held_normal(rng=np.random.default_rng(0), correlation=1.0, **kw)
