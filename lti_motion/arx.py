@@ -25,7 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lti_motion.exceptions import CalibrationError, ShapeError, UnstableModelError
+from lti_motion.exceptions import (
+    CalibrationError,
+    NonFiniteError,
+    ShapeError,
+    UnstableModelError,
+)
 from lti_motion.excitation import DEFAULT_MAX_CONDITION, check_excitation, check_runs
 from lti_motion.fir import (
     StateSpace,
@@ -688,6 +693,10 @@ class RecursiveARX:
         self._hist = _start(self.na, self.nb, self.delay)
         self._u = np.zeros((self._hist, 2))
         self._y = np.zeros((self._hist, 2))
+        # rows of [history; new sample] that form one regressor (regression_matrix's order)
+        self._u_rows = self._hist - np.arange(self.delay, self.delay + self.nb)
+        self._y_rows = self._hist - np.arange(1, self.na + 1)
+        self._u_now = np.zeros((self._hist + 1, 2))
         self._sum_ee = np.zeros((2, 2))
         self._weight = 0.0
         self.n_updates = 0
@@ -709,8 +718,37 @@ class RecursiveARX:
         return self._p.copy()
 
     def update(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """One sample: returns the a-priori prediction of ``y`` (2,)."""
-        return self.update_many(np.reshape(u, (1, 2)), np.reshape(y, (1, 2)))[0]
+        """One sample: returns the a-priori prediction of ``y`` (2,).
+
+        The same update as :meth:`update_many` on one row, with the regressor
+        taken straight from the stored history (no regression matrix built).
+
+        Raises
+        ------
+        ShapeError
+            If ``u`` or ``y`` is not of shape (2,).
+        NonFiniteError
+            If either holds NaN or inf.
+        """
+        u = np.asarray(u, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if u.shape != (2,) or y.shape != (2,):
+            raise ShapeError(f"update() expects u and y of shape (2,), got {u.shape} and {y.shape}")
+        if not (np.isfinite(u).all() and np.isfinite(y).all()):
+            raise NonFiniteError(f"update() got non-finite samples u={u}, y={y}")
+        u_now = self._u_now
+        u_now[:-1] = self._u
+        u_now[-1] = u
+        phi = np.concatenate([u_now[self._u_rows].ravel(), self._y[self._y_rows].ravel()])
+        self._theta, self._p, err = _rls_step(self._theta, self._p, phi, y, self.lam)
+        self._sum_ee = self.lam * self._sum_ee + np.outer(err, err)
+        self._weight = self.lam * self._weight + 1.0
+        self._u[:-1] = self._u[1:]
+        self._u[-1] = u
+        self._y[:-1] = self._y[1:]
+        self._y[-1] = y
+        self.n_updates += 1
+        return y - err
 
     def update_many(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Update with consecutive samples ``u, y`` (n, 2); returns the a-priori predictions."""
