@@ -1,4 +1,7 @@
-"""Shared fixtures: seeded randomness only."""
+"""Shared fixtures: seeded randomness, and the real recorded data."""
+
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,3 +11,22 @@ import pytest
 def rng() -> np.random.Generator:
     """A seeded generator; tests never use unseeded randomness."""
     return np.random.default_rng(20261123)
+
+
+def data_dir() -> Path | None:
+    """Real robot data: ``LTI_MOTION_DATA`` (the Makefile sets it), else ``../shared/data``."""
+    env = os.environ.get("LTI_MOTION_DATA")
+    path = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
+    return path if path.is_dir() else None
+
+
+@pytest.fixture(scope="session")
+def mrclam_path() -> Path:
+    """The MRCLAM set 6 folder. Absent data fails under CI and skips elsewhere."""
+    base = data_dir()
+    path = None if base is None else base / "mrclam" / "MRCLAM_Dataset6"
+    if path is None or not path.is_dir():
+        if os.environ.get("CI"):
+            pytest.fail("MRCLAM data not found: set LTI_MOTION_DATA to the shared data folder")
+        pytest.skip("MRCLAM data not found (set LTI_MOTION_DATA)")
+    return path

@@ -1,0 +1,1 @@
+"""Experiment runners (application layer: they may import ``drivers`` and ``fusion``)."""
