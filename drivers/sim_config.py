@@ -179,6 +179,10 @@ class Room:
     #: Pose (x m, y m, heading rad) near the boxes of :meth:`cluttered`.
     CALIBRATION_SPOT = (0.95, 0.85, 0.0)
 
+    #: Open floor outside the 5 m rooms: nothing within 25 m, for the steps and the
+    #: random excitation of a calibration (:meth:`drivers.sim.Simulator.place`).
+    OPEN_FLOOR = (30.0, 30.0, 0.0)
+
 
 @dataclass(frozen=True)
 class RobotParams:

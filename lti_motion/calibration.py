@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal, Protocol
 
 import numpy as np
@@ -120,30 +120,56 @@ def drive(robot: Robot, commands_m_s: np.ndarray, *,
     Parameters
     ----------
     robot : Robot
-        Simulator or serial driver. A simulator's whole-sequence ``run`` is
-        used when it has one (same frames, faster).
-    commands_m_s : ndarray, shape (n, 2)
-        Wheel commands (left, right) [m/s].
+        Simulator or serial driver. A single simulator's whole-sequence
+        ``run`` is used when it has one (the same frames, faster). A robot
+        with a ``log_meta()`` method adds what it returns to the log's meta
+        (the serial driver: port, baud, link counters).
+    commands_m_s : array_like, shape (n, 2)
+        Wheel commands (left, right) [m/s], ``n >= 1``.
     progress : callable, optional
-        Called as ``progress(done, total)`` every 100 periods.
+        Called as ``progress(done, total)`` every 100 periods and at the end.
 
     Returns
     -------
     FrameLog
         The ``n`` frames, lost ones marked invalid.
+
+    Raises
+    ------
+    ValueError
+        If the commands are not a finite array of shape (n, 2) with n >= 1.
+
+    Examples
+    --------
+    >>> from drivers.sim import Simulator
+    >>> log = drive(Simulator("create2", seed=0), np.full((10, 2), 0.2))
+    >>> len(log), bool(log.ticks[-1, 0] > 0)
+    (10, True)
     """
     commands_m_s = np.asarray(commands_m_s, dtype=float)
+    if commands_m_s.ndim != 2 or commands_m_s.shape[1] != 2 or len(commands_m_s) == 0:
+        raise ValueError(
+            f"commands must have shape (n, 2) with n >= 1, got {commands_m_s.shape}")
+    if not np.all(np.isfinite(commands_m_s)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(commands_m_s))[0])
+        raise ValueError(f"commands must be finite; first bad value at index {bad}")
+    n = len(commands_m_s)
+    meta = {"source": type(robot).__name__, "n_commands": n}
+    if hasattr(robot, "log_meta"):
+        meta.update(robot.log_meta())
     if hasattr(robot, "run") and not getattr(robot, "batch", False):
         out = robot.run(commands_m_s)
         if progress is not None:
-            progress(len(commands_m_s), len(commands_m_s))
-        return out
+            progress(n, n)
+        return replace(out, meta={**out.meta, **meta})
     frames = []
     for k, cmd in enumerate(commands_m_s):
         frames.append(robot.step(cmd))
-        if progress is not None and (k % 100 == 99 or k == len(commands_m_s) - 1):
-            progress(k + 1, len(commands_m_s))
-    return FrameLog.from_frames(frames, dt_s=robot.dt_s)
+        if progress is not None and (k % 100 == 99 or k == n - 1):
+            progress(k + 1, n)
+    if hasattr(robot, "log_meta"):
+        meta.update(robot.log_meta())        # the link counters after the drive
+    return FrameLog.from_frames(frames, dt_s=robot.dt_s, meta=meta)
 
 
 def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,

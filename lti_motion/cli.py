@@ -5,6 +5,11 @@ Sub-commands
 demo
     Drive the simulated robot through a manoeuvre and compare the true path
     with the path integrated from the encoders; writes a plot and metrics.
+calibrate
+    Run the calibration manoeuvres on the simulator or a real robot, fit the
+    encoder scale, FIR and ARX models, save them and their plots.
+virtual-roomba
+    A simulated Roomba behind the Open Interface on a pseudo-terminal.
 
 This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
@@ -97,6 +102,79 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2",
     return metrics
 
 
+def _progress(stage: str, done: int, total: int) -> None:
+    end = "\n" if done >= total else ""
+    print(f"\r  {stage:10s} {100 * done / total:5.1f}% ({done}/{total} frames)", end=end,
+          flush=True)
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from drivers.sim import Simulator
+    from drivers.sim_config import Room, get_preset
+    from lti_motion.calibration import CalibrationPlan, calibrate
+    from lti_motion.experiments.plots import plot_calibration
+
+    plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
+    out = Path(args.out)
+    if args.sim:
+        params = get_preset(args.sim)
+        robot = Simulator(params, seed=args.seed, floor=args.floor, room=Room.cluttered(),
+                          initial_pose=Room.CALIBRATION_SPOT)
+        wheel_base = params.wheel_base_m
+
+        def before_stage(stage: str) -> None:
+            if stage != "rotation":
+                robot.place(Room.OPEN_FLOOR)
+
+        print(f"calibrating the simulated {args.sim} robot on {args.floor} floor "
+              f"(seed {args.seed})")
+        cal = calibrate(robot, wheel_base_m=wheel_base, plan=plan, floor=args.floor,
+                        progress=_progress, before_stage=before_stage)
+    else:
+        from drivers.roomba import Roomba
+
+        wheel_base = args.wheel_base
+
+        def before_stage(stage: str) -> None:
+            where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
+                     "steps": "on open floor, 2 m clear all round",
+                     "excitation": "on open floor, 2 m clear all round"}[stage]
+            print(f"next: {stage}. Put the robot {where}.")
+            if not args.yes:
+                input("press Enter when it is there (Ctrl-C stops the robot) ")
+
+        print(f"calibrating the robot on {args.port} at {args.baud} baud")
+        with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+            cal = calibrate(robot, wheel_base_m=wheel_base, plan=plan, floor=args.floor,
+                            progress=_progress, before_stage=before_stage)
+    out.mkdir(parents=True, exist_ok=True)
+    cal.arx.save(out / "model_arx.json")
+    cal.fir.save(out / "model_fir.json")
+    plots = plot_calibration(cal, out)
+    sel = cal.arx.selection
+    print(f"encoder scale   {cal.m_per_tick * 1e3:.5f} mm/tick "
+          f"(rotation period {cal.rotation.period_ticks:.1f} ticks, "
+          f"confidence {cal.rotation.confidence:.3f})")
+    print(f"ARX             order {cal.arx.orders['na']}, input delay "
+          f"{cal.arx.orders['delay']} samples; held-out free-run fit "
+          f"v {sel.validation_fit_percent[0]:.1f}%, w {sel.validation_fit_percent[1]:.1f}%")
+    print(f"FIR             {cal.fir.orders['n_taps']} taps")
+    print(f"wrote {out / 'model_arx.json'}, {out / 'model_fir.json'} and "
+          f"{', '.join(p.name for p in plots)}")
+    return 0
+
+
+def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
+    from drivers.virtual_roomba import serve
+
+    try:
+        serve(preset=args.preset, seed=args.seed, speed=args.speed, floor=args.floor,
+              duration_s=args.duration)
+    except KeyboardInterrupt:
+        print("\nvirtual Roomba stopped")
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     run_demo(Path(args.out), seed=args.seed, preset=args.preset, floor=args.floor)
     return 0
@@ -120,6 +198,44 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"],
                       help="floor (default: hard)")
     demo.set_defaults(func=_cmd_demo)
+
+    cal = sub.add_parser(
+        "calibrate", help="calibrate the encoder scale, FIR and ARX models by driving",
+        description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
+                    "random excitation) on the simulator or a robot, fits the models, and "
+                    "writes model_arx.json, model_fir.json and plots.")
+    where = cal.add_mutually_exclusive_group(required=True)
+    where.add_argument("--sim", choices=["create2", "paper"], help="calibrate the simulator")
+    where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    cal.add_argument("--clock-rate", type=float, default=1.0,
+                     help="robot seconds per wall second: 1 for a real robot, the --speed "
+                          "of a faster virtual Roomba")
+    cal.add_argument("--wheel-base", type=float, default=0.235,
+                     help="nominal wheel base [m] (default 0.235, the Create 2)")
+    cal.add_argument("--floor", default="hard", help="floor name recorded in the model "
+                     "(and simulated with --sim: hard, tile, carpet)")
+    cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
+    cal.add_argument("--excitation-s", type=float, default=180.0,
+                     help="length of the random excitation [s] (default 180)")
+    cal.add_argument("--out", default="out/calibration", help="output folder")
+    cal.add_argument("--yes", action="store_true",
+                     help="do not wait for Enter between manoeuvres (robot already placed)")
+    cal.set_defaults(func=_cmd_calibrate)
+
+    vr = sub.add_parser(
+        "virtual-roomba", help="a simulated Roomba on a pseudo-terminal",
+        description="Starts the simulator behind the Roomba Open Interface on a "
+                    "pseudo-terminal and prints its device path; connect with "
+                    "'lti-motion calibrate --port PATH'. Ctrl-C stops it.")
+    vr.add_argument("--preset", default="create2", choices=["create2", "paper"])
+    vr.add_argument("--seed", type=int, default=0)
+    vr.add_argument("--speed", type=float, default=1.0,
+                    help="simulated seconds per wall-clock second (default 1: real time)")
+    vr.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"])
+    vr.add_argument("--duration", type=float, default=None,
+                    help="stop after this many wall-clock seconds (default: run until Ctrl-C)")
+    vr.set_defaults(func=_cmd_virtual_roomba)
     return parser
 
 

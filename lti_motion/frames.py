@@ -223,7 +223,7 @@ class FrameLog:
             light_bump=np.array([f.light_bump for f in frames], dtype=np.int64),
             bumps=np.array([f.bumps for f in frames], dtype=bool),
             cmd_m_s=np.array([f.cmd_m_s for f in frames], dtype=float),
-            valid=np.ones(len(frames), dtype=bool),
+            valid=np.array([bool(np.all(f.valid)) for f in frames], dtype=bool),
             dt_s=dt_s,
             true_pose=np.array([f.true_pose for f in frames]) if truth else None,
             true_body_m_s=np.array([f.true_body_m_s for f in frames]) if truth else None,

@@ -15,8 +15,6 @@ from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_t
 from lti_motion.excitation import random_held_normal, rotation_in_place
 from lti_motion.odometry import stream_clock, unwrap_ticks
 
-OPEN_FLOOR = (30.0, 30.0, 0.0)    # carried out of the 5 m room: nothing within 25 m
-
 
 def _straight_m_per_tick(params, floor):
     """The simulator's true ground travel per tick while driving straight at 0.25 m/s."""
@@ -54,7 +52,7 @@ def calibrated(request):
 
     def to_open_floor(stage):
         if stage != "rotation":
-            sim.place(OPEN_FLOOR)
+            sim.place(Room.OPEN_FLOOR)
 
     cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
                     floor="hard", before_stage=to_open_floor)

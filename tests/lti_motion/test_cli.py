@@ -21,3 +21,23 @@ def test_help_and_bad_choices(capsys):
         build_parser().parse_args(["demo", "--floor", "ice"])
     assert exc.value.code == 2
     assert "invalid choice: 'ice'" in capsys.readouterr().err
+
+
+def test_calibrate_on_a_missing_port_names_it(capsys):
+    assert main(["calibrate", "--port", "/dev/does-not-exist", "--yes"]) == 2
+    assert "/dev/does-not-exist" in capsys.readouterr().err
+
+
+def test_calibrate_sim_writes_models_and_plots(tmp_path, capsys):
+    assert main(["calibrate", "--sim", "create2", "--excitation-s", "40",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "encoder scale" in out and "ARX" in out
+    for name in ("model_arx.json", "model_fir.json", "order_selection.png"):
+        assert (tmp_path / name).is_file()
+
+
+def test_virtual_roomba_prints_its_device_path(capsys):
+    assert main(["virtual-roomba", "--duration", "0.3"]) == 0
+    out = capsys.readouterr().out
+    assert "listening on /dev/pts/" in out and "stopped" in out
