@@ -1,0 +1,342 @@
+"""The smoother on the simulator, against its ground truth: the factor-graph acceptance runs.
+
+One ARX model is calibrated per module on the nominal Create 2 (hard floor) and reused.
+Runs are 20 simulated robots driving for 60 s among known landmarks (the example's
+waypoint driver and camera model, ``examples/factor_graph.py``).
+
+The "true" calibration of a run is what the calibration-aware factors would estimate if
+every keyframe pose were known exactly: :func:`fusion.preintegration.fit_calibration` on
+the true keyframe poses. On the nominal robot it is ``s = 1.004``: the encoder scale
+from the rotation manoeuvre (paper eq. 13) uses the nominal wheel base, 0.4% short of the
+true one, so encoder (and model) speeds are 0.4% low. With wheels 10% larger than the
+model was calibrated with (``wheel_diameter_errors=(0.1, 0.1)``) the speed loop still
+holds the commanded wheel rotation, so every tick carries 10% more ground:
+``s = 1.1 x 1.004 = 1.104`` in geometry; measured 1.102 (a little more slip; checked below).
+"""
+
+from dataclasses import dataclass
+from importlib import util
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+from scipy import stats
+
+from drivers.sim_config import Fault, get_preset
+from fusion.factors import LandmarkMap, RangeBearing
+from fusion.preintegration import (
+    EmptyIntervalError,
+    KeyframeOrderError,
+    Preintegrated,
+    UnknownPoseError,
+    compose_motions,
+    fit_calibration,
+    preintegrate,
+    preintegrate_model,
+)
+from fusion.smoother import (
+    IncrementalSmoother,
+    SmootherOptions,
+    SmootherResult,
+    log_keyframes,
+    smooth_batch,
+    smooth_log,
+    smoother_ates,
+)
+from lti_motion.calibration import speeds_from_log
+from lti_motion.metrics import ate
+
+ROOT = Path(__file__).resolve().parents[2]
+N_RUNS = 20
+DURATION_S = 60.0
+
+
+def _load_example():
+    spec = util.spec_from_file_location("factor_graph_example",
+                                        ROOT / "examples" / "factor_graph.py")
+    mod = util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def example():
+    return _load_example()
+
+
+@pytest.fixture(scope="module")
+def model(example):
+    return example.calibrated_model()
+
+
+@pytest.fixture(scope="module")
+def landmarks(example):
+    return example.landmark_grid()
+
+
+@dataclass(frozen=True)
+class Run:
+    log: object
+    obs: RangeBearing
+    result: SmootherResult
+    pre: Preintegrated          # on the result's keyframes
+    truth: np.ndarray           # true keyframe poses
+
+    @property
+    def dead_reckoning(self) -> np.ndarray:
+        return compose_motions(self.pre.delta_pose, initial_pose=self.log.true_pose[0])
+
+
+def _drive_and_smooth(example, model, landmarks, robot, *, seed, duration_s=DURATION_S,
+                      faults=(), n_runs=N_RUNS):
+    batch = example.drive(robot, n_robots=n_runs, seed=seed, duration_s=duration_s,
+                          faults=faults)
+    runs = []
+    for r in range(n_runs):
+        log = batch.robot(r)
+        obs = example.observe(log, landmarks, rng=np.random.default_rng(1000 * seed + r))
+        res = smooth_log(model, log, initial_pose=log.true_pose[0], observations=obs,
+                         landmarks=landmarks, covariance_scale=example.COVARIANCE_SCALE,
+                         covariances=True)
+        u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
+        pre = preintegrate_model(model, u, keyframes=res.keyframes,
+                                 covariance_scale=example.COVARIANCE_SCALE)
+        runs.append(Run(log, obs, res, pre, log.true_pose[res.keyframes]))
+    return runs
+
+
+@pytest.fixture(scope="module")
+def nominal(example, model, landmarks):
+    return _drive_and_smooth(example, model, landmarks, get_preset("create2"), seed=3)
+
+
+@pytest.fixture(scope="module")
+def big_wheels(example, model, landmarks):
+    robot = get_preset("create2", wheel_diameter_errors=(0.1, 0.1))
+    return _drive_and_smooth(example, model, landmarks, robot, seed=4)
+
+
+# -- accuracy ------------------------------------------------------------------------------
+
+def test_smoothed_trajectory_is_accurate_and_far_better_than_dead_reckoning(nominal):
+    ates = np.array([ate(r.truth, r.result.poses) for r in nominal])
+    dead = np.array([ate(r.truth, r.dead_reckoning) for r in nominal])
+    assert ates.max() < 0.012, ates          # about 5 mm with 3 cm / 1 degree landmarks
+    assert np.all(ates < dead / 4), (ates, dead)
+    assert dead.mean() > 20 * ates.mean(), (dead.mean(), ates.mean())
+
+
+def test_smoother_ates_reports_one_ate_per_run(example, model, landmarks, nominal):
+    runs = nominal[:2]
+    out = smoother_ates(model, [r.log for r in runs], [r.obs for r in runs],
+                        landmarks=landmarks, covariance_scale=example.COVARIANCE_SCALE)
+    np.testing.assert_allclose(out, [ate(r.truth, r.result.poses) for r in runs], rtol=1e-6)
+
+
+def test_encoder_aided_speeds_also_smooth_accurately(example, model, landmarks, nominal):
+    runs = nominal[:3]
+    ates = smoother_ates(model, [r.log for r in runs], [r.obs for r in runs],
+                         landmarks=landmarks, mode="one_step",
+                         covariance_scale=example.COVARIANCE_SCALE)
+    assert ates.max() < 0.012, ates
+
+
+# -- consistency ---------------------------------------------------------------------------
+
+def _nees(run: Run) -> np.ndarray:
+    est, cov = run.result.poses, run.result.pose_covariances
+    err = np.array([gtsam.Pose2(*e).localCoordinates(gtsam.Pose2(*t))
+                    for e, t in zip(est, run.truth, strict=True)])
+    return np.einsum("ki,kij,kj->k", err, np.linalg.inv(cov), err)
+
+
+def test_pose_nees_is_inside_the_95_percent_interval(nominal):
+    """With the preintegrated covariance inflated by hand (examples/factor_graph.py,
+    COVARIANCE_SCALE = 3). Known gap: the model's own speed covariance is over-confident
+    in closed-loop driving (motion-only NEES 7-9 against 3; docs/factor_graph.md), and the
+    inflation should be estimated from data, not set."""
+    n = min(len(r.result.keyframes) for r in nominal)
+    nees = np.array([_nees(r)[2:n] for r in nominal])   # skip keyframe 0 (the prior)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * N_RUNS) / N_RUNS
+    anees = nees.mean(axis=0)                                     # over runs, per keyframe
+    assert lo < anees.mean() < hi, (lo, anees.mean(), hi)
+    # a consistent estimator has 95% of keyframes inside; heading is a little over-confident
+    assert np.mean((anees > lo) & (anees < hi)) > 0.7, np.mean((anees > lo) & (anees < hi))
+
+
+def test_marginal_covariances_are_symmetric_positive_definite(nominal):
+    res = nominal[0].result
+    for cov in (*res.pose_covariances, *res.calibration_covariances):
+        np.testing.assert_allclose(cov, cov.T, atol=1e-15)
+        assert np.linalg.eigvalsh(cov).min() > 0
+
+
+# -- calibration ---------------------------------------------------------------------------
+
+def _true_calibration(run: Run) -> np.ndarray:
+    return fit_calibration(run.pre, run.truth)[0]
+
+
+def test_true_scale_of_big_wheels_is_ten_percent_over_the_nominal_robots(nominal, big_wheels):
+    s_nominal = np.mean([_true_calibration(r)[0] for r in nominal])
+    s_big = np.mean([_true_calibration(r)[0] for r in big_wheels])
+    assert s_nominal == pytest.approx(1.004, abs=0.002)
+    # 10% more ground per tick, less about 0.2% of extra slip (more torque for the same
+    # wheel acceleration)
+    assert s_big / s_nominal == pytest.approx(1.10, abs=0.004)
+
+
+def test_calibration_recovers_a_ten_percent_scale_change_within_one_percent_in_60_s(big_wheels):
+    truth = np.array([_true_calibration(r) for r in big_wheels])
+    est = np.array([r.result.calibrations[-1] for r in big_wheels])    # online, at 60 s
+    sigma = np.array([np.sqrt(np.diag(r.result.calibration_covariances[-1]))
+                      for r in big_wheels])
+    rel = est[:, 0] / truth[:, 0] - 1.0
+    assert np.abs(rel).max() < 0.01, rel
+    assert np.mean(np.abs(est[:, 0] - truth[:, 0]) < 2 * sigma[:, 0]) >= 0.9
+    # the yaw-rate gain moves with it (both wheels carry 10% more ground per tick)
+    assert np.mean(np.abs(est[:, 1] - truth[:, 1]) < 2 * sigma[:, 1]) >= 0.8
+    assert np.all(est[:, 1] > 1.04)
+
+
+def test_calibration_follows_a_floor_change(example, model, landmarks):
+    """Hard floor to carpet at 40 s: about 4% less ground per tick (true s 1.004 -> 0.964)."""
+    change_s = 40.0
+    runs = _drive_and_smooth(example, model, landmarks, get_preset("create2"), seed=5,
+                             duration_s=120.0, n_runs=4,
+                             faults=[Fault("floor", t_s=change_s, floor="carpet")])
+    for run in runs:
+        t = run.result.keyframes * run.log.dt_s
+        cut, settled = int(np.argmax(t >= change_s)), int(np.argmax(t > change_s + 20.0))
+        s_before = fit_calibration(run.pre[:cut - 1], run.truth[:cut])[0][0]
+        s_after = fit_calibration(run.pre[settled:], run.truth[settled:])[0][0]
+        assert s_after / s_before == pytest.approx(0.96, abs=0.01)
+        est = run.result.calibrations[:, 0]
+        assert est[int(np.argmax(t >= 20.0))] == pytest.approx(s_before, rel=0.01)  # smoothed
+        assert est[-1] == pytest.approx(s_after, rel=0.01)         # online, 80 s after
+
+
+# -- the two solvers -----------------------------------------------------------------------
+
+def test_incremental_and_batch_smoothing_agree(example, model, landmarks, nominal):
+    run = nominal[0]
+    batch = smooth_log(model, run.log, initial_pose=run.log.true_pose[0], observations=run.obs,
+                       landmarks=landmarks, covariance_scale=example.COVARIANCE_SCALE,
+                       method="batch", covariances=True)
+    np.testing.assert_allclose(batch.poses[:, :2], run.result.poses[:, :2], atol=2e-3)
+    np.testing.assert_allclose(batch.calibrations[-1], run.result.calibrations[-1], atol=2e-3)
+    np.testing.assert_allclose(np.sqrt(batch.pose_covariances[:, 0, 0]),
+                               np.sqrt(run.result.pose_covariances[:, 0, 0]), rtol=0.1)
+
+
+def test_unknown_landmarks_are_mapped_alongside_the_path(example, model, landmarks, nominal):
+    run = nominal[1]
+    res = smooth_log(model, run.log, initial_pose=run.log.true_pose[0], observations=run.obs,
+                     covariance_scale=example.COVARIANCE_SCALE)      # no map given
+    assert ate(run.truth, res.poses) < 0.05
+    true_xy = np.array([landmarks.position(i) for i in res.landmark_ids])
+    assert np.abs(res.landmarks_xy - true_xy).max() < 0.1
+    # landmarks with uncertain known positions (a prior, not a constant)
+    rough = LandmarkMap(landmarks.ids, landmarks.xy_m, sigma_m=0.05)
+    res = smooth_log(model, run.log, initial_pose=run.log.true_pose[0], observations=run.obs,
+                     landmarks=rough, covariance_scale=example.COVARIANCE_SCALE)
+    assert ate(run.truth, res.poses) < 0.02
+
+
+def test_plain_model_factors_smooth_too(example, model, landmarks, nominal):
+    run = nominal[2]
+    res = smooth_log(model, run.log, initial_pose=run.log.true_pose[0], observations=run.obs,
+                     landmarks=landmarks, covariance_scale=example.COVARIANCE_SCALE,
+                     options=SmootherOptions(calibrate=False))
+    assert res.calibrations is None
+    assert ate(run.truth, res.poses) < 0.012
+
+
+# -- the incremental API and bad input ------------------------------------------------------
+
+@pytest.fixture
+def straight():
+    return preintegrate(np.tile([0.2, 0.0], (100, 1)), 0.01, keyframes=[0, 50, 100],
+                        speed_covariance=np.eye(2) * 1e-4)
+
+
+def test_incremental_api_reads_poses_covariances_and_calibration(straight):
+    lm = LandmarkMap([7], [[0.1, 1.0]])
+    sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm)
+    assert sm.add_motion(straight[0]) == 1
+    sm.add_observations(RangeBearing([1], [7], [np.pi / 2], [1.0], 0.01, 0.01))
+    sm.update()
+    assert sm.add_motion(straight[1]) == 2
+    np.testing.assert_allclose(sm.pose(2), [0.2, 0.0, 0.0], atol=1e-6)   # flushes pending
+    assert sm.keyframes.tolist() == [0, 50, 100]
+    cov = sm.pose_covariance(2)
+    assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+    np.testing.assert_allclose(sm.calibration(2), [1.0, 1.0], atol=1e-6)
+    assert sm.calibration_covariance(0).shape == (2, 2)
+    res = sm.result()
+    assert res.landmark_ids.tolist() == [7]
+    np.testing.assert_allclose(res.landmarks_xy[0], [0.1, 1.0], atol=1e-5)
+
+
+def test_observation_of_a_missing_pose_raises_unknown_pose_error(straight):
+    sm = IncrementalSmoother(initial_pose=np.zeros(3))
+    sm.add_motion(straight)
+    with pytest.raises(UnknownPoseError, match=r"pose 5, but the graph holds poses 0 \.\. 2"):
+        sm.add_observations(RangeBearing([1, 5], [0, 0], [0.0, 0.0], [1.0, 1.0], 0.01, 0.01))
+    with pytest.raises(UnknownPoseError):
+        sm.pose(3)
+    assert issubclass(UnknownPoseError, ValueError)
+
+
+def test_motion_that_does_not_continue_the_last_keyframe_raises(straight):
+    sm = IncrementalSmoother(initial_pose=np.zeros(3))
+    sm.add_motion(straight[0])
+    with pytest.raises(KeyframeOrderError, match="starts at sample 0 but the last keyframe is "
+                                                 "at sample 50"):
+        sm.add_motion(straight[0])
+    with pytest.raises(EmptyIntervalError):
+        preintegrate(np.zeros((10, 2)), 0.01, keyframes=[0, 5, 5], speed_covariance=np.eye(2))
+
+
+def test_calibration_queries_need_a_calibrating_smoother(straight):
+    sm = IncrementalSmoother(initial_pose=np.zeros(3), options=SmootherOptions(calibrate=False))
+    sm.add_motion(straight)
+    with pytest.raises(ValueError, match="calibrate=False"):
+        sm.calibration(1)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"calibration_every": 0}, "calibration_every"),
+    ({"calibration_prior_sigmas": (0.1, -1.0)}, "calibration_prior_sigmas"),
+    ({"relinearize_threshold": 0.0}, "relinearize_threshold"),
+])
+def test_bad_options_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        SmootherOptions(**kwargs)
+
+
+def test_log_helpers_check_their_input(model, nominal):
+    with pytest.raises(UnknownPoseError, match="outside"):
+        log_keyframes(100, every=33, extra=[101])
+    with pytest.raises(ValueError, match="m_per_tick"):
+        smooth_log(model.updated(m_per_tick=None), nominal[0].log, initial_pose=np.zeros(3))
+    with pytest.raises(ValueError, match="method"):
+        smooth_log(model, nominal[0].log, initial_pose=np.zeros(3), method="magic")
+
+
+def test_batch_smoothing_without_landmarks_is_dead_reckoning(straight):
+    res = smooth_batch(straight, initial_pose=np.array([1.0, 2.0, np.pi / 2]),
+                       options=SmootherOptions(calibrate=False))
+    np.testing.assert_allclose(res.poses[-1], [1.0, 2.2, np.pi / 2], atol=1e-9)
+    # variance grows along the chain
+    assert np.all(np.diff(res.pose_covariances[:, 0, 0]) > 0)
+
+
+# -- the example ---------------------------------------------------------------------------
+
+def test_example_runs_on_a_short_horizon(example, model, tmp_path):
+    out = tmp_path / "factor_graph.png"
+    summary = example.run(seed=1, duration_s=20.0, out=out, model=model)
+    assert out.stat().st_size > 10_000
+    assert summary["ate_smoother_m"] < 0.02 < summary["ate_dead_reckoning_m"]
