@@ -7,8 +7,9 @@ where it *believes* it started. The closure offset is the true distance between 
 true start and the true stop (paper III.D). Thirty seeded runs per estimator.
 
 An *estimator* here is anything with ``reset(n_robots, pose0)`` and
-``step(frame, cmd) -> poses (N, 3)``: it sees the frame the robot reports (encoder
-counts, timestamps) and the command just executed, never the simulator's truth.
+``step(frame, cmd, observations) -> poses (N, 3)``: it sees the frame the robot reports
+(encoder counts, timestamps), the command just executed, and the landmark sensor's noisy
+range-bearing observations, never the simulator's truth.
 """
 
 from __future__ import annotations
@@ -22,14 +23,18 @@ import numpy as np
 
 from drivers.sim import Simulator
 from drivers.sim_config import RobotParams, Room
+from fusion.ekf import ModelEKF
+from fusion.landmarks import LandmarkMap, LandmarkNoise, range_bearing
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import TICK_MODULUS
 
 __all__ = [
+    "ROUTE_LANDMARKS",
     "ROUTE_M",
     "ArxHybrid",
+    "EkfEstimator",
     "Estimator",
     "Odometry",
     "RouteResult",
@@ -43,6 +48,12 @@ log = logging.getLogger(__name__)
 #: 10.3 m in all (the paper's route is "about 10 m"; its geometry is not given).
 ROUTE_M = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [1.5, 2.7], [0.0, 2.0], [0.0, 0.0]])
 
+#: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
+ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
+
+#: Per-robot landmark observations of one period: ``[(landmark id, (range m, bearing rad))]``.
+Observations = list[list[tuple[int, np.ndarray]]]
+
 
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
@@ -50,8 +61,10 @@ class Estimator(Protocol):
     def reset(self, n_robots: int, pose0: np.ndarray) -> None:
         """Start ``n_robots`` estimates at ``pose0`` (N, 3)."""
 
-    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray) -> np.ndarray:
-        """Take the frame closing the period of ``cmd_m_s`` (N, 2); return poses (N, 3)."""
+    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
+             observations: Observations | None = None) -> np.ndarray:
+        """Take the frame closing the period of ``cmd_m_s`` (N, 2), and the landmark
+        observations of that period if any; return poses (N, 3)."""
 
 
 def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
@@ -78,7 +91,8 @@ class Odometry:
         self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
         self._ticks = None
 
-    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray) -> np.ndarray:
+    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
+             observations: Observations | None = None) -> np.ndarray:
         ticks = np.asarray(frame.ticks, np.int64)
         if self._ticks is None:
             self._ticks = ticks
@@ -101,7 +115,8 @@ class SensorLess:
         self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
 
-    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray) -> np.ndarray:
+    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
+             observations: Observations | None = None) -> np.ndarray:
         m = self.model
         y = self.z @ m.C.T + cmd_m_s @ m.D.T             # predicted (v, w) over the period
         self.z = self.z @ m.A.T + cmd_m_s @ m.B.T
@@ -129,7 +144,8 @@ class ArxHybrid:
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
         self._ticks = None
 
-    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray) -> np.ndarray:
+    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
+             observations: Observations | None = None) -> np.ndarray:
         m = self.model
         ticks = np.asarray(frame.ticks, np.int64)
         y_hat = self.z @ m.C.T + cmd_m_s @ m.D.T
@@ -143,6 +159,59 @@ class ArxHybrid:
         self.z = self.z @ self._a.T + cmd_m_s @ self._b.T + y_meas @ m.K.T
         self.pose = pose_step(self.pose, y_hat[:, 0], y_hat[:, 1], m.dt_s)
         return self.pose
+
+
+class EkfEstimator:
+    """One :class:`fusion.ekf.ModelEKF` per robot: the model and the encoders, and
+    landmarks when a map is given (the filter gates and counts faulty readings)."""
+
+    def __init__(self, model: MotionModel, *, landmarks: LandmarkMap | None = None,
+                 landmark_noise: LandmarkNoise | None = None) -> None:
+        self.model = model
+        self.landmarks = landmarks
+        self.landmark_noise = landmark_noise
+
+    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
+        self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
+        self.filters: list[ModelEKF] | None = None
+
+    def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
+             observations: Observations | None = None) -> np.ndarray:
+        ticks = np.asarray(frame.ticks, np.int64)
+        if self.filters is None:            # the first frame anchors the encoder counts
+            self.filters = [
+                ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
+                         initial_ticks=t, landmarks=self.landmarks,
+                         landmark_noise=self.landmark_noise, history=0)
+                for pose, t in zip(self.pose, ticks, strict=True)]
+            return self.pose
+        for i, ekf in enumerate(self.filters):
+            ekf.predict(cmd_m_s[i])
+            ekf.update_encoders(ticks[i])
+            if observations is not None and self.landmarks is not None:
+                for landmark_id, rb in observations[i]:
+                    ekf.update_landmark(landmark_id, rb)
+            self.pose[i] = ekf.x[:3]
+        return self.pose
+
+
+def _observe(landmarks: LandmarkMap, true_poses: np.ndarray, k: int, *, stride: int,
+             noise: LandmarkNoise, rng: np.random.Generator) -> Observations:
+    """The landmark sensor of period ``k``: each landmark seen once per ``stride`` periods,
+    the landmarks taking turns, with noise (the physical world's side: it reads the truth)."""
+    out: Observations = [[] for _ in true_poses]
+    ids = landmarks.ids
+    for j, landmark_id in enumerate(ids):
+        if (k + j * stride // len(ids)) % stride:
+            continue
+        xy = landmarks.position(landmark_id)
+        for i, pose in enumerate(true_poses):
+            r, b = range_bearing(pose, xy)
+            sr = max(noise.range_std_m, noise.range_std_frac * r)
+            rb = np.array([r + sr * rng.standard_normal(),
+                           wrap_angle(b + noise.bearing_std_rad * rng.standard_normal())])
+            out[i].append((landmark_id, rb))
+    return out
 
 
 @dataclass(frozen=True)
@@ -192,6 +261,8 @@ def _follower(est: np.ndarray, target_idx: np.ndarray, phase: np.ndarray, *,
 def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[int],
                 floor: str = "hard", cruise_m_s: float = 0.25, turn_rad_s: float = 1.0,
                 reach_m: float = 0.03, max_s: float = 150.0, faults: Sequence = (),
+                landmarks: LandmarkMap | None = None, landmark_noise: LandmarkNoise | None = None,
+                landmark_rate_hz: float = 2.0,
                 progress: Callable[[int, int], None] | None = None) -> RouteResult:
     """Drive the closed route once per seed, all robots in lock step.
 
@@ -207,6 +278,9 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     sim = Simulator(params, seed=list(seeds), floor=floor, room=Room.empty(),
                     initial_pose=pose0, faults=faults)
     estimator.reset(n, pose0)
+    noise = landmark_noise or LandmarkNoise()
+    stride = max(1, round(1.0 / (landmark_rate_hz * dt)))
+    sensor_rng = np.random.default_rng([int(x) for x in seeds] + [0x5E45])
     est = pose0.copy()
     target = np.ones(n, int)           # index of the checkpoint being approached
     phase = np.zeros(n, int)           # 0 stop, 1 turn, 2 drive, 3 done
@@ -222,7 +296,10 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
         frame = sim.step(cmd)
         # the estimator gets what a robot reports: the simulator's truth is stripped
         seen = replace(frame, true_pose=None, true_body_m_s=None)
-        est = estimator.step(seen, np.round(cmd * 1000.0) / 1000.0)
+        obs = None if landmarks is None else _observe(landmarks, frame.true_pose, k + 1,
+                                                      stride=stride, noise=noise,
+                                                      rng=sensor_rng)
+        est = estimator.step(seen, np.round(cmd * 1000.0) / 1000.0, obs)
         true_log.append(frame.true_pose)
         est_log.append(est.copy())
         # phase transitions, on the estimate only

@@ -11,7 +11,8 @@ def test_demo_writes_report_metrics_and_plots(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--runs", "4", "--excitation-s", "60"]) == 0
     metrics = json.loads((tmp_path / "metrics.json").read_text())
     closure = metrics["closure_offset_m"]
-    assert {"odometry", "fir_sensorless", "arx_sensorless", "arx_hybrid"} <= set(closure)
+    assert {"odometry", "fir_sensorless", "arx_sensorless", "arx_hybrid", "ekf",
+            "ekf_landmarks"} <= set(closure)
     for row in closure.values():
         assert row["n"] == 4 and row["mean"] > 0 and row["std"] >= 0
     for name in ("report.md", "closure.png", "trajectories.png", "order_selection.png"):
