@@ -24,28 +24,18 @@ import numpy as np
 
 from drivers.sim import Simulator
 from drivers.sim_config import Room, get_preset
-from lti_motion.calibration import Calibration, CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.calibration import Calibration, CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
 from lti_motion.experiments.plots import plot_calibration, plot_validation
+from lti_motion.experiments.sim_calibration import calibrate_simulator, print_progress, summarize
 from lti_motion.model import MotionModel
 
 
 def run_calibration(preset: str, *, seed: int = 0, excitation_s: float = 180.0) -> Calibration:
     """Calibrate on the simulator: rotate beside the furniture, then drive on open floor."""
-    params = get_preset(preset)
-    sim = Simulator(params, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def progress(stage: str, done: int, total: int) -> None:
-        print(f"\r  {stage:10s} {done:6d}/{total} frames", end="" if done < total else "\n",
-              flush=True)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place(Room.OPEN_FLOOR)
-
-    return calibrate(sim, wheel_base_m=params.wheel_base_m,
-                     plan=CalibrationPlan(seed=seed, excitation_s=excitation_s), floor="hard",
-                     progress=progress, before_stage=to_open_floor)
+    return calibrate_simulator(preset, seed=seed,
+                               plan=CalibrationPlan(seed=seed, excitation_s=excitation_s),
+                               progress=print_progress)
 
 
 def validation_drive(preset: str, model: MotionModel, *, seed: int,
@@ -77,9 +67,8 @@ def main(argv: list[str] | None = None) -> int:
     plot_calibration(cal, args.out)
     plot_validation(cal, u, y, args.out / "validation.png")
     cal.arx.save(args.out / "model_arx.json")
-    print(f"encoder scale {cal.m_per_tick * 1e3:.5f} mm/tick "
-          f"(rotation period {cal.rotation.period_ticks:.1f} ticks, "
-          f"confidence {cal.rotation.confidence:.3f})")
+    for line in summarize(cal):
+        print(line)
     print(f"ARX order {cal.arx.orders['na']}, delay {cal.arx.orders['delay']}; "
           f"free-run fit on a fresh drive: ARX {cal.arx.fit_percent([(u, y)]).round(1)}, "
           f"FIR {cal.fir.fit_percent([(u, y)]).round(1)} (v, w) %")

@@ -26,38 +26,24 @@ from pathlib import Path
 __all__ = ["main"]
 
 
-def _progress(stage: str, done: int, total: int) -> None:
-    end = "\n" if done >= total else ""
-    print(f"\r  {stage:10s} {100 * done / total:5.1f}% ({done}/{total} frames)", end=end,
-          flush=True)
-
-
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from drivers.sim import Simulator
-    from drivers.sim_config import Room, get_preset
     from lti_motion.calibration import CalibrationPlan, calibrate
     from lti_motion.experiments.plots import plot_calibration
+    from lti_motion.experiments.sim_calibration import (
+        calibrate_simulator,
+        print_progress,
+        summarize,
+    )
 
     plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
     out = Path(args.out)
     if args.sim:
-        params = get_preset(args.sim)
-        robot = Simulator(params, seed=args.seed, floor=args.floor, room=Room.cluttered(),
-                          initial_pose=Room.CALIBRATION_SPOT)
-        wheel_base = params.wheel_base_m
-
-        def before_stage(stage: str) -> None:
-            if stage != "rotation":
-                robot.place(Room.OPEN_FLOOR)
-
         print(f"calibrating the simulated {args.sim} robot on {args.floor} floor "
               f"(seed {args.seed})")
-        cal = calibrate(robot, wheel_base_m=wheel_base, plan=plan, floor=args.floor,
-                        progress=_progress, before_stage=before_stage)
+        cal = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor, plan=plan,
+                                  progress=print_progress)
     else:
         from drivers.roomba import Roomba
-
-        wheel_base = args.wheel_base
 
         def before_stage(stage: str) -> None:
             where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
@@ -69,20 +55,14 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
         print(f"calibrating the robot on {args.port} at {args.baud} baud")
         with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            cal = calibrate(robot, wheel_base_m=wheel_base, plan=plan, floor=args.floor,
-                            progress=_progress, before_stage=before_stage)
+            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan, floor=args.floor,
+                            progress=print_progress, before_stage=before_stage)
     out.mkdir(parents=True, exist_ok=True)
     cal.arx.save(out / "model_arx.json")
     cal.fir.save(out / "model_fir.json")
     plots = plot_calibration(cal, out)
-    sel = cal.arx.selection
-    print(f"encoder scale   {cal.m_per_tick * 1e3:.5f} mm/tick "
-          f"(rotation period {cal.rotation.period_ticks:.1f} ticks, "
-          f"confidence {cal.rotation.confidence:.3f})")
-    print(f"ARX             order {cal.arx.orders['na']}, input delay "
-          f"{cal.arx.orders['delay']} samples; held-out free-run fit "
-          f"v {sel.validation_fit_percent[0]:.1f}%, w {sel.validation_fit_percent[1]:.1f}%")
-    print(f"FIR             {cal.fir.orders['n_taps']} taps")
+    for line in summarize(cal):
+        print(line)
     print(f"wrote {out / 'model_arx.json'}, {out / 'model_fir.json'} and "
           f"{', '.join(p.name for p in plots)}")
     return 0

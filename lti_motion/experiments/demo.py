@@ -23,9 +23,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from drivers.sim import Simulator
-from drivers.sim_config import Room, get_preset
-from lti_motion.calibration import Calibration, CalibrationPlan, calibrate
+from drivers.sim_config import get_preset
+from lti_motion.calibration import Calibration, CalibrationPlan
 from lti_motion.experiments.plots import plot_calibration
 from lti_motion.experiments.route import (
     ROUTE_LANDMARKS,
@@ -38,6 +37,7 @@ from lti_motion.experiments.route import (
     SensorLess,
     drive_route,
 )
+from lti_motion.experiments.sim_calibration import calibrate_simulator, print_progress, summarize
 
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
@@ -138,23 +138,15 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
     params = get_preset(preset)
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    def progress(stage: str, done: int, total: int) -> None:
-        end = "\n" if done >= total else ""
-        print(f"\r  calibrating: {stage:10s} {100 * done / total:5.1f}%", end=end, flush=True)
-
     print_fn(f"1. calibrating the simulated {preset} robot on {floor} floor (seed {seed})")
-    sim = Simulator(params, seed=seed, floor=floor, room=Room.cluttered(),
-                    initial_pose=Room.CALIBRATION_SPOT)
-    cal = calibrate(sim, wheel_base_m=params.wheel_base_m,
-                    plan=CalibrationPlan(seed=seed, excitation_s=excitation_s), floor=floor,
-                    progress=progress,
-                    before_stage=lambda s: s != "rotation" and sim.place(Room.OPEN_FLOOR))
+    cal = calibrate_simulator(params, seed=seed, floor=floor,
+                              plan=CalibrationPlan(seed=seed, excitation_s=excitation_s),
+                              progress=print_progress)
     cal.arx.save(out_dir / "model_arx.json")
     plots = plot_calibration(cal, out_dir)
     sel = cal.arx.selection
-    print_fn(f"   encoder scale {cal.m_per_tick * 1e3:.5f} mm/tick; ARX order "
-             f"{cal.arx.orders['na']}, delay {cal.arx.orders['delay']}; held-out free-run "
-             f"fit v {sel.validation_fit_percent[0]:.1f}%, w {sel.validation_fit_percent[1]:.1f}%")
+    for line in summarize(cal):
+        print_fn(f"   {line}")
 
     print_fn(f"2. the closed route ({np.linalg.norm(np.diff(ROUTE_M, axis=0), axis=1).sum():.1f}"
              f" m), {runs} runs per estimator in lock step")
