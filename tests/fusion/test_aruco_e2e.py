@@ -1,0 +1,77 @@
+"""End to end at 5 Hz images (issue 8): simulated drive -> rendered images -> ArUco
+detection -> EKF and smoother (``examples/aruco_end_to_end.py``).
+
+One calibration per module; 3 simulated robots (simulator seed 11, image-noise seeds
+11000 + run) drive the EKF example's rounded square for 5 minutes in a 5 m x 5 m room with
+twelve 15 cm markers on the walls. Every image (640 x 480, fx 500 px, every 13th-14th
+15 ms frame) is rendered from the true pose and detected; the EKF and the smoother get the
+same detections, the commands and the encoder counts, never the truth.
+
+Measured (docs/aruco_end_to_end.md): both estimators hold the position to millimetres, far
+inside the 5 cm acceptance; but the smoother's RMS is about twice the EKF's (about 2 mm
+against 1 mm), so "smoother at most the EKF" is not met yet: it is an xfail (strict).
+"""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+N_RUNS, DURATION_S, SEED = 3, 300.0, 11
+
+
+def _load_example():
+    path = ROOT / "examples" / "aruco_end_to_end.py"
+    spec = importlib.util.spec_from_file_location("aruco_end_to_end_example", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def example():
+    return _load_example()
+
+
+@pytest.fixture(scope="module")
+def runs(example):
+    model = example.load_ekf_example().calibrate_model()
+    return example.run_end_to_end(model, n_runs=N_RUNS, duration_s=DURATION_S, seed=SEED)
+
+
+def test_images_arrive_at_5_hz_and_show_markers(example, runs):
+    for run in runs:
+        frames = run.detections.frames
+        gaps = np.diff(frames)
+        assert set(gaps.tolist()) <= {13, 14}
+        assert len(frames) == pytest.approx(DURATION_S * example.CAMERA_RATE_HZ, abs=10)
+        per = run.detections.per_image
+        assert per.mean() > 1.0 and np.mean(per == 0) < 0.1
+
+
+def test_ekf_position_rms_within_5_cm_over_5_minutes(runs):
+    rms = np.array([r.ekf_rms_m for r in runs])
+    assert np.all(rms <= 0.05), rms
+    assert np.all(rms <= 0.01), rms         # measured about 1 mm
+    assert all(r.ekf.fused > 0.9 * r.detections.per_image.sum() for r in runs)
+
+
+def test_smoother_position_rms_within_5_cm(runs):
+    rms = np.array([r.smoother_rms_m for r in runs])
+    assert np.all(rms <= 0.01), rms         # measured about 2 mm
+
+
+@pytest.mark.xfail(strict=True, reason="known gap: the smoother is about 2x the EKF's RMS "
+                   "(mm level; docs/aruco_end_to_end.md)")
+def test_smoother_at_most_the_ekf(runs):
+    for r in runs:
+        assert r.smoother_rms_m <= r.ekf_rms_keyframes_m, (r.smoother_rms_m, r.ekf_rms_keyframes_m)
+
+
+def test_example_main_writes_a_png(example, tmp_path):
+    assert example.main(["--short", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "aruco_end_to_end.png").stat().st_size > 10_000
