@@ -1,3 +1,24 @@
-"""Estimators that use a calibrated motion model: filterpy EKF, GTSAM factors, monitoring."""
+"""Estimators that use a calibrated motion model: the filterpy EKF plug-in, GTSAM
+preintegrated factors and an iSAM2 smoother, ArUco landmarks, residual monitoring."""
 
-__all__: list[str] = []
+from fusion.aruco import MarkerDetector, MarkerObservation
+from fusion.ekf import ModelEKF, UpdateRecord
+from fusion.landmarks import LandmarkMap, LandmarkNoise
+from fusion.monitor import AlarmEvent, ResidualMonitor
+from fusion.preintegration import preintegrate, preintegrate_model
+from fusion.smoother import IncrementalSmoother, SmootherOptions
+
+__all__ = [
+    "AlarmEvent",
+    "IncrementalSmoother",
+    "LandmarkMap",
+    "LandmarkNoise",
+    "MarkerDetector",
+    "MarkerObservation",
+    "ModelEKF",
+    "ResidualMonitor",
+    "SmootherOptions",
+    "UpdateRecord",
+    "preintegrate",
+    "preintegrate_model",
+]

@@ -1,1 +1,30 @@
-"""placeholder"""
+"""Self-calibrating LTI motion models for differential-drive robots (numpy and scipy only).
+
+The core: sensor frames and logs, encoder odometry, kinematics (paper eq. 11), the
+encoder scale from a rotation (eq. 13), FIR and ARX identification, one state-space
+:class:`MotionModel`, calibration by driving, and trajectory metrics.
+"""
+
+from lti_motion.calibration import Calibration, CalibrationPlan, calibrate, drive
+from lti_motion.frames import FrameLog, SensorFrame
+from lti_motion.kinematics import integrate_poses, pose_step, wrap_angle
+from lti_motion.metrics import ate, fit_percent, rpe
+from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
+
+__all__ = [
+    "Calibration",
+    "CalibrationPlan",
+    "FrameLog",
+    "MotionModel",
+    "SensorFrame",
+    "ate",
+    "calibrate",
+    "drive",
+    "fit_arx",
+    "fit_fir_from_steps",
+    "fit_percent",
+    "integrate_poses",
+    "pose_step",
+    "rpe",
+    "wrap_angle",
+]
