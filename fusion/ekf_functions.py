@@ -147,7 +147,7 @@ from scipy.stats import chi2
 
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
 from fusion.landmarks import range_bearing, range_bearing_jacobian, range_bearing_residual
-from lti_motion.kinematics import body_from_wheel, wrap_angle
+from lti_motion.kinematics import body_from_wheel, sinc_and_derivative, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -184,13 +184,6 @@ __all__ = [
 ]
 
 _log = logging.getLogger(__name__)
-
-#: Below this |h| = |w dt / 2| the derivative of sin(h)/h uses its Taylor series
-#: (as lti_motion.kinematics does): truncation error below 1e-18 relative.
-_SERIES_BELOW = 0.25
-#: d/dh [sin(h)/h] = sum_k c_k h^(2k-1), c_k = (-1)^k 2k / (2k+1)!, k = 1..6.
-_DSINC_SERIES = (-1 / 3, 1 / 30, -1 / 840, 1 / 45360, -1 / 3991680, 1 / 518918400)
-
 
 @dataclass(frozen=True)
 class SlipNoise:
@@ -419,17 +412,6 @@ def _check_command(u: np.ndarray) -> np.ndarray:
     return u
 
 
-def _sinc_and_derivative(h: float) -> tuple[float, float]:
-    """``sin(h)/h`` (1 at 0) and its derivative, a series near 0 (as lti_motion.kinematics)."""
-    sinc = math.sin(h) / h if h != 0.0 else 1.0
-    if abs(h) < _SERIES_BELOW:
-        ds = 0.0
-        for c in reversed(_DSINC_SERIES):
-            ds = ds * h * h + c
-        return sinc, ds * h
-    return sinc, (h * math.cos(h) - math.sin(h)) / (h * h)
-
-
 def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: bool = False,
                   out_F: np.ndarray | None = None, out_Q: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -491,7 +473,7 @@ def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: 
     c_v, c_w = 1.0 + k_v, 1.0 + k_w
     vg, wg = c_v * v, c_w * w               # ground speeds
     h = 0.5 * wg * dt
-    sinc, dsinc = _sinc_and_derivative(h)
+    sinc, dsinc = sinc_and_derivative(h)
     mid = theta + h
     cm, sm = math.cos(mid), math.sin(mid)
     chord = vg * dt * sinc                  # paper eq. 11, chord form
