@@ -1,6 +1,8 @@
 """Shared fixtures: seeded randomness, and the real recorded data."""
 
+import importlib.util
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,3 +32,24 @@ def mrclam_path() -> Path:
             pytest.fail("MRCLAM data not found: set LTI_MOTION_DATA to the shared data folder")
         pytest.skip("MRCLAM data not found (set LTI_MOTION_DATA)")
     return path
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def load_example():
+    """Load ``examples/NAME.py`` as a module (once per session), to share its helpers."""
+    cache = {}
+
+    def load(name: str):
+        if name not in cache:
+            spec = importlib.util.spec_from_file_location(f"{name}_example",
+                                                          ROOT / "examples" / f"{name}.py")
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[spec.name] = module
+            spec.loader.exec_module(module)
+            cache[name] = module
+        return cache[name]
+
+    return load

@@ -12,29 +12,16 @@ inside the 5 cm acceptance; but the smoother's RMS is about twice the EKF's (abo
 against 1 mm), so "smoother at most the EKF" is not met yet: it is an xfail (strict).
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
 N_RUNS, DURATION_S, SEED = 3, 300.0, 11
 
 
-def _load_example():
-    path = ROOT / "examples" / "aruco_end_to_end.py"
-    spec = importlib.util.spec_from_file_location("aruco_end_to_end_example", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def example():
-    return _load_example()
+def example(load_example):
+    return load_example("aruco_end_to_end")
 
 
 @pytest.fixture(scope="module")

@@ -5,10 +5,7 @@ runs on the simulator are in ``test_ekf_montecarlo.py``.
 """
 
 import dataclasses
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numba
 import numpy as np
@@ -37,7 +34,6 @@ from lti_motion.exceptions import ShapeError
 from lti_motion.kinematics import integrate_poses, pose_step, pose_step_jacobians, wrap_angle
 from lti_motion.model import MotionModel
 
-ROOT = Path(__file__).resolve().parents[2]
 DT, B = 0.015, 0.235
 M_PER_TICK = 2e-5    # fine counts: quantisation far below the synthetic model's noise
 R_TRUE = np.diag([1e-4, 6e-3])
@@ -591,17 +587,8 @@ def test_predict_and_update_keep_P_symmetric_positive_definite(model, rng):
 
 
 # -- the example ----------------------------------------------------------------------------------
-def _load_example():
-    path = ROOT / "examples" / "ekf_plugin.py"
-    spec = importlib.util.spec_from_file_location("ekf_plugin_example", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_example_runs_with_a_short_horizon(tmp_path, capsys):
-    example = _load_example()
+def test_example_runs_with_a_short_horizon(tmp_path, capsys, load_example):
+    example = load_example("ekf_plugin")
     assert example.main(["--out", str(tmp_path), "--duration-s", "10", "--short"]) == 0
     png = tmp_path / "ekf_plugin.png"
     assert png.exists() and png.stat().st_size > 10_000

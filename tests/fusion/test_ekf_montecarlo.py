@@ -19,9 +19,6 @@ each of four landmarks at 2 Hz).
   position RMS error at most 5 cm, no divergence.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,24 +30,14 @@ from fusion.landmarks import synthetic_observations
 from lti_motion.kinematics import wrap_angle
 from lti_motion.odometry import tick_deltas
 
-ROOT = Path(__file__).resolve().parents[2]
 N_RUNS, DURATION_S = 30, 60.0
 LONG_RUNS, LONG_DURATION_S = 5, 600.0
 P0_STD = 0.005          # initial pose standard deviation [m, m, rad]
 
 
-def _load_example():
-    path = ROOT / "examples" / "ekf_plugin.py"
-    spec = importlib.util.spec_from_file_location("ekf_plugin_example", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def example():
-    return _load_example()
+def example(load_example):
+    return load_example("ekf_plugin")
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,7 @@ nominal drives without sensor false alarms. The dynamics faults are *not*
 asserted here: see ``docs/monitor.md`` for what the monitor measured on them.
 """
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -33,7 +30,6 @@ from fusion.monitor import (
 )
 from lti_motion.odometry import tick_deltas
 
-ROOT = Path(__file__).resolve().parents[2]
 DT = 0.015
 N_RUNS, FAULT_AT_S, DURATION_S = 20, 20.0, 30.0
 NOMINAL_RUNS, NOMINAL_S = 20, 60.0
@@ -224,18 +220,9 @@ def test_bad_options_are_rejected():
 
 
 # -- on the simulator --------------------------------------------------------------------------
-def _load_example():
-    path = ROOT / "examples" / "ekf_plugin.py"
-    spec = importlib.util.spec_from_file_location("ekf_plugin_example_monitor", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def example():
-    return _load_example()
+def example(load_example):
+    return load_example("ekf_plugin")
 
 
 @pytest.fixture(scope="module")

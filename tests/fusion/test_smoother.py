@@ -15,8 +15,6 @@ holds the commanded wheel rotation, so every tick carries 10% more ground:
 """
 
 from dataclasses import dataclass
-from importlib import util
-from pathlib import Path
 
 import gtsam
 import numpy as np
@@ -47,22 +45,13 @@ from fusion.smoother import (
 from lti_motion.calibration import speeds_from_log
 from lti_motion.metrics import ate
 
-ROOT = Path(__file__).resolve().parents[2]
 N_RUNS = 20
 DURATION_S = 60.0
 
 
-def _load_example():
-    spec = util.spec_from_file_location("factor_graph_example",
-                                        ROOT / "examples" / "factor_graph.py")
-    mod = util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.fixture(scope="module")
-def example():
-    return _load_example()
+def example(load_example):
+    return load_example("factor_graph")
 
 
 @pytest.fixture(scope="module")
