@@ -11,7 +11,7 @@ and delay 4.
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from synthetic_plant import BASE, DELAY, commands, plant, wheel_filters
 
 from lti_motion.arx import (
     RecursiveARX,
@@ -30,31 +30,8 @@ from lti_motion.exceptions import (
     ShapeError,
     UnstableModelError,
 )
-from lti_motion.excitation import random_held_normal
 from lti_motion.fir import simulate_state_space
 from lti_motion.metrics import fit_percent
-
-DT, BASE, DELAY = 0.015, 0.235, 4
-NOISE = (0.003, 0.02)  # std of v [m/s] and w [rad/s]
-
-
-def wheel_filters():
-    """(numerator, denominator) of the left and right wheel, unit DC gain times the wheel gain."""
-    out = []
-    for poles, gain in (((0.8 + 0.15j, 0.8 - 0.15j), 1.0), ((0.75 + 0.2j, 0.75 - 0.2j), 0.95)):
-        den = np.poly(poles).real
-        out.append((np.array([1.0, 0.3]) * gain * den.sum() / 1.3, den))
-    return out
-
-
-def plant(u, rng=None):
-    """Body speeds of the synthetic plant for commands u (n, 2); noisy when rng is given."""
-    delayed = np.zeros_like(u)
-    delayed[DELAY:] = u[:-DELAY]
-    wheels = np.column_stack([lfilter(b, a, delayed[:, i]) for i, (b, a) in
-                              enumerate(wheel_filters())])
-    y = np.column_stack([(wheels[:, 1] + wheels[:, 0]) / 2, (wheels[:, 1] - wheels[:, 0]) / BASE])
-    return y if rng is None else y + rng.normal(size=y.shape) * NOISE
 
 
 def true_arx():
@@ -64,10 +41,6 @@ def true_arx():
     a = np.array([t @ np.diag([-al[k], -ar[k]]) @ np.linalg.inv(t) for k in (1, 2)])
     b = np.array([t @ np.diag([bl[j], br[j]]) for j in (0, 1)])
     return a, b
-
-
-def commands(rng, n, std=0.2):
-    return random_held_normal(n=n, dt_s=DT, rng=rng, std_m_s=std)
 
 
 @pytest.fixture(scope="module")

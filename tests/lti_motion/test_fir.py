@@ -6,7 +6,7 @@ delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from synthetic_plant import DELAY, DT, plant
 
 from lti_motion.exceptions import CalibrationError, ShapeError
 from lti_motion.excitation import random_held_normal, step_sequence
@@ -19,26 +19,6 @@ from lti_motion.fir import (
     simulate_state_space_loop,
 )
 from lti_motion.metrics import fit_percent
-
-DT, BASE, DELAY = 0.015, 0.235, 4
-NOISE = (0.003, 0.02)
-
-
-def wheel_filters():
-    out = []
-    for poles, gain in (((0.8 + 0.15j, 0.8 - 0.15j), 1.0), ((0.75 + 0.2j, 0.75 - 0.2j), 0.95)):
-        den = np.poly(poles).real
-        out.append((np.array([1.0, 0.3]) * gain * den.sum() / 1.3, den))
-    return out
-
-
-def plant(u, rng=None):
-    delayed = np.zeros_like(u)
-    delayed[DELAY:] = u[:-DELAY]
-    wheels = np.column_stack([lfilter(b, a, delayed[:, i]) for i, (b, a) in
-                              enumerate(wheel_filters())])
-    y = np.column_stack([(wheels[:, 1] + wheels[:, 0]) / 2, (wheels[:, 1] - wheels[:, 0]) / BASE])
-    return y if rng is None else y + rng.normal(size=y.shape) * NOISE
 
 
 def true_impulse_response(n):

@@ -10,7 +10,7 @@ import os
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from synthetic_plant import BASE, DELAY, DT, NOISE, commands, plant, wheel_filters
 
 from lti_motion.arx import arx_regression, arx_state_space
 from lti_motion.exceptions import (
@@ -28,34 +28,7 @@ from lti_motion.metrics import fit_percent
 from lti_motion.model import FORMAT, MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.persistence import write_document
 
-DT, BASE, DELAY = 0.015, 0.235, 4
-NOISE = (0.003, 0.02)
 WHEN = "2026-11-23T12:00:00+00:00"
-
-
-def wheel_filters():
-    out = []
-    for poles, gain in (((0.8 + 0.15j, 0.8 - 0.15j), 1.0), ((0.75 + 0.2j, 0.75 - 0.2j), 0.95)):
-        den = np.poly(poles).real
-        out.append((np.array([1.0, 0.3]) * gain * den.sum() / 1.3, den))
-    return out
-
-
-def plant(u, rng=None, *, saturation=None, dead_zone=None):
-    if saturation is not None:
-        u = np.clip(u, -saturation, saturation)
-    if dead_zone is not None:
-        u = np.where(np.abs(u) < dead_zone, 0.0, u)
-    delayed = np.zeros_like(u)
-    delayed[DELAY:] = u[:-DELAY]
-    wheels = np.column_stack([lfilter(b, a, delayed[:, i]) for i, (b, a) in
-                              enumerate(wheel_filters())])
-    y = np.column_stack([(wheels[:, 1] + wheels[:, 0]) / 2, (wheels[:, 1] - wheels[:, 0]) / BASE])
-    return y if rng is None else y + rng.normal(size=y.shape) * NOISE
-
-
-def commands(rng, n, std=0.2):
-    return random_held_normal(n=n, dt_s=DT, rng=rng, std_m_s=std)
 
 
 @pytest.fixture(scope="module")
