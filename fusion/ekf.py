@@ -67,6 +67,7 @@ from fusion.ekf_functions import (
     pose_residual,
     predict_terms,
     propagate_covariance,
+    span_verdict,
     state_transition,
 )
 from fusion.exceptions import (
@@ -76,6 +77,7 @@ from fusion.exceptions import (
 )
 from fusion.landmarks import MIN_RANGE_M, LandmarkMap, LandmarkNoise
 from lti_motion.model import MotionModel
+from lti_motion.odometry import tick_deltas
 
 __all__ = ["FilterStats", "ModelEKF", "UpdateKind", "UpdateReason", "UpdateRecord"]
 
@@ -86,8 +88,8 @@ if int(filterpy.__version__.split(".")[0]) < 2:     # 1.4.5's EKF.update never s
                       "upgrade it (pip install 'filterpy>=2.0')")
 
 UpdateKind = Literal["encoders", "landmark", "pose"]
-UpdateReason = Literal["fused", "gated", "non_finite", "unknown_landmark", "anchor", "gap",
-                       "degenerate"]
+UpdateReason = Literal["fused", "forced", "gated", "non_finite", "unknown_landmark", "anchor",
+                       "gap", "degenerate"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,7 +113,10 @@ class UpdateRecord:
     accepted : bool
         Whether the reading was fused.
     reason : str
-        ``"fused"``, ``"gated"`` (NIS outside the gate), ``"non_finite"``
+        ``"fused"``, ``"forced"`` (encoder counts outside the gate fused
+        anyway: after ``reanchor_periods`` gated periods both wheels count
+        steadily, so the model is what misses, e.g. a start from rest),
+        ``"gated"`` (NIS outside the gate), ``"non_finite"``
         (NaN or inf in the reading), ``"unknown_landmark"``, ``"anchor"``
         (first encoder counts: a reference only), ``"gap"`` (counts right
         after others with no :meth:`ModelEKF.predict` between, or more than
@@ -210,13 +215,20 @@ class ModelEKF(ExtendedKalmanFilter):
     history : int
         How many update records :attr:`records` keeps (0: none).
     reanchor_periods : int
-        An encoder reading rejected while it spans this many periods or more
-        renews the count reference (the motion since is given up: a stuck
-        encoder). Fewer, and the next reading still sums from the last fused
-        counts, which recovers single-frame spikes and the model's transient
-        misses (speed changes, the start from rest), which a longer sum
-        dilutes. 16 periods (0.24 s at 15 ms) keeps the filter within a
-        millimetre of odometry on nominal runs (``docs/ekf.md``).
+        When an encoder reading is still outside the gate after spanning
+        this many periods, the span is judged
+        (:func:`~fusion.ekf_functions.span_verdict`): a wheel flat while
+        predicted to turn (stuck) renews the count reference and gives up the
+        motion since; both wheels counting steadily means the model misses a
+        transient (a start from rest), and the counts are fused anyway
+        (``"forced"``); a frame whose increment jumps (a spike) waits for the
+        next frame; a jump earlier in the span (a spike, a frozen wheel that
+        resumed) also renews the reference. Fewer periods than this, and the
+        next reading still sums from the last fused counts, which recovers
+        single-frame spikes.
+    max_jump_ticks : float
+        Largest change of a frame's tick increment from the last frame's that
+        still counts as steady, for the judgement above [ticks].
     max_periods : int
         Most periods one encoder reading may span after gated or lost ones
         (500 periods of 15 ms at 0.5 m/s stay far from the 16-bit counter's
@@ -272,6 +284,7 @@ class ModelEKF(ExtendedKalmanFilter):
         history: int = 10_000,
         reanchor_periods: int = 16,
         max_periods: int = 500,
+        max_jump_ticks: float = 10.0,
     ) -> None:
         fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
                          encoder_std=encoder_std, m_per_tick=m_per_tick)
@@ -294,6 +307,9 @@ class ModelEKF(ExtendedKalmanFilter):
                 raise FilterOptionError(f"{name} must be a positive int, got {value!r}")
         self.reanchor_periods = reanchor_periods
         self.max_periods = max_periods
+        if not max_jump_ticks > 0:
+            raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
+        self.max_jump_ticks = float(max_jump_ticks)
         self.x = initial_state(fm, initial_pose, z=z0)
         self.P = initial_covariance(fm, pose_std=pose_std, z_cov=z_cov)
         self.F = np.array(fm.F_template)
@@ -315,12 +331,19 @@ class ModelEKF(ExtendedKalmanFilter):
         self._tick_pair = np.zeros((2, 2), dtype=np.int64)
         self._have_ref = False
         self._periods_since_ref = 0
+        # the previous frame's counts and increment, for the single-frame jump test
+        self._last_frame = np.zeros(2, dtype=np.int64)
+        self._last_delta = np.zeros(2, dtype=np.int64)
+        self._have_last = self._have_last_delta = False
+        self._span_jump = 0.0       # largest frame jump since the last fused counts [ticks]
         if initial_ticks is not None:
             first = self._check_ticks(initial_ticks)
             if not np.all(np.isfinite(first)):
                 raise FilterOptionError(f"initial_ticks must be finite, got {initial_ticks}")
             self._tick_pair[0] = first
             self._have_ref = True
+            self._last_frame[:] = first
+            self._have_last = True
         # F buffers must hold the constant blocks (predict_terms writes only the pose rows)
         self._buffers = (np.array(fm.F_template), np.empty((fm.n, fm.n)))
 
@@ -448,18 +471,43 @@ class ModelEKF(ExtendedKalmanFilter):
         periods = self._periods_since_ref
         if not self._have_ref or periods == 0 or periods > self.max_periods:
             reason: UpdateReason = "gap" if self._have_ref else "anchor"
+            self._frame_jump(ticks)
+            self._span_jump = 0.0
             pair[0] = ticks
             self._have_ref, self._periods_since_ref = True, 0
             return self._skip("encoders", t, reason, 2)
         pair[1] = ticks
-        y = encoder_speeds(pair, self.fm)        # summed over `periods` periods
-        record = self._gated("encoders", t, y, y - self.x[self._speed_at:],
-                             self.fm.H_encoders, self.R, None,
-                             PHt=self.P[:, self._speed_at:])
-        if record.accepted or periods >= self.reanchor_periods:
+        jump = self._frame_jump(ticks)
+        speeds = self.x[self._speed_at:]
+        y = encoder_speeds(pair, self.fm)           # summed over `periods` periods
+        verdict = "young"
+        if periods >= self.reanchor_periods:
+            verdict = span_verdict(tick_deltas(pair, axis=0)[0],
+                                   np.linalg.solve(self.fm.ticks_to_speeds, speeds),
+                                   jump, self._span_jump, periods=periods,
+                                   max_jump_ticks=self.max_jump_ticks)
+        record = self._gated("encoders", t, y, y - speeds, self.fm.H_encoders, self.R, None,
+                             PHt=self.P[:, self._speed_at:], force=verdict == "consistent")
+        if record.accepted or verdict == "broken":
             pair[0] = ticks
             self._periods_since_ref = 0
+            self._span_jump = 0.0
+        else:
+            self._span_jump = max(self._span_jump, float(jump.max()))
         return record
+
+    def _frame_jump(self, ticks: np.ndarray) -> np.ndarray:
+        """``| |d_k| - |d_(k-1)| |`` per wheel [ticks]: how much this frame's increment
+        differs from the last frame's (a wheel's speed changes by about a tick per period)."""
+        last = self._last_frame
+        delta = np.abs(tick_deltas(np.stack([last, ticks]), axis=0)[0]) if self._have_last \
+            else np.zeros(2, np.int64)
+        jump = np.abs(delta - self._last_delta) if self._have_last_delta else np.zeros(2)
+        self._last_frame = ticks.astype(np.int64)
+        self._have_last_delta = self._have_last
+        self._have_last = True
+        self._last_delta = delta
+        return jump
 
     def update_speeds(self, y_m_s: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
         """Fuse measured body speeds ``(v [m/s], w [rad/s])`` of the period just predicted.
@@ -575,8 +623,9 @@ class ModelEKF(ExtendedKalmanFilter):
     # -- shared ----------------------------------------------------------------------------------
     def _gated(self, kind: UpdateKind, t: float, zmeas: np.ndarray, innovation: np.ndarray,
                H: np.ndarray, R: np.ndarray, landmark_id: Hashable | None, *,
-               PHt: np.ndarray | None = None) -> UpdateRecord:
-        """Gate on the NIS, then a Joseph-form update (Bar-Shalom et al. 2001, eq. 5.2.3-18)."""
+               PHt: np.ndarray | None = None, force: bool = False) -> UpdateRecord:
+        """Gate on the NIS, then a Joseph-form update (Bar-Shalom et al. 2001, eq. 5.2.3-18);
+        ``force`` fuses a reading outside the gate (reason ``"forced"``)."""
         P = self.P
         m = innovation.shape[0]
         if PHt is None:
@@ -586,7 +635,8 @@ class ModelEKF(ExtendedKalmanFilter):
             S = PHt[-m:] + R                     # H P H^T for a selector H on the last rows
         SI = inverse_covariance(S)
         value = nis(innovation, SI)
-        accepted = value <= self._gates[m]
+        inside = value <= self._gates[m]
+        accepted = inside or force
         innovation.flags.writeable = False
         S.flags.writeable = False
         self.y, self.S, self.SI, self.z = innovation, S, SI, zmeas
@@ -596,7 +646,7 @@ class ModelEKF(ExtendedKalmanFilter):
             self.x = self.x_post = self.x + K @ innovation
             self.P = self.P_post = joseph_covariance(P, K, H, R, PHt)
             self._log_likelihood = self._likelihood = self._mahalanobis = None
-            reason: UpdateReason = "fused"
+            reason: UpdateReason = "fused" if inside else "forced"
         else:
             self.K = np.zeros((self.fm.n, m))
             self.x_post, self.P_post = self.x, P

@@ -177,6 +177,7 @@ __all__ = [
     "predict_terms",
     "process_noise",
     "propagate_covariance",
+    "span_verdict",
     "state_mean",
     "state_residual",
     "state_transition",
@@ -639,6 +640,56 @@ def encoder_speeds(ticks: np.ndarray, fm: FilterModel) -> np.ndarray:
     if fm.ticks_to_speeds is None:
         raise FilterOptionError("the model has no encoder scale; give FilterModel(m_per_tick=...)")
     return fm.ticks_to_speeds @ tick_deltas(ticks, axis=0)[0]
+
+
+def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump_ticks: np.ndarray,
+                 span_jump_ticks: float, *, periods: int, max_jump_ticks: float) -> str:
+    """Judge encoder counts that stayed outside the gate for ``periods`` periods.
+
+    Parameters
+    ----------
+    span_ticks : array_like, shape (2,)
+        Count increments ``(left, right)`` since the last fused counts [ticks].
+    predicted_ticks : array_like, shape (2,)
+        The model's predicted travel of each wheel over the same span [ticks].
+    frame_jump_ticks : array_like, shape (2,)
+        ``| |d_k| - |d_(k-1)| |``: change of this frame's increment from the
+        last one [ticks].
+    span_jump_ticks : float
+        The largest such change over the earlier frames of the span [ticks].
+    periods : int
+        Periods the span covers.
+    max_jump_ticks : float
+        Largest plausible frame-to-frame change; a wheel's speed changes by
+        about one tick per period (2 m/s^2 for 15 ms at 0.44 mm/tick), a
+        spike or a frozen encoder that resumes by tens or hundreds.
+
+    Returns
+    -------
+    {"jump", "broken", "consistent"}
+        ``"jump"``: this frame's increment jumped (wait for a clean frame);
+        ``"broken"``: a wheel counted at most one tick while predicted to turn
+        at least half a tick a period (frozen), or an earlier frame of the
+        span jumped: renew the reference and give up the span's motion;
+        ``"consistent"``: both wheels counted steadily, so the model is what
+        misses (a transient it does not follow) and the counts are fused.
+
+    Examples
+    --------
+    >>> span_verdict(np.array([0, 60]), np.array([64.0, 64.0]), np.zeros(2), 0.0, periods=16,
+    ...              max_jump_ticks=10)
+    'broken'
+    >>> span_verdict(np.array([40, 41]), np.array([64.0, 64.0]), np.zeros(2), 1.0, periods=16,
+    ...              max_jump_ticks=10)
+    'consistent'
+    """
+    if np.any(np.asarray(frame_jump_ticks) > max_jump_ticks):
+        return "jump"
+    flat = np.abs(span_ticks) <= 1
+    frozen = np.any(flat & (np.abs(predicted_ticks) >= 0.5 * periods))
+    if frozen or span_jump_ticks > max_jump_ticks:
+        return "broken"
+    return "consistent"
 
 
 def landmark_measurement(x: np.ndarray, landmark_xy: np.ndarray) -> np.ndarray:

@@ -72,6 +72,12 @@ class CalibrationPlan:
         (docs/calibration.md has the measurements).
     validation_fraction : float
         Tail of the excitation held out to choose the ARX order and delay.
+    dc_gain : {"wheel_servo", "free"}
+        Steady-state gain of the ARX fit (:func:`~lti_motion.model.fit_arx`).
+        ``"wheel_servo"`` (default): the robot servoes each wheel on the
+        encoders that measure ``y``, so the gain is one scale times the
+        wheel-to-body matrix; this removes the straight-line yaw scatter of
+        a free fit (docs/route.md).
     seed : int
         Seed of the random excitation.
     """
@@ -87,6 +93,7 @@ class CalibrationPlan:
     excitation_correlation: float = 0.85
     hold_s: tuple[float, float] = (0.5, 2.0)
     validation_fraction: float = 0.3
+    dc_gain: Literal["wheel_servo", "free"] = "wheel_servo"
     seed: int = 0
 
 
@@ -271,7 +278,8 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     u_x, y_x = speeds_from_log(exc_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
 
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
-    arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, **common)
+    arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
+                  **common)
     fir = fit_fir_from_steps(u_s, y_s, phases=steps, noise_runs=[(u_x, y_x)], **common)
     return Calibration(m_per_tick=scale, rotation=rotation, fir=fir, arx=arx,
                        logs={"rotation": rot_log, "steps": step_log, "excitation": exc_log})

@@ -45,6 +45,7 @@ from lti_motion.arx import (
     select_arx,
     split_runs,
 )
+from lti_motion.arx_structure import restrict_dc_gain, servo_dc_gain
 from lti_motion.exceptions import (
     CalibrationError,
     ModelFileError,
@@ -594,6 +595,7 @@ def fit_arx(
     floor: str | None = None,
     calibrated_at: str | None = None,
     max_condition: float = DEFAULT_MAX_CONDITION,
+    dc_gain: Literal["free", "wheel_servo"] = "free",
 ) -> MotionModel:
     """Calibrate an ARX motion model from random-excitation runs (paper II.C, III.C).
 
@@ -613,6 +615,12 @@ def fit_arx(
         Metadata (``calibrated_at`` defaults to now, UTC).
     max_condition : float
         Excitation limit.
+    dc_gain : {"free", "wheel_servo"}
+        ``"wheel_servo"`` restricts the steady-state gain to ``c M``, one
+        scale ``c`` for both wheels (:mod:`lti_motion.arx_structure`): right for a
+        robot whose wheel speeds are servoed on its encoders (Roomba, Create 2)
+        and ``y`` measured by those encoders. ``"free"`` (default) for any
+        other pairing, e.g. commands against motion capture.
 
     Returns
     -------
@@ -627,22 +635,30 @@ def fit_arx(
     ShapeError, NonFiniteError, CalibrationError, NotExcitedError, UnstableModelError
         For bad data (see :func:`~lti_motion.arx.estimate_arx`).
     """
+    if dc_gain not in ("free", "wheel_servo"):
+        raise ValueError(f"dc_gain must be 'free' or 'wheel_servo', got {dc_gain!r}")
     runs = check_runs(runs)
     sel = select_arx(runs, orders=orders, delays=delays, validation=validation,
                      tolerance=tolerance, max_condition=max_condition)
     final = estimate_arx(runs, na=sel.order, nb=sel.order, delay=sel.delay,
                          max_condition=max_condition)
+    probe_fit, diagnostics = sel.fit, {}
+    if dc_gain == "wheel_servo":
+        probe_fit = restrict_dc_gain(sel.fit, servo_dc_gain(sel.fit, wheel_base_m=wheel_base_m)[0])
+        gain, diagnostics["dc_gain_scale"] = servo_dc_gain(final, wheel_base_m=wheel_base_m)
+        final = restrict_dc_gain(final, gain)
     _, val = split_runs(runs, validation, warmup=sel.warmup)
-    probe = sel.fit.state_space()
-    alpha = q_scale_from_errors(probe, sel.fit.residual_cov,
-                                free_run_errors(probe, val, warmup=sel.warmup))
-    fit_v, fit_w = sel.validation_fit_percent
+    probe = probe_fit.state_space()
+    errors = free_run_errors(probe, val, warmup=sel.warmup)
+    alpha = q_scale_from_errors(probe, probe_fit.residual_cov, errors)
+    y_val = np.concatenate([y[sel.warmup:] for _, y in val])
+    fit_v, fit_w = (float(f) for f in fit_percent(y_val, y_val - np.concatenate(errors), axis=0))
     _log.info("ARX model: order %d, delay %d, validation fit %.2f / %.2f %%, q_scale %.3g",
               sel.order, sel.delay, fit_v, fit_w, alpha)
     return MotionModel.from_arx(
         final, dt_s=dt_s, wheel_base_m=wheel_base_m, q_scale=alpha, m_per_tick=m_per_tick,
         floor=floor, calibrated_at=calibrated_at, selection=sel,
-        diagnostics={"validation_fit_v": fit_v, "validation_fit_w": fit_w},
+        diagnostics={"validation_fit_v": fit_v, "validation_fit_w": fit_w, **diagnostics},
     )
 
 

@@ -180,8 +180,8 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
         if target is None:                   # relative to odometry
             target = metrics["closure_offset_m"]["odometry"]["mean"]
         if got > target:
-            misses.append(f"{LABELS[name]}: target {text}; measured {got:.3f} m, "
-                          f"missed by {got - target:.3f} m")
+            misses.append(f"{LABELS[name]}: target {text}; measured {got:.4f} m, "
+                          f"missed by {1000 * (got - target):.1f} mm")
     metrics["targets_missed"] = misses
     _plot_trajectories(results, out_dir / "trajectories.png")
     _plot_closure(results, out_dir / "closure.png")

@@ -115,3 +115,17 @@ def test_place_puts_the_robot_down_at_rest():
     np.testing.assert_allclose(log.true_pose[-1], (1.0, 1.0, 0.5), atol=1e-4)
     assert np.abs(log.true_body_m_s[:, 0]).max() < 1e-3     # m/s
     assert np.abs(log.true_body_m_s[:, 1]).max() < 1e-2     # rad/s
+
+
+def test_arx_drives_straight_when_commanded_straight(calibrated):
+    """Wheel-servo DC gain (lti_motion.arx_structure): a straight command gives zero yaw rate in
+    steady state, and equal wheel commands give the same speed ratio c for both wheels."""
+    p, cal, _ = calibrated
+    c = cal.arx.diagnostics["dc_gain_scale"]
+    assert c == pytest.approx(1.0, abs=0.02)
+    y = cal.arx.simulate(np.full((2000, 2), 0.2))
+    assert abs(y[-1, 1]) < 1e-9
+    assert y[-1, 0] == pytest.approx(0.2 * c, rel=1e-6)
+    turn = cal.arx.simulate(np.tile([-0.1, 0.1], (2000, 1)))
+    assert turn[-1, 0] == pytest.approx(0.0, abs=1e-9)
+    assert turn[-1, 1] == pytest.approx(0.2 / p.wheel_base_m * c, rel=1e-6)
