@@ -7,6 +7,7 @@ from fusion.landmarks import LandmarkMap, LandmarkNoise
 from fusion.monitor import AlarmEvent, ResidualMonitor
 from fusion.preintegration import preintegrate, preintegrate_model
 from fusion.smoother import IncrementalSmoother, SmootherOptions
+from fusion.velocity_ekf import VelocityModelEKF
 
 __all__ = [
     "AlarmEvent",
@@ -19,6 +20,7 @@ __all__ = [
     "ResidualMonitor",
     "SmootherOptions",
     "UpdateRecord",
+    "VelocityModelEKF",
     "preintegrate",
     "preintegrate_model",
 ]
