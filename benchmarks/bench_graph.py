@@ -33,7 +33,6 @@ from fusion.preintegration import Preintegrated, preintegrate, preintegrate_mode
 from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from lti_motion.calibration import speeds_from_log
 from lti_motion.kinematics import integrate_poses
-from lti_motion.model import MotionModel
 
 #: Keyframes of the iSAM2 drive; ``BENCH_GRAPH_KEYFRAMES`` overrides it for a quick look.
 N_KEYFRAMES = int(os.environ.get("BENCH_GRAPH_KEYFRAMES", "10000"))
@@ -96,7 +95,7 @@ def graph() -> list[Figure]:
     kf = np.arange(0, n + 1, EVERY)
     t_pre = median_seconds(lambda: preintegrate(speeds, 0.015, keyframes=kf,
                                                 speed_covariance=np.eye(2) * 1e-4), repeat=5)
-    model: MotionModel = ex.calibrated_model()
+    model, phi = ex.calibrated_model_and_noise()
     u_long = np.tile(rng.uniform(-0.3, 0.3, (1000, 2)).repeat(50, axis=0), (20, 1))
     t_model = median_seconds(lambda: preintegrate_model(model, u_long, keyframes=kf), repeat=3)
 
@@ -120,12 +119,12 @@ def graph() -> list[Figure]:
 
     def model_plain(n_kf: int) -> None:
         pre = preintegrate_model(model, u[:kf[n_kf]], keyframes=kf[:n_kf + 1],
-                                 covariance_scale=ex.COVARIANCE_SCALE)
+                                 speed_covariance=phi)
         _smooth(pre, obs, landmarks, start, plain)
 
     def model_calibrated(n_kf: int) -> None:
         pre = preintegrate_model(model, u[:kf[n_kf]], keyframes=kf[:n_kf + 1],
-                                 covariance_scale=ex.COVARIANCE_SCALE)
+                                 speed_covariance=phi)
         _smooth(pre, obs, landmarks, start, calibrated)
 
     for fn in (encoder, model_plain, model_calibrated):     # warm-up

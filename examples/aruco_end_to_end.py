@@ -58,16 +58,16 @@ from fusion.factors import RangeBearing
 from fusion.landmark_map import MarkerLandmark, MarkerMap
 from fusion.landmarks import LandmarkNoise
 from fusion.preintegration import preintegrate_model
-from fusion.smoother import IncrementalSmoother, log_keyframes
+from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
 
 __all__ = [
     "CAMERA_RATE_HZ",
-    "COVARIANCE_SCALE",
     "KEYFRAME_EVERY",
     "ROOM_M",
+    "SMOOTHER_OPTIONS",
     "START_POSE",
     "Detections",
     "EndToEndRun",
@@ -89,9 +89,16 @@ ROOM_M = 5.0
 CAMERA_RATE_HZ = 5.0
 #: Regular smoother keyframes between images [frames] (0.5 s), as in ``examples/factor_graph.py``.
 KEYFRAME_EVERY = 33
-#: Inflation of the model's preintegrated speed covariance (``examples/factor_graph.py``:
-#: the model's own speed covariance is over-confident in closed-loop driving).
-COVARIANCE_SCALE = 3.0
+#: The smoother's settings, like for like with :class:`fusion.ekf.ModelEKF`: motion from the
+#: model's encoder-filtered speeds (``mode="filtered"``, the EKF's slip noise), a calibration
+#: ``(s, g)`` of ground against encoder speeds with the EKF's scale-error prior (1%) and
+#: random walk (1e-4 per sqrt(s)), a Huber kernel on the detections (the EKF gates them; the
+#: threshold 1.0 is about 1.345, the usual 95%-efficiency one, times the measured spread of
+#: the detections' normalised errors, 0.64-0.85, docs/aruco_end_to_end.md), and
+#: relinearisation at 1 mm / 1 mrad at every update (the kernel's weights need it).
+SMOOTHER_OPTIONS = SmootherOptions(calibration_prior_sigmas=(0.01, 0.01),
+                                   calibration_walk_sigmas=(1e-4, 1e-4), landmark_huber_k=1.0,
+                                   relinearize_threshold=1e-3, relinearize_skip=1)
 CAMERA_HEIGHT_M = 0.2
 
 
@@ -250,20 +257,21 @@ class SmootherRun:
 
 def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
                  marker_map: MarkerMap, *, initial_pose: Sequence[float] = START_POSE,
-                 keyframe_every: int = KEYFRAME_EVERY, mode: str = "one_step") -> SmootherRun:
+                 keyframe_every: int = KEYFRAME_EVERY, mode: str = "filtered",
+                 options: SmootherOptions = SMOOTHER_OPTIONS) -> SmootherRun:
     """iSAM2 over keyframes (every image, plus every ``keyframe_every`` frames).
 
     Each detection is added as a one-row :class:`RangeBearing` carrying its own sigmas.
     """
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=keyframe_every, extra=detections.frames)
-    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y,
-                             covariance_scale=COVARIANCE_SCALE)
+    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y)
     ids = np.array(marker_map.ids)
     landmarks = GraphLandmarks(ids, np.array([marker_map.marker(i).position_xy_m for i in ids]))
     image_at = dict(zip(np.searchsorted(kf, detections.frames).tolist(), detections.by_image,
                         strict=True))
-    sm = IncrementalSmoother(initial_pose=np.asarray(initial_pose, float), landmarks=landmarks)
+    sm = IncrementalSmoother(initial_pose=np.asarray(initial_pose, float), landmarks=landmarks,
+                             options=options)
     for k in range(len(kf)):
         if k > 0:
             sm.add_motion(pre[k - 1])

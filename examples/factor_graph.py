@@ -26,6 +26,7 @@ from matplotlib.figure import Figure
 from drivers.sim import Simulator
 from drivers.sim_config import Fault, RobotParams, Room, get_preset
 from fusion.factors import LandmarkMap, RangeBearing, observe_landmarks
+from fusion.graph_noise import speed_covariance_from_data
 from fusion.preintegration import compose_motions, fit_calibration, preintegrate_model
 from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
@@ -40,10 +41,6 @@ MAX_RANGE_M = 3.5
 FIELD_OF_VIEW_RAD = np.deg2rad(120.0)
 #: Samples between keyframes (0.5 s at the Create 2's 15 ms period).
 KEYFRAME_EVERY = 33
-#: Factor on the model's own speed-error covariance: on this closed-loop
-#: driving the model's covariance understates the heading error about
-#: fourfold (docs/factor_graph.md, "Is the covariance honest?").
-COVARIANCE_SCALE = 3.0
 START_POSE = (0.0, -2.0, 0.0)
 
 
@@ -141,11 +138,16 @@ class Track:
 
 def run_smoother(model: MotionModel, log: FrameLog, observations: RangeBearing,
                  landmarks: LandmarkMap, *, initial_pose: np.ndarray,
+                 speed_covariance: np.ndarray | None = None,
                  options: SmootherOptions | None = None) -> Track:
-    """iSAM2 over one log, one update per keyframe, recording the online calibration."""
+    """iSAM2 over one log, one update per keyframe, recording the online calibration.
+
+    ``speed_covariance``: the long-run speed covariance measured on the calibration
+    log (:func:`calibrated_model_and_noise`); ``None`` uses the model's own.
+    """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=KEYFRAME_EVERY, extra=observations.pose_index)
-    pre = preintegrate_model(model, u, keyframes=kf, covariance_scale=COVARIANCE_SCALE)
+    pre = preintegrate_model(model, u, keyframes=kf, speed_covariance=speed_covariance)
     obs = observations.with_pose_index(np.searchsorted(kf, observations.pose_index))
     bounds = np.searchsorted(obs.pose_index, np.arange(len(kf) + 1))
     sm = IncrementalSmoother(initial_pose=initial_pose, options=options, landmarks=landmarks)
@@ -171,7 +173,7 @@ def true_calibration(model: MotionModel, log: FrameLog, keyframes: np.ndarray, *
     of each span (the first ``settle_s`` after the change left out).
     """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
-    pre = preintegrate_model(model, u, keyframes=keyframes, covariance_scale=COVARIANCE_SCALE)
+    pre = preintegrate_model(model, u, keyframes=keyframes)
     t = keyframes * log.dt_s
     truth = log.true_pose[keyframes]
     spans = []
@@ -226,8 +228,11 @@ def plot(track: Track, true_poses: np.ndarray, landmarks: LandmarkMap, *, path: 
     return path
 
 
-def calibrated_model(*, seed: int = 1) -> MotionModel:
-    """The ARX model of the nominal Create 2, calibrated on hard floor by driving (3-4 s)."""
+def calibrated_model_and_noise(*, seed: int = 1) -> tuple[MotionModel, np.ndarray]:
+    """The ARX model of the nominal Create 2, calibrated on hard floor by driving, and the
+    long-run covariance of its sensor-less speed errors measured on its own calibration
+    excitation log against the encoders (:func:`fusion.graph_noise.speed_covariance_from_data`,
+    Newey-West, 5 s bandwidth): the covariance to preintegrate with, no hand factor."""
     p = get_preset("create2")
     sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
 
@@ -235,21 +240,33 @@ def calibrated_model(*, seed: int = 1) -> MotionModel:
         if stage != "rotation":
             sim.place((30.0, 30.0, 0.0))
 
-    return calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
-                     floor="hard", before_stage=to_open_floor).arx
+    cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
+                    floor="hard", before_stage=to_open_floor)
+    u, y = speeds_from_log(cal.logs["excitation"], m_per_tick=cal.m_per_tick,
+                           wheel_base_m=p.wheel_base_m)
+    return cal.arx, speed_covariance_from_data(cal.arx, [(u, y)])
+
+
+def calibrated_model(*, seed: int = 1) -> MotionModel:
+    """The ARX model of :func:`calibrated_model_and_noise` alone."""
+    return calibrated_model_and_noise(seed=seed)[0]
 
 
 def run(*, seed: int = 0, duration_s: float = 120.0, out: Path = Path("out/factor_graph.png"),
-        model: MotionModel | None = None) -> dict[str, float]:
-    """Calibrate (unless given a model), drive, smooth, plot; return summary figures."""
-    model = model or calibrated_model()
+        model: MotionModel | None = None, speed_covariance: np.ndarray | None = None
+        ) -> dict[str, float]:
+    """Calibrate (unless given a model and its speed covariance), drive, smooth, plot;
+    return summary figures."""
+    if model is None:
+        model, speed_covariance = calibrated_model_and_noise()
     p = get_preset("create2")
     floor_change_s = 0.5 * duration_s
     log = drive(p, n_robots=1, seed=seed, duration_s=duration_s,
                 faults=[Fault("floor", t_s=floor_change_s, floor="carpet")]).robot(0)
     landmarks = landmark_grid()
     obs = observe(log, landmarks, rng=np.random.default_rng(seed + 1000))
-    track = run_smoother(model, log, obs, landmarks, initial_pose=log.true_pose[0])
+    track = run_smoother(model, log, obs, landmarks, initial_pose=log.true_pose[0],
+                         speed_covariance=speed_covariance)
     truth = log.true_pose[track.keyframes]
     plot(track, log.true_pose, landmarks, path=out, dt_s=p.period_s,
          floor_change_s=floor_change_s,

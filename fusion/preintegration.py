@@ -80,11 +80,13 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 
+from fusion.graph_noise import filtered_speeds
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import pose_step_jacobians
 from lti_motion.model import MotionModel
 
 __all__ = [
+    "FILTERED_SLIP_DENSITY",
     "SLIP_DENSITY",
     "EmptyIntervalError",
     "GraphInputError",
@@ -103,8 +105,13 @@ __all__ = [
 
 #: Default :func:`preintegrate` ``slip_density``: 1 mm and 1 mrad per square-root second.
 SLIP_DENSITY = (1e-6, 1e-6, 1e-6)
-#: Where the speeds come from: commands only, or the one-step predictor with encoders.
-SpeedMode = Literal["free_run", "one_step"]
+#: :func:`preintegrate_model`'s ``slip_density`` in ``mode="filtered"``: 0.1 mm and 0.1 mrad
+#: per square-root second (slip along the track and in heading is in the per-sample
+#: covariance there; this keeps the sideways direction positive definite).
+FILTERED_SLIP_DENSITY = (1e-8, 1e-8, 1e-8)
+#: Where the speeds come from: commands only, the one-step predictor with encoders, or
+#: the model's Kalman-filtered (posterior) speeds given the encoders.
+SpeedMode = Literal["free_run", "one_step", "filtered"]
 
 
 class GraphInputError(ValueError):
@@ -275,9 +282,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
         Sample period(s) [s].
     keyframes : array_like of int, shape (m + 1,)
         Strictly increasing sample indices in ``[0, n]``.
-    speed_covariance : array_like, shape (2, 2)
+    speed_covariance : array_like, shape (2, 2) or (n, 2, 2)
         Per-sample (long-run) covariance ``Phi`` of the speed errors
-        (:func:`speed_error_covariance`).
+        (:func:`speed_error_covariance`), one for all samples or one per sample.
     calibration : (float, float)
         ``(s, g)``: the speeds integrated are ``(s v, g w)``; the errors
         scale with them (``diag(c) Phi diag(c)``).
@@ -325,8 +332,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     if dt.shape != (n,):
         raise ShapeError(f"expected dt_s a number or of shape ({n},), got {dt.shape}")
     phi_cov = np.asarray(speed_covariance, dtype=float)
-    if phi_cov.shape != (2, 2):
-        raise ShapeError(f"expected speed_covariance of shape (2, 2), got {phi_cov.shape}")
+    if phi_cov.shape not in ((2, 2), (n, 2, 2)):
+        raise ShapeError(f"expected speed_covariance of shape (2, 2) or ({n}, 2, 2), got "
+                         f"{phi_cov.shape}")
     slip = np.asarray(slip_density, dtype=float)
     if slip.shape != (3,) or not np.all(slip >= 0):
         raise ValueError(f"slip_density must be three non-negative densities, got {slip_density}")
@@ -335,6 +343,8 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
         raise ShapeError(f"expected calibration (s, g) of shape (2,), got {cal.shape}")
     lo, hi = int(kf[0]), int(kf[-1])
     sp, dt = sp[lo:hi], dt[lo:hi]
+    if phi_cov.ndim == 3:
+        phi_cov = phi_cov[lo:hi]
     for name, arr in (("speeds", sp), ("dt_s", dt), ("speed_covariance", phi_cov),
                       ("calibration", cal)):
         if not np.all(np.isfinite(arr)):
@@ -366,8 +376,8 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     b = f_speed[:, 0, 1] - rem_y * dt
     d = f_speed[:, 1, 1] + rem_x * dt
     # G Phi G^T with G = [[a, b], [c, d], [0, dt]], six distinct entries per sample
-    pc = phi_cov * np.outer(cal, cal)
-    p, q, r = pc[0, 0], pc[0, 1], pc[1, 1]
+    pc = phi_cov * np.outer(cal, cal)                             # diag(c) Phi diag(c)
+    p, q, r = pc[..., 0, 0], pc[..., 0, 1], pc[..., 1, 1]
     ga, gb, gc, gd = p * a + q * b, q * a + r * b, p * c + q * d, q * c + r * d
     per_sample = np.stack([ga * a + gb * b, ga * c + gb * d, gb * dt, gc * c + gd * d, gd * dt,
                            r * dt * dt, a * v_raw, b * w_raw, c * v_raw, d * w_raw, dt * w_raw],
@@ -393,8 +403,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
 def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarray,
                        mode: SpeedMode = "free_run", y_measured: np.ndarray | None = None,
                        z0: np.ndarray | None = None, covariance_scale: float = 1.0,
+                       speed_covariance: np.ndarray | None = None,
                        calibration: tuple[float, float] | np.ndarray = (1.0, 1.0),
-                       slip_density: tuple[float, float, float] | np.ndarray = SLIP_DENSITY,
+                       slip_density: tuple[float, float, float] | np.ndarray | None = None,
                        ) -> Preintegrated:
     """Predict speeds with a model, then preintegrate them between keyframes.
 
@@ -406,20 +417,27 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
         Wheel commands ``(L, R)`` [m/s], one per sample.
     keyframes : array_like of int, shape (m + 1,)
         Strictly increasing sample indices in ``[0, n]``.
-    mode : {"free_run", "one_step"}
-        Sensor-less (:meth:`MotionModel.simulate`) or with encoders
-        (:meth:`MotionModel.predict_one_step`, needs ``y_measured``).
+    mode : {"free_run", "one_step", "filtered"}
+        Sensor-less (:meth:`MotionModel.simulate`), one step ahead with the
+        encoders (:meth:`MotionModel.predict_one_step`), or the model's
+        Kalman-filtered speeds given the encoders
+        (:func:`fusion.graph_noise.filtered_speeds`, with their per-sample
+        error covariance, slip included). The last two need ``y_measured``.
     y_measured : array_like, shape (n, 2), optional
-        Encoder body speeds, for ``mode="one_step"``.
+        Encoder body speeds, for ``mode="one_step"`` and ``"filtered"``.
     z0 : array_like, shape (nz,), optional
         Model state before sample 0 (zeros: at rest).
     covariance_scale : float
-        Factor on the model's long-run covariance, for errors the model does
-        not know about (slip, unmodelled dynamics); 1 trusts the model.
+        Factor on the speed covariance; 1 (the default) trusts it.
+    speed_covariance : array_like, shape (2, 2) or (n, 2, 2), optional
+        The speed covariance to use instead of the model's own
+        (:func:`speed_error_covariance`), e.g. measured on the calibration
+        log (:func:`fusion.graph_noise.speed_covariance_from_data`).
     calibration : (float, float)
         Linearisation point ``(s, g)``.
-    slip_density : (float, float, float)
-        Pose noise outside the model, as in :func:`preintegrate`.
+    slip_density : (float, float, float), optional
+        Pose noise outside the model, as in :func:`preintegrate`; default
+        :data:`SLIP_DENSITY`, or :data:`FILTERED_SLIP_DENSITY` for ``"filtered"``.
 
     Returns
     -------
@@ -431,19 +449,26 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
         For an unknown mode, a missing ``y_measured``, a non-positive
         ``covariance_scale``; and as :func:`preintegrate`.
     """
+    if mode in ("one_step", "filtered") and y_measured is None:
+        raise ValueError(f"mode={mode!r} needs y_measured (encoder speeds, shape (n, 2))")
     if mode == "free_run":
         speeds = model.simulate(u, z0=z0)
+        phi = speed_error_covariance(model, mode=mode)
     elif mode == "one_step":
-        if y_measured is None:
-            raise ValueError("mode='one_step' needs y_measured (encoder speeds, shape (n, 2))")
         speeds = model.predict_one_step(u, y_measured, z0=z0)
+        phi = speed_error_covariance(model, mode=mode)
+    elif mode == "filtered":
+        speeds, phi = filtered_speeds(model, u, y_measured, z0=z0)
     else:
-        raise ValueError(f"mode must be 'free_run' or 'one_step', got {mode!r}")
+        raise ValueError(f"mode must be 'free_run', 'one_step' or 'filtered', got {mode!r}")
     scale = float(covariance_scale)
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError(f"covariance_scale must be positive and finite, got {covariance_scale}")
-    return preintegrate(speeds, model.dt_s, keyframes=keyframes,
-                        speed_covariance=scale * speed_error_covariance(model, mode=mode),
+    if speed_covariance is not None:
+        phi = np.asarray(speed_covariance, dtype=float)
+    if slip_density is None:
+        slip_density = FILTERED_SLIP_DENSITY if mode == "filtered" else SLIP_DENSITY
+    return preintegrate(speeds, model.dt_s, keyframes=keyframes, speed_covariance=scale * phi,
                         calibration=calibration, slip_density=slip_density)
 
 

@@ -111,6 +111,14 @@ class SmootherOptions:
         the acceptance runs at up to 1.6x the time.
     relinearize_skip : int
         iSAM2 checks for relinearisation every this many updates.
+    landmark_huber_k : float or None
+        Huber threshold (in standard deviations of the whitened error) of a
+        robust kernel on the range-bearing factors (``gtsam.noiseModel.Robust``
+        with ``mEstimator.Huber``; Huber 1964): beyond ``k`` sigma a detection
+        weighs as if its error grew linearly, not quadratically, so outliers
+        (the EKF gates them) cannot drag the path. ``None``: plain Gaussian.
+        The kernel's weights follow the linearisation point, so use it with a
+        small ``relinearize_threshold`` (1e-3 with ``relinearize_skip=1``).
     reinitialize_every : int
         Every this many updates, the newest pose and calibration are read
         back from iSAM2 to start the next keyframes from (in between, new
@@ -127,6 +135,7 @@ class SmootherOptions:
     calibration_every: int = 10
     relinearize_threshold: float = 0.1
     relinearize_skip: int = 10
+    landmark_huber_k: float | None = None
     reinitialize_every: int = 10
 
     def __post_init__(self) -> None:
@@ -141,6 +150,9 @@ class SmootherOptions:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        k = self.landmark_huber_k
+        if k is not None and not (np.isfinite(k) and k > 0):
+            raise ValueError(f"landmark_huber_k must be positive or None, got {k}")
         if not (np.isfinite(self.relinearize_threshold) and self.relinearize_threshold > 0):
             raise ValueError(f"relinearize_threshold must be positive, got "
                              f"{self.relinearize_threshold}")
@@ -253,6 +265,9 @@ class _Graph:
                 f"observation of pose {first}, but the graph holds poses 0 .. "
                 f"{self.n_poses - 1}; add the motion up to that keyframe first")
         noise = gtsam.noiseModel.Diagonal.Sigmas([obs.bearing_sigma_rad, obs.range_sigma_m])
+        if self.opts.landmark_huber_k is not None:
+            noise = gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Huber.Create(self.opts.landmark_huber_k), noise)
         for p, lid, b, r in zip(obs.pose_index.tolist(), obs.landmark_id.tolist(),
                                 obs.bearing_rad.tolist(), obs.range_m.tolist(), strict=True):
             key = landmark_key(lid)
@@ -515,7 +530,8 @@ def log_keyframes(n_samples: int, *, every: int, extra: np.ndarray | Sequence[in
 def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
                observations: RangeBearing | None = None, landmarks: LandmarkMap | None = None,
                keyframe_every: int = 33, mode: SpeedMode = "free_run",
-               covariance_scale: float = 1.0, options: SmootherOptions | None = None,
+               covariance_scale: float = 1.0, speed_covariance: np.ndarray | None = None,
+               options: SmootherOptions | None = None,
                method: Literal["isam2", "batch"] = "isam2", covariances: bool = False
                ) -> SmootherResult:
     """Run the model and the smoother over a recorded single-robot log.
@@ -534,10 +550,14 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
         Known landmarks.
     keyframe_every : int
         Samples between regular keyframes (33 is 0.5 s on a Create 2).
-    mode : {"free_run", "one_step"}
-        Sensor-less speeds, or the one-step predictor with the encoders.
+    mode : {"free_run", "one_step", "filtered"}
+        Sensor-less speeds, the one-step predictor with the encoders, or the
+        model's Kalman-filtered speeds (:func:`~fusion.preintegration.preintegrate_model`).
     covariance_scale : float
-        Factor on the model's speed-error covariance.
+        Factor on the speed-error covariance.
+    speed_covariance : array_like, shape (2, 2), optional
+        Speed-error covariance instead of the model's own, e.g. measured on
+        the calibration log (:func:`fusion.graph_noise.speed_covariance_from_data`).
     options : SmootherOptions, optional
         Graph settings.
     method : {"isam2", "batch"}
@@ -565,7 +585,8 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
     frames = np.zeros(0, np.int64) if observations is None else observations.pose_index
     kf = log_keyframes(len(u), every=keyframe_every, extra=frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y,
-                             covariance_scale=covariance_scale)
+                             covariance_scale=covariance_scale,
+                             speed_covariance=speed_covariance)
     obs = None if observations is None else observations.with_pose_index(
         np.searchsorted(kf, observations.pose_index))
     if method == "batch":

@@ -27,7 +27,6 @@ NOISE = LandmarkNoise(range_std_frac=0.0, range_std_m=0.05, bearing_std_rad=np.r
 @pytest.fixture(scope="module")
 def runs(load_example):
     ekf_ex = load_example("ekf_plugin")
-    graph_ex = load_example("factor_graph")
     model = ekf_ex.calibrate_model()
     sim = Simulator("create2", n_robots=N_RUNS, seed=300, room=Room.box(5.0, 5.0),
                     initial_pose=ekf_ex.START_POSE)
@@ -45,8 +44,7 @@ def runs(load_example):
                           bearing_rad=obs.range_bearing[:, 1], range_m=obs.range_bearing[:, 0],
                           bearing_sigma_rad=NOISE.bearing_std_rad, range_sigma_m=0.05)
         sm = smooth_log(model, log, initial_pose=log.true_pose[0], observations=rb,
-                        landmarks=graph_map, mode="one_step",
-                        covariance_scale=graph_ex.COVARIANCE_SCALE)
+                        landmarks=graph_map, mode="filtered")
         kf = sm.keyframes
         out.append((ate(log.true_pose[kf], ekf.poses[kf]), ate(log.true_pose[kf], sm.poses)))
     return np.array(out)
