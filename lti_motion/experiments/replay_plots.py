@@ -32,13 +32,7 @@ def plot_trajectories(path: Path, src: ReplaySource, poses: Mapping[str, np.ndar
     start = next(iter(poses.values()))[0]
     ax.plot(start[0], start[1], "ko", ms=6, mfc="none", label="start")
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal", title=src.name)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _finish(fig, ax, path)
 
 
 def plot_errors(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]) -> Path:
@@ -50,6 +44,11 @@ def plot_errors(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]) 
         ax.plot(t, err, "-", color=f"C{i}", lw=0.9, label=src.label(name))
     ax.set(xlabel="time from the first frame [s]", ylabel="position error [m]",
            title=f"{src.name}: position error against ground truth")
+    return _finish(fig, ax, path)
+
+
+def _finish(fig: plt.Figure, ax: plt.Axes, path: Path) -> Path:
+    """Grid, legend, and the figure written to ``path`` (folders made) and closed."""
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.datasets import DatasetError, load_mrclam
+from drivers.datasets import DatasetError, MrclamDataset, MrclamRobot, load_mrclam
 from fusion.landmarks import LandmarkMap, LandmarkNoise
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.logfile import load_log
@@ -191,6 +191,15 @@ def _key(value: object) -> Hashable:
     return value if isinstance(value, Hashable) else str(value)
 
 
+def _mrclam_robot(path: str | os.PathLike, robot: int) -> tuple[MrclamDataset, MrclamRobot]:
+    """The data set and one of its robots; :class:`DatasetError` naming the robots it holds."""
+    dataset = load_mrclam(path)
+    if robot not in dataset.robots:
+        raise DatasetError(f"{Path(path).name} holds robots {sorted(dataset.robots)}; there is "
+                           f"no robot {robot}")
+    return dataset, dataset.robots[robot]
+
+
 def source_from_mrclam(path: str | os.PathLike, *, robot: int, dt_s: float,
                        wheel_base_m: float, start_s: float = 0.0,
                        duration_s: float | None = None, max_gap_s: float = 0.25
@@ -218,11 +227,7 @@ def source_from_mrclam(path: str | os.PathLike, *, robot: int, dt_s: float,
     DatasetError
         For a missing or malformed file, or a robot the data set does not hold.
     """
-    dataset = load_mrclam(path)
-    if robot not in dataset.robots:
-        raise DatasetError(f"{Path(path).name} holds robots {sorted(dataset.robots)}; there is "
-                           f"no robot {robot}")
-    rec = dataset.robots[robot]
+    dataset, rec = _mrclam_robot(path, robot)
     cmd, gt = rec.commands, rec.groundtruth
     t0, t1 = max(cmd[0, 0], gt[0, 0]), min(cmd[-1, 0], gt[-1, 0])
     grid = np.arange(t0, t1, dt_s)
@@ -274,11 +279,7 @@ def fit_mrclam_model(path: str | os.PathLike, *, robot: int, dt_s: float = 0.1
     from lti_motion.experiments.mrclam import split_halves
     from lti_motion.model import fit_arx
 
-    dataset = load_mrclam(path)
-    if robot not in dataset.robots:
-        raise DatasetError(f"{Path(path).name} holds robots {sorted(dataset.robots)}; there is "
-                           f"no robot {robot}")
-    rec = dataset.robots[robot]
+    _, rec = _mrclam_robot(path, robot)
     segments = resample_robot(rec, dt_s=dt_s)
     train, _ = split_halves(segments, min_samples=round(2.0 / dt_s))
     runs = [(wheel_from_body(s.commands_vw, wheel_base_m=CREATE1_WHEEL_BASE_M), s.speeds_vw)
