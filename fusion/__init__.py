@@ -2,6 +2,7 @@
 preintegrated factors and an iSAM2 smoother, ArUco landmarks, residual monitoring."""
 
 from fusion.aruco import MarkerDetector, MarkerObservation
+from fusion.dynamics_monitor import DynamicsMonitor, DynamicsNull, fit_dynamics_null
 from fusion.ekf import ModelEKF, UpdateRecord
 from fusion.landmarks import LandmarkMap, LandmarkNoise
 from fusion.monitor import AlarmEvent, ResidualMonitor
@@ -11,6 +12,8 @@ from fusion.velocity_ekf import VelocityModelEKF
 
 __all__ = [
     "AlarmEvent",
+    "DynamicsMonitor",
+    "DynamicsNull",
     "IncrementalSmoother",
     "LandmarkMap",
     "LandmarkNoise",
@@ -21,6 +24,7 @@ __all__ = [
     "SmootherOptions",
     "UpdateRecord",
     "VelocityModelEKF",
+    "fit_dynamics_null",
     "preintegrate",
     "preintegrate_model",
 ]
