@@ -332,8 +332,8 @@ class ModelEKF(ExtendedKalmanFilter):
         self._have_ref = False
         self._periods_since_ref = 0
         # the previous frame's counts and increment, for the single-frame jump test
-        self._last_frame = np.zeros(2, dtype=np.int64)
-        self._last_delta = np.zeros(2, dtype=np.int64)
+        self._last_frame = (0, 0)
+        self._last_delta = (0, 0)
         self._have_last = self._have_last_delta = False
         self._span_jump = 0.0       # largest frame jump since the last fused counts [ticks]
         if initial_ticks is not None:
@@ -342,7 +342,7 @@ class ModelEKF(ExtendedKalmanFilter):
                 raise FilterOptionError(f"initial_ticks must be finite, got {initial_ticks}")
             self._tick_pair[0] = first
             self._have_ref = True
-            self._last_frame[:] = first
+            self._last_frame = (int(first[0]), int(first[1]))
             self._have_last = True
         # F buffers must hold the constant blocks (predict_terms writes only the pose rows)
         self._buffers = (np.array(fm.F_template), np.empty((fm.n, fm.n)))
@@ -493,20 +493,24 @@ class ModelEKF(ExtendedKalmanFilter):
             self._periods_since_ref = 0
             self._span_jump = 0.0
         else:
-            self._span_jump = max(self._span_jump, float(jump.max()))
+            self._span_jump = max(self._span_jump, jump)
         return record
 
-    def _frame_jump(self, ticks: np.ndarray) -> np.ndarray:
-        """``| |d_k| - |d_(k-1)| |`` per wheel [ticks]: how much this frame's increment
-        differs from the last frame's (a wheel's speed changes by about a tick per period)."""
-        last = self._last_frame
-        delta = np.abs(tick_deltas(np.stack([last, ticks]), axis=0)[0]) if self._have_last \
-            else np.zeros(2, np.int64)
-        jump = np.abs(delta - self._last_delta) if self._have_last_delta else np.zeros(2)
-        self._last_frame = ticks.astype(np.int64)
+    def _frame_jump(self, ticks: np.ndarray) -> float:
+        """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
+        increment differs from the last frame's (a wheel's speed changes by about a tick per
+        period). Scalar arithmetic: it runs at every reading."""
+        left, right = int(ticks[0]), int(ticks[1])
+        # 16-bit rollover-safe increments, as lti_motion.odometry.tick_deltas
+        dl = abs((left - self._last_frame[0] + 32768) % 65536 - 32768)
+        dr = abs((right - self._last_frame[1] + 32768) % 65536 - 32768)
+        jump = 0.0
+        if self._have_last_delta:
+            jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))
         self._have_last_delta = self._have_last
         self._have_last = True
-        self._last_delta = delta
+        self._last_frame = (left, right)
+        self._last_delta = (dl, dr)
         return jump
 
     def update_speeds(self, y_m_s: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:

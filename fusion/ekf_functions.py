@@ -642,7 +642,7 @@ def encoder_speeds(ticks: np.ndarray, fm: FilterModel) -> np.ndarray:
     return fm.ticks_to_speeds @ tick_deltas(ticks, axis=0)[0]
 
 
-def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump_ticks: np.ndarray,
+def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump_ticks: float,
                  span_jump_ticks: float, *, periods: int, max_jump_ticks: float) -> str:
     """Judge encoder counts that stayed outside the gate for ``periods`` periods.
 
@@ -652,9 +652,9 @@ def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump
         Count increments ``(left, right)`` since the last fused counts [ticks].
     predicted_ticks : array_like, shape (2,)
         The model's predicted travel of each wheel over the same span [ticks].
-    frame_jump_ticks : array_like, shape (2,)
-        ``| |d_k| - |d_(k-1)| |``: change of this frame's increment from the
-        last one [ticks].
+    frame_jump_ticks : float
+        ``max | |d_k| - |d_(k-1)| |`` over the wheels: change of this frame's
+        increment from the last one [ticks].
     span_jump_ticks : float
         The largest such change over the earlier frames of the span [ticks].
     periods : int
@@ -676,14 +676,14 @@ def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump
 
     Examples
     --------
-    >>> span_verdict(np.array([0, 60]), np.array([64.0, 64.0]), np.zeros(2), 0.0, periods=16,
+    >>> span_verdict(np.array([0, 60]), np.array([64.0, 64.0]), 0.0, 0.0, periods=16,
     ...              max_jump_ticks=10)
     'broken'
-    >>> span_verdict(np.array([40, 41]), np.array([64.0, 64.0]), np.zeros(2), 1.0, periods=16,
+    >>> span_verdict(np.array([40, 41]), np.array([64.0, 64.0]), 0.0, 1.0, periods=16,
     ...              max_jump_ticks=10)
     'consistent'
     """
-    if np.any(np.asarray(frame_jump_ticks) > max_jump_ticks):
+    if frame_jump_ticks > max_jump_ticks:
         return "jump"
     flat = np.abs(span_ticks) <= 1
     frozen = np.any(flat & (np.abs(predicted_ticks) >= 0.5 * periods))

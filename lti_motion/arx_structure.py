@@ -107,39 +107,6 @@ def servo_dc_gain(fit: ArxFit, *, wheel_base_m: float) -> tuple[np.ndarray, floa
     return c * m, c
 
 
-def _dc_rows(fit: ArxFit, gain: np.ndarray) -> np.ndarray:
-    """``C`` with ``C theta[:, r] = G[r]`` for both outputs ``r``: ``sum B_j + sum A_k G = G``."""
-    return np.concatenate([np.tile(np.eye(2), fit.nb), np.tile(gain.T, fit.na)], axis=1)
-
-
-def _restrict(fit: ArxFit, rows: list[np.ndarray], rhs: list[np.ndarray]) -> ArxFit:
-    """Restricted least squares per output column ``r``: ``rows[r] theta[:, r] = rhs[r]``.
-
-    ``theta_R = theta - P C^T (C P C^T)^+ (C theta - d)`` and ``P_R = P - P C^T (C P C^T)^+
-    C P`` (Greene 2012, eq. 5-23 and 5-26); the pseudo-inverse admits redundant, consistent
-    restrictions. The residual sum of squares of column ``r`` grows by
-    ``r^T (C P C^T)^+ r``; ``information_inv`` becomes the mean of the columns' ``P_R``
-    (exact when both outputs carry the same restrictions).
-    """
-    p = fit.information_inv
-    theta = fit.theta.copy()
-    extra = np.zeros(2)
-    p_r = np.zeros_like(p)
-    for r in range(2):
-        c, d = rows[r], rhs[r]
-        pc = p @ c.T
-        cpc_inv = np.linalg.pinv(c @ pc, rcond=1e-12, hermitian=True)
-        viol = c @ theta[:, r] - d
-        theta[:, r] -= pc @ cpc_inv @ viol                 # Greene eq. 5-23
-        extra[r] = viol @ cpc_inv @ viol
-        p_r += (p - pc @ cpc_inv @ pc.T) / 2.0              # Greene eq. 5-26
-    a, b = _split_theta(theta, fit.na, fit.nb)
-    dof = max(fit.n_rows - fit.rank + sum(np.linalg.matrix_rank(c) for c in rows) // 2, 1)
-    return dataclasses.replace(fit, a=a, b=b,
-                               residual_cov=fit.residual_cov + np.diag(extra / dof),
-                               information_inv=p_r)
-
-
 def restrict_dc_gain(fit: ArxFit, gain: np.ndarray) -> ArxFit:
     """The least-squares ARX fit restricted to a given steady-state gain.
 
@@ -187,5 +154,14 @@ def restrict_dc_gain(fit: ArxFit, gain: np.ndarray) -> ArxFit:
     g = np.asarray(gain, float)
     if g.shape != (2, 2):
         raise ShapeError(f"gain must have shape (2, 2), got {g.shape}")
-    c = _dc_rows(fit, g)
-    return _restrict(fit, [c, c], [g[0], g[1]])
+    c = np.concatenate([np.tile(np.eye(2), fit.nb), np.tile(g.T, fit.na)], axis=1)
+    p = fit.information_inv
+    pc = p @ c.T
+    cpc_inv = np.linalg.inv(c @ pc)
+    r = c @ fit.theta - g.T                         # (2, 2): one column per output
+    theta = fit.theta - pc @ cpc_inv @ r            # Greene eq. 5-23
+    a, b = _split_theta(theta, fit.na, fit.nb)
+    extra = r.T @ cpc_inv @ r / max(fit.n_rows - fit.rank + 2, 1)
+    return dataclasses.replace(
+        fit, a=a, b=b, residual_cov=fit.residual_cov + (extra + extra.T) / 2.0,
+        information_inv=p - pc @ cpc_inv @ pc.T)    # Greene eq. 5-26
