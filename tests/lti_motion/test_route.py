@@ -70,3 +70,70 @@ def test_ekf_with_landmarks_closes_the_route_within_3_cm(cal):
                          landmarks=ROUTE_LANDMARKS)
     assert result.finished.all()
     assert result.closure_offset_m.mean() <= 0.03, result.closure_offset_m
+
+
+def test_smoother_with_landmarks_closes_the_route_like_the_ekf(cal):
+    """The smoother row of Table II against the EKF row, same calibration, seeds, sensor.
+
+    Bound: in the demo's 30 runs the paired difference smoother - EKF of the closure
+    offset was -0.01 +- 0.74 mm (largest 2.1 mm), so the mean of 4 paired runs exceeds
+    the EKF's by 2 mm only if the smoother is worse (> 5 standard errors). Both must also
+    meet the issue's 3 cm for a landmark row: without its landmarks the smoother would be
+    odometry (0.069 m) and fail.
+    """
+    from lti_motion.experiments.route import ROUTE_LANDMARKS, EkfEstimator
+    from lti_motion.experiments.route_smoother import SmootherEstimator
+
+    seeds = range(4)
+    ekf = drive_route(P, EkfEstimator(cal.arx, landmarks=ROUTE_LANDMARKS), seeds=seeds,
+                      landmarks=ROUTE_LANDMARKS)
+    est = SmootherEstimator(cal.arx, landmarks=ROUTE_LANDMARKS)
+    smo = drive_route(P, est, seeds=seeds, landmarks=ROUTE_LANDMARKS)
+    assert smo.finished.all()
+    assert smo.closure_offset_m.mean() <= 0.03, smo.closure_offset_m
+    assert smo.closure_offset_m.mean() <= ekf.closure_offset_m.mean() + 0.002, (
+        smo.closure_offset_m, ekf.closure_offset_m)
+    # where it believed it stopped, against the truth: a few mm, as the EKF
+    stop_err = np.linalg.norm(smo.est_poses[:, -1, :2] - smo.true_poses[:, -1, :2], axis=1)
+    assert stop_err.max() < 0.015, stop_err
+    # a pose every period, keyframes at every observation (8 or 9 periods here)
+    n_periods = smo.est_poses.shape[1]
+    assert smo.true_poses.shape == smo.est_poses.shape
+    for sm in est.smoothers:
+        gaps = np.diff(sm.keyframes)
+        assert gaps.min() >= 1 and gaps.max() <= est.keyframe_every
+        assert n_periods / 10 < sm.n_poses < n_periods / 7
+    assert est.dropped_observations == 0
+
+
+def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
+    from fusion.factors import LandmarkMap as GraphMap
+    from lti_motion.exceptions import ShapeError
+    from lti_motion.experiments.route import ROUTE_LANDMARKS
+    from lti_motion.experiments.route_smoother import SmootherEstimator
+    from lti_motion.frames import SensorFrame
+
+    with pytest.raises(ValueError, match="encoder scale"):
+        SmootherEstimator(cal.arx.updated(m_per_tick=None))
+    with pytest.raises(ValueError, match="at least one period"):
+        SmootherEstimator(cal.arx, keyframe_s=0.001)
+    with pytest.raises(TypeError, match=r"fusion\.landmarks\.LandmarkMap"):
+        SmootherEstimator(cal.arx, landmarks=GraphMap([1], [[0.0, 0.0]]))
+    est = SmootherEstimator(cal.arx, landmarks=ROUTE_LANDMARKS)
+    frame = SensorFrame(t_s=0.0, ticks=np.zeros((2, 2), np.int64),
+                        light_bump=np.zeros((2, 6), np.int64), bumps=np.zeros((2, 2), bool),
+                        cmd_m_s=np.zeros((2, 2)))
+    with pytest.raises(RuntimeError, match="reset"):
+        est.step(frame, np.zeros((2, 2)))
+    with pytest.raises(ShapeError, match=r"\(3, 3\)"):
+        est.reset(3, np.zeros((2, 3)))
+    est.reset(2, np.zeros((2, 3)))
+    with pytest.raises(ShapeError, match=r"\(2, 2\)"):
+        est.step(frame, np.zeros((3, 2)))
+    est.step(frame, np.zeros((2, 2)))                      # anchors the counts
+    with pytest.raises(ShapeError, match="2 robots"):
+        est.step(frame, np.zeros((2, 2)), [[]])
+    seen = [[(99, np.array([1.0, 0.0])), (1, np.array([1.41, -2.36]))], []]
+    est.step(frame, np.zeros((2, 2)), seen)
+    assert est.dropped_observations == 1
+    assert est.smoothers[0].n_poses == 2 and est.smoothers[1].n_poses == 1
