@@ -7,6 +7,7 @@ from fusion.ekf import ModelEKF, UpdateRecord
 from fusion.landmarks import LandmarkMap, LandmarkNoise
 from fusion.monitor import AlarmEvent, ResidualMonitor
 from fusion.preintegration import preintegrate, preintegrate_model
+from fusion.scale_monitor import ScaleMonitor, ScaleOptions
 from fusion.smoother import IncrementalSmoother, SmootherOptions
 from fusion.velocity_ekf import VelocityModelEKF
 
@@ -21,6 +22,8 @@ __all__ = [
     "MarkerObservation",
     "ModelEKF",
     "ResidualMonitor",
+    "ScaleMonitor",
+    "ScaleOptions",
     "SmootherOptions",
     "UpdateRecord",
     "VelocityModelEKF",

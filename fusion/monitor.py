@@ -27,7 +27,11 @@ Tests on the residual stream, per stream ("encoders" or "landmark"):
    ticks over at least ``stuck_periods`` periods.
 
 Tests 4 and 5 raise ``"dynamics_changed"`` on the encoder stream and
-``"scale_changed"`` on the landmark stream.
+``"scale_changed"`` on the landmark stream. Optional replacements:
+:mod:`fusion.dynamics_monitor` for the encoder stream
+(:meth:`ResidualMonitor.update_commands`) and :mod:`fusion.scale_monitor`
+(landmark-aided odometry with a likelihood-ratio test on the scale) for the
+landmark stream (:meth:`ResidualMonitor.update_landmarks`).
 
 Threshold arithmetic (:func:`design_thresholds`)
 -------------------------------------------------
@@ -76,7 +80,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -88,6 +92,7 @@ from scipy.stats import chi2
 from fusion.dynamics_monitor import DynamicsMonitor
 from fusion.ekf import UpdateRecord
 from fusion.exceptions import FilterOptionError, FusionError, MeasurementShapeError
+from fusion.scale_monitor import ScaleAlarm, ScaleMonitor
 from lti_motion.model import MotionModel
 
 __all__ = [
@@ -132,13 +137,18 @@ class AlarmEvent:
         What changed.
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
-        ``"cusum+"`` or ``"cusum-"``.
+        ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics) or
+        ``"scale_glr"`` (scale).
     statistic, threshold : float
         The evidence: the test statistic and the threshold it crossed.
     onset_s : float
         Estimated start of the change [s].
     channel : int or None
         Channel (CUSUM) or wheel (stuck check, 0 left, 1 right).
+    scale : ScaleAlarm or None
+        For ``"scale_glr"``: the scale test's alarm, with the new scale
+        estimated from the landmarks since the onset (``scale.scale_ratio``:
+        ground travel per encoder travel, with its standard deviation).
     """
 
     t_s: float
@@ -148,6 +158,7 @@ class AlarmEvent:
     threshold: float
     onset_s: float
     channel: int | None = None
+    scale: ScaleAlarm | None = None
 
 
 @dataclass(frozen=True)
@@ -391,6 +402,10 @@ class ResidualMonitor:
         one robot), fed by :meth:`update_commands`. When given, it replaces the
         windowed NIS and CUSUM on the *encoder* innovations, which cry wolf on
         real drives (``docs/monitor.md``); the glitch gate and bursts stay.
+    scale : ScaleMonitor, optional
+        The landmark scale test (:mod:`fusion.scale_monitor`, one robot), fed
+        by :meth:`update_landmarks`. When given, it replaces the windowed NIS
+        and CUSUM on the *landmark* innovations; their gate and bursts stay.
 
     Attributes
     ----------
@@ -417,9 +432,14 @@ class ResidualMonitor:
 
     def __init__(self, options: MonitorOptions | None = None, *, m_per_tick: float | None = None,
                  on_alarm: Callable[[AlarmEvent], None] | None = None,
-                 dynamics: DynamicsMonitor | None = None) -> None:
+                 dynamics: DynamicsMonitor | None = None,
+                 scale: ScaleMonitor | None = None) -> None:
         self.options = options or MonitorOptions()
         self.dynamics = dynamics
+        if scale is not None and scale.n_robots != 1:
+            raise FilterOptionError(f"scale must watch one robot, got a ScaleMonitor of "
+                                    f"{scale.n_robots}")
+        self.scale = scale
         if m_per_tick is not None and not m_per_tick > 0:
             raise FilterOptionError(f"m_per_tick must be positive, got {m_per_tick}")
         self.m_per_tick = m_per_tick
@@ -504,7 +524,7 @@ class ResidualMonitor:
             self.counts["glitches"] += 1
             raised += self._glitch(st, stream, t)
             return self._emit(raised)
-        if stream == "encoders" and self.dynamics is not None:
+        if (self.dynamics if stream == "encoders" else self.scale) is not None:
             return self._emit(raised)
         raised += self._nis_window(st, t, value, w.size)
         raised += self._cusum(st, t, w)
@@ -543,6 +563,39 @@ class ResidualMonitor:
                 continue
             st.last_alarm["dynamics_changed"] = t
             raised.append(AlarmEvent(t, "dynamics_changed", "integrated", g, h, onset))
+        return self._emit(raised)
+
+    def update_landmarks(self, t_s: float, tick_deltas: np.ndarray,
+                         sightings: Sequence[tuple[Hashable, np.ndarray]] = ()
+                         ) -> list[AlarmEvent]:
+        """Feed the scale test one period: count changes and the frame's landmark sightings.
+
+        Parameters
+        ----------
+        t_s : float
+            Time of the frame closing the period [s].
+        tick_deltas : array_like, shape (2,)
+            Count changes of (left, right) over the period [ticks]; NaN: missing.
+        sightings : sequence of (id, (r [m], b [rad]))
+            Landmarks seen at this frame (:meth:`ScaleMonitor.update`).
+
+        Returns
+        -------
+        list of AlarmEvent
+            A ``"scale_changed"`` alarm (test ``"scale_glr"``, the new scale in
+            :attr:`AlarmEvent.scale`); none within ``refractory_s`` of a
+            sensor alarm (a stuck or spiking encoder explains the odometry error).
+        """
+        if self.scale is None:
+            raise FilterOptionError("update_landmarks needs a ScaleMonitor: pass scale=...")
+        t = self._check_time(t_s)
+        hits = self.scale.update(t, np.asarray(tick_deltas, dtype=float).reshape(1, 2),
+                                 [list(sightings)])
+        st = self._streams["encoders"]
+        sensor_t = max(self._stuck_alarm_t, st.last_alarm.get("glitch_burst", -math.inf))
+        raised = [AlarmEvent(t, "scale_changed", "scale_glr", a.statistic, a.threshold,
+                             a.onset_s, scale=a)
+                  for a in hits if t - sensor_t >= self.options.refractory_s]
         return self._emit(raised)
 
     def update_counts(self, t_s: float, tick_deltas: np.ndarray,
