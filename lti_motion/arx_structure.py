@@ -19,7 +19,8 @@ to the calibrated ones, near 1) and the wheel base ``b`` used to compute ``y``.
 A free fit estimates the straight-line yaw rate ``G[1, 0] + G[1, 1]`` as the
 small difference of two large cross-gains (about +-4.3 rad/s per m/s); its
 scatter of about 0.001 rad/s per calibration becomes decimetres at the end of a
-ten-metre route (``docs/route.md``).
+ten-metre route (``docs/route.md``). The same restriction serves the FIR
+model from steps (:func:`nearest_servo_gain`, :mod:`lti_motion.fir_steps`).
 
 References
 ----------
@@ -40,6 +41,7 @@ from lti_motion.exceptions import ShapeError
 
 __all__ = [
     "dc_gain",
+    "nearest_servo_gain",
     "restrict_dc_gain",
     "servo_dc_gain",
     "wheel_to_body_matrix",
@@ -102,8 +104,56 @@ def servo_dc_gain(fit: ArxFit, *, wheel_base_m: float) -> tuple[np.ndarray, floa
         ``trace(G M^-1) / 2``: the mean of the two wheels' steady-state ratios
         of encoder speed to command [-].
     """
+    return nearest_servo_gain(dc_gain(fit), wheel_base_m=wheel_base_m)
+
+
+def nearest_servo_gain(gain: np.ndarray, *, wheel_base_m: float) -> tuple[np.ndarray, float]:
+    """The wheel-servo gain ``c M`` nearest a 2x2 gain, in wheel coordinates.
+
+    Shared by the ARX fit (:func:`servo_dc_gain`) and the FIR from steps
+    (:func:`lti_motion.fir_steps.fir_from_steps`).
+
+    Parameters
+    ----------
+    gain : array_like, shape (2, 2)
+        Steady-state gain ``G`` from commands ``(L, R)`` [m/s] to body speeds
+        ``(v [m/s], w [rad/s])``.
+    wheel_base_m : float
+        Wheel base used to compute the body speeds [m].
+
+    Returns
+    -------
+    gain : ndarray, shape (2, 2)
+        ``c M``.
+    c : float
+        ``trace(M^-1 G) / 2`` [-].
+
+    Raises
+    ------
+    ShapeError
+        If ``gain`` is not 2 x 2.
+    ValueError
+        If ``wheel_base_m`` is not positive.
+
+    Notes
+    -----
+    ``M^-1 G`` is the gain from commands to the encoder *wheel* speeds, which
+    the encoders measure independently, one per wheel; the restriction says it
+    is ``c I``. The least-squares ``c`` (Frobenius norm, the orthogonal
+    projection onto ``span(I)``; Greene 2012, eq. 5-23 with an identity
+    information matrix) is ``trace(M^-1 G) / 2``.
+
+    Examples
+    --------
+    >>> g, c = nearest_servo_gain([[0.5, 0.5], [-4.1, 4.3]], wheel_base_m=0.25)
+    >>> round(c, 6), (g.round(6) + 0.0).tolist()
+    (1.025, [[0.5125, 0.5125], [-4.1, 4.1]])
+    """
+    g = np.asarray(gain, float)
+    if g.shape != (2, 2):
+        raise ShapeError(f"gain must have shape (2, 2), got {g.shape}")
     m = wheel_to_body_matrix(wheel_base_m)
-    c = float(np.trace(dc_gain(fit) @ np.linalg.inv(m)) / 2.0)
+    c = float(np.trace(np.linalg.solve(m, g)) / 2.0)
     return c * m, c
 
 

@@ -78,6 +78,13 @@ class CalibrationPlan:
         encoders that measure ``y``, so the gain is one scale times the
         wheel-to-body matrix; this removes the straight-line yaw scatter of
         a free fit (docs/route.md).
+    fir_dc_gain : {"wheel_servo", "settled", "free"}
+        Steady-state gain of the FIR from steps
+        (:func:`~lti_motion.fir_steps.fir_from_steps`). ``"free"`` is the
+        paper's (the step response at the last tap, one sample);
+        ``"settled"`` the mean of the settled part of each response;
+        ``"wheel_servo"`` (default) the wheel-servo gain ``c M`` nearest it
+        (docs/route.md has the measurements).
     seed : int
         Seed of the random excitation.
     """
@@ -94,6 +101,7 @@ class CalibrationPlan:
     hold_s: tuple[float, float] = (0.5, 2.0)
     validation_fraction: float = 0.3
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo"
+    fir_dc_gain: Literal["wheel_servo", "settled", "free"] = "wheel_servo"
     seed: int = 0
 
 
@@ -280,6 +288,7 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
     arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
                   **common)
-    fir = fit_fir_from_steps(u_s, y_s, phases=steps, noise_runs=[(u_x, y_x)], **common)
+    fir = fit_fir_from_steps(u_s, y_s, phases=steps, noise_runs=[(u_x, y_x)],
+                             dc_gain=plan.fir_dc_gain, **common)
     return Calibration(m_per_tick=scale, rotation=rotation, fir=fir, arx=arx,
                        logs={"rotation": rot_log, "steps": step_log, "excitation": exc_log})

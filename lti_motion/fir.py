@@ -30,12 +30,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from lti_motion.exceptions import CalibrationError, ShapeError
-from lti_motion.excitation import (
-    DEFAULT_MAX_CONDITION,
-    StepSequence,
-    check_excitation,
-    check_runs,
-)
+from lti_motion.excitation import DEFAULT_MAX_CONDITION, check_excitation, check_runs
 
 __all__ = [
     "FirFit",
@@ -43,7 +38,6 @@ __all__ = [
     "StateSpace",
     "block_condition",
     "estimate_fir",
-    "fir_from_steps",
     "fir_state_space",
     "lagged_columns",
     "markov_parameters",
@@ -359,144 +353,6 @@ def estimate_fir(
                n_taps, ls.rank, _condition(ls.singular_values), cond_u)
     return FirFit(taps=taps, residual_cov=ls.rss / (n_rows - ls.rank), n_samples=n_rows,
                   source="lstsq", condition_number=_condition(ls.singular_values))
-
-
-def _edge_response(
-    u: np.ndarray, y: np.ndarray, start: int, length: int, wheel: int, baseline: int
-) -> np.ndarray:
-    """Normalised step response ``(y[start + i] - y_before) / step`` for one edge."""
-    before = slice(max(start - baseline, 0), start)
-    u0 = u[before, wheel].mean() if start > 0 else 0.0  # the robot stands still at the start
-    y0 = y[before].mean(axis=0) if start > 0 else np.zeros(2)
-    step = u[start, wheel] - u0
-    window = u[start : start + length]
-    if abs(step) < 1e-9:
-        raise CalibrationError(f"no step of wheel {'LR'[wheel]} at sample {start}: "
-                               "the phases do not match the commands")
-    if np.ptp(window[:, wheel]) > 1e-9 or np.ptp(window[:, 1 - wheel]) > 1e-9:
-        raise CalibrationError(f"the commands change inside the phase starting at sample {start}; "
-                               "a step calibration holds them constant, one motor at a time")
-    return (y[start : start + length] - y0) / step
-
-
-def _settled_length(s: np.ndarray, *, rel_threshold: float, noise_factor: float) -> int:
-    """Samples until the step response ``s`` (k,) stays inside its settling band."""
-    tail = s[-max(len(s) // 3, 3) :]
-    final = np.median(tail)
-    noise = 1.4826 * np.median(np.abs(tail - final))  # robust standard deviation (MAD)
-    band = max(rel_threshold * np.abs(s).max(), noise_factor * noise)
-    outside = np.flatnonzero(np.abs(s - final) > band)
-    return int(outside[-1]) + 1 if outside.size else 1
-
-
-def fir_from_steps(
-    u: np.ndarray,
-    y: np.ndarray,
-    *,
-    phases: StepSequence | Sequence[slice],
-    edges: Literal["both", "rising"] = "both",
-    rel_threshold: float = 0.05,
-    noise_factor: float = 5.0,
-    margin_taps: int = 2,
-    max_taps: int | None = None,
-    baseline_samples: int = 5,
-) -> FirFit:
-    """The moving-average model from a step calibration (paper II.B, eq. 2-10).
-
-    Parameters
-    ----------
-    u : ndarray, shape (n, 2)
-        Commands actually sent [m/s] (for example ``sequence.commands_m_s``).
-    y : ndarray, shape (n, 2)
-        Measured body speeds ``(v, w)`` [m/s, rad/s].
-    phases : StepSequence or four slices
-        Left on, left off, right on, right off (:func:`~lti_motion.excitation.step_sequence`).
-    edges : {"both", "rising"}
-        Average the responses to the rising and falling edges (halves the
-        noise; the PID loops make them near-symmetric, paper III.B), or use the
-        rising edges only.
-    rel_threshold, noise_factor : float
-        A step response has settled once it stays within a band around its
-        final value (median of its last third): ``rel_threshold`` times its
-        peak, or ``noise_factor`` times its noise level (robust standard
-        deviation of the last third), whichever is larger.
-    margin_taps : int
-        Taps kept after the last of the four responses has settled.
-    max_taps : int, optional
-        Upper limit of the FIR length.
-    baseline_samples : int
-        Samples before each edge averaged as its starting level.
-
-    Returns
-    -------
-    FirFit
-        ``source="steps"``; the residual covariance is that of the FIR's free
-        run on the step data itself.
-
-    Raises
-    ------
-    ShapeError, NonFiniteError
-        For malformed ``u``/``y``.
-    CalibrationError
-        If a phase holds no step, the commands change inside a phase, or a
-        phase lies outside the data.
-
-    Notes
-    -----
-    For a step of size ``a`` applied at ``n0`` the response is
-    ``y[n0 + i] - y[n0 - 1] = a sum_{j <= i} h[j]``, so the impulse response
-    is the normalised step response, differenced (paper eq. 6-7). One motor
-    at a time gives one column of the transfer matrix (eq. 8-9). The length
-    is the settling time of the slowest of the four step responses (the
-    control-engineering definition with a band around the final value,
-    e.g. Franklin, Powell & Emami-Naeini 2015, section 3.4), judged on the
-    step responses because differencing doubles their noise; paper III.B
-    finds about 15 taps on a Roomba. A warning is logged when the responses
-    have not settled inside the recorded window.
-
-    Examples
-    --------
-    >>> from lti_motion.excitation import step_sequence
-    >>> seq = step_sequence(amplitude_m_s=0.2, hold_s=0.3, rest_s=0.3, dt_s=0.015)
-    >>> u = seq.commands_m_s
-    >>> y = np.zeros_like(u)
-    >>> y[3:, 0] = 0.5 * (u[:-3, 0] + u[:-3, 1]); y[3:, 1] = (u[:-3, 1] - u[:-3, 0]) / 0.235
-    >>> fit = fir_from_steps(u, y, phases=seq)
-    >>> fit.n_taps, np.round(fit.taps[3], 3).tolist()
-    (5, [[0.5, 0.5], [-4.255, 4.255]])
-    """
-    ((u, y),) = check_runs([(u, y)])
-    slices = phases.phases if isinstance(phases, StepSequence) else tuple(phases)
-    if len(slices) != 4 or not all(isinstance(s, slice) for s in slices):
-        raise ShapeError(f"phases must be a StepSequence or four slices, got {phases!r}")
-    n = len(u)
-    lengths = [s.stop - s.start for s in slices]
-    length = min(lengths)
-    if any(s.start is None or s.stop is None or s.start < 0 or s.stop > n for s in slices) \
-            or length < 2:
-        raise CalibrationError(f"the phases {slices} do not fit in {n} samples of data")
-    responses = np.empty((length, 2, 2))  # step responses s[i, out, in]
-    for wheel in range(2):
-        on, off = slices[2 * wheel], slices[2 * wheel + 1]
-        s = _edge_response(u, y, on.start, length, wheel, baseline_samples)
-        if edges == "both":
-            s = 0.5 * (s + _edge_response(u, y, off.start, length, wheel, baseline_samples))
-        elif edges != "rising":
-            raise ValueError(f"edges must be 'both' or 'rising', got {edges!r}")
-        responses[:, :, wheel] = s
-    impulse = np.diff(responses, axis=0, prepend=0.0)  # paper eq. 7: h = ds/dn
-    last = max(_settled_length(responses[:, o, i], rel_threshold=rel_threshold,
-                               noise_factor=noise_factor) for o in range(2) for i in range(2))
-    m = last + int(margin_taps)
-    if m > length:
-        _log.warning("the step responses have not settled within %d samples; record longer "
-                     "hold_s and rest_s", length)
-    m = min(m, length, max_taps or length)
-    taps = impulse[:m].copy()
-    ss = fir_state_space(taps)
-    resid = y - simulate_state_space(ss.A, ss.B, ss.C, ss.D, u)[0]
-    return FirFit(taps=taps, residual_cov=resid.T @ resid / n, n_samples=n, source="steps",
-                  step_responses=responses)
 
 
 def fir_state_space(taps: np.ndarray) -> StateSpace:

@@ -54,7 +54,8 @@ from lti_motion.exceptions import (
     UnstableModelError,
 )
 from lti_motion.excitation import DEFAULT_MAX_CONDITION, StepSequence, check_runs
-from lti_motion.fir import FirFit, StateSpace, fir_from_steps, fir_state_space, simulate_state_space
+from lti_motion.fir import FirFit, StateSpace, fir_state_space, simulate_state_space
+from lti_motion.fir_steps import fir_from_steps
 from lti_motion.kinematics import integrate_poses
 from lti_motion.metrics import fit_percent
 from lti_motion.persistence import decode_array, encode_array, read_document, write_document
@@ -716,8 +717,8 @@ def fit_fir_from_steps(
     m_per_tick, floor, calibrated_at
         Metadata.
     **fir_options
-        Passed to :func:`~lti_motion.fir.fir_from_steps` (``edges``,
-        ``rel_threshold``, ``margin_taps``, ``max_taps`` ...).
+        Passed to :func:`~lti_motion.fir_steps.fir_from_steps` (``edges``,
+        ``dc_gain``, ``rel_threshold``, ``margin_taps``, ``max_taps`` ...).
 
     Returns
     -------
@@ -729,7 +730,7 @@ def fit_fir_from_steps(
     ShapeError, NonFiniteError, CalibrationError
         For bad data.
     """
-    fir = fir_from_steps(u, y, phases=phases, **fir_options)
+    fir = fir_from_steps(u, y, phases=phases, wheel_base_m=wheel_base_m, **fir_options)
     ss = fir_state_space(fir.taps)
     skip = fir.n_taps - 1
     data = check_runs(noise_runs if noise_runs is not None else [(u, y)])

@@ -9,6 +9,7 @@ from synthetic_plant import BASE, DELAY, commands, plant
 from lti_motion.arx import arx_regression, estimate_arx
 from lti_motion.arx_structure import (
     dc_gain,
+    nearest_servo_gain,
     restrict_dc_gain,
     servo_dc_gain,
     wheel_to_body_matrix,
@@ -78,7 +79,25 @@ def test_servo_gain_is_one_scale_times_the_wheel_matrix(free):
     assert abs(gain[1].sum()) < 1e-12
 
 
+def test_nearest_servo_gain_is_the_least_squares_projection_in_wheel_coordinates(rng, free):
+    g = wheel_to_body_matrix(BASE) @ rng.normal(1.0, 0.05, size=(2, 2))
+    gain, c = nearest_servo_gain(g, wheel_base_m=BASE)
+    m = wheel_to_body_matrix(BASE)
+    np.testing.assert_allclose(gain, c * m, rtol=0, atol=1e-15)
+    wheel = np.linalg.solve(m, g)
+    assert c == pytest.approx(np.trace(wheel) / 2, rel=1e-12)
+    for other in c + np.array([-1e-3, -1e-6, 1e-6, 1e-3]):   # any other scale is farther
+        assert np.linalg.norm(wheel - other * np.eye(2)) > np.linalg.norm(wheel - c * np.eye(2))
+    # the ARX form is the same function of the fit's DC gain
+    np.testing.assert_allclose(servo_dc_gain(free, wheel_base_m=BASE)[0],
+                               nearest_servo_gain(dc_gain(free), wheel_base_m=BASE)[0])
+
+
 def test_bad_gain_shape_and_wheel_base(free):
+    with pytest.raises(ShapeError, match=r"got \(2, 3\)"):
+        nearest_servo_gain(np.ones((2, 3)), wheel_base_m=BASE)
+    with pytest.raises(ValueError, match="wheel_base_m"):
+        nearest_servo_gain(np.eye(2), wheel_base_m=float("nan"))
     with pytest.raises(ShapeError, match=r"\(2, 2\)"):
         restrict_dc_gain(free, np.eye(3))
     with pytest.raises(ValueError, match="wheel_base_m"):

@@ -1,4 +1,5 @@
-"""Tests of lti_motion.fir: FIR from steps and by least squares, state-space simulation.
+"""Tests of lti_motion.fir and lti_motion.fir_steps: FIR from steps and by least squares,
+state-space simulation.
 
 The synthetic plant is the one of test_arx.py (second-order wheels, 4-sample
 delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
@@ -6,18 +7,18 @@ delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
 
 import numpy as np
 import pytest
-from synthetic_plant import DELAY, DT, plant
+from synthetic_plant import BASE, DELAY, DT, plant
 
 from lti_motion.exceptions import CalibrationError, ShapeError
 from lti_motion.excitation import random_held_normal, step_sequence
 from lti_motion.fir import (
     estimate_fir,
-    fir_from_steps,
     fir_state_space,
     markov_parameters,
     simulate_state_space,
     simulate_state_space_loop,
 )
+from lti_motion.fir_steps import fir_from_steps
 from lti_motion.metrics import fit_percent
 
 
@@ -132,3 +133,113 @@ def test_simulation_checks_shapes(rng):
         simulate_state_space(a, b, c, d, np.zeros((5, 2)), z0=np.zeros(3))
     y, z = simulate_state_space(a, b, c, d, np.zeros((0, 2)))
     assert y.shape == (0, 2) and z.shape == (2,)
+
+
+# --- the steady-state gain of the FIR from steps (lti_motion.fir_steps, dc_gain) -------------
+
+TICK_M = 0.00044  # encoder resolution [m per tick], as a Roomba's
+
+
+def servo_plant(u, rng, *, gain=0.99):
+    """A wheel-servoed robot: both wheels reach ``gain`` times their command (the plant's
+    right wheel, gain 0.95, is given its command / 0.95), and the body speeds come from
+    quantised encoder counts, one count in 10 per period at 0.3 m/s."""
+    y = plant(u * np.array([1.0, 1.0 / 0.95])) * gain
+    wheels = np.column_stack([y[:, 0] - y[:, 1] * BASE / 2, y[:, 0] + y[:, 1] * BASE / 2])
+    counts = np.floor((np.cumsum(wheels * DT, axis=0) + rng.uniform(0, TICK_M, 2)) / TICK_M)
+    speeds = np.diff(counts, axis=0, prepend=counts[:1]) * TICK_M / DT
+    return np.column_stack([(speeds[:, 1] + speeds[:, 0]) / 2,
+                            (speeds[:, 1] - speeds[:, 0]) / BASE])
+
+
+def _free_run(fit, u):
+    ss = fir_state_space(fit.taps)
+    return simulate_state_space(ss.A, ss.B, ss.C, ss.D, u)[0]
+
+
+@pytest.mark.parametrize("dc_gain", ["settled", "wheel_servo"])
+def test_noise_free_steps_keep_the_transient_and_hold_the_settled_level(dc_gain):
+    y = plant(SEQ.commands_m_s)
+    free = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ)
+    fit = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ, dc_gain=dc_gain, wheel_base_m=BASE)
+    assert fit.n_taps == free.n_taps
+    step = np.cumsum(fit.taps, axis=0)
+    peak = np.abs(free.step_responses).max(axis=0)
+    # the level is averaged from twice the settling length on, where the plant's transient
+    # is down to the band squared (0.25 % of the peak) and decaying: 0.1 % of the peak
+    level = np.cumsum(true_impulse_response(200), axis=0)[-1]    # wheels 1.0 and 0.95
+    if dc_gain == "wheel_servo":   # the nearest c M: c the mean wheel gain, 0.975
+        level = 0.975 * np.array([[0.5, 0.5], [-1 / BASE, 1 / BASE]])
+    np.testing.assert_array_less(np.abs(step[-1] - level), 1e-3 * peak)
+    # before it has settled, the step response is the measured one (edges measured from
+    # the settled part of the phase before them: a shift of 0.1 % of the peak at most)
+    settled = np.flatnonzero(np.any(np.abs(fit.taps) > 1e-15, axis=(1, 2)))[-1]
+    shift = np.abs(step[:settled] - free.step_responses[:settled])
+    assert np.all(shift < 1e-3 * peak), shift.max(axis=0) / peak
+    assert np.all(np.abs(step[:DELAY]) < 1e-3 * peak)                 # the transport delay
+
+
+def test_wheel_servo_restriction_holds_exactly_straight_commands_give_no_yaw(rng):
+    u = SEQ.commands_m_s
+    fit = fir_from_steps(u, servo_plant(u, rng), phases=SEQ, dc_gain="wheel_servo",
+                         wheel_base_m=BASE)
+    g = fit.taps.sum(axis=0)
+    c = g[0, 0] * 2.0
+    np.testing.assert_allclose(g, c * np.array([[0.5, 0.5], [-1 / BASE, 1 / BASE]]),
+                               rtol=0, atol=1e-12)
+    assert c == pytest.approx(0.99, abs=0.01)
+    straight = _free_run(fit, np.full((300, 2), 0.2))
+    assert abs(straight[-1, 1]) < 1e-12 and straight[-1, 0] == pytest.approx(0.2 * c, rel=1e-12)
+    turn = _free_run(fit, np.tile([-0.1, 0.1], (300, 1)))
+    assert abs(turn[-1, 0]) < 1e-12
+
+
+def test_settled_level_and_servo_gain_beat_one_quantised_sample():
+    """Over 20 step calibrations of a quantised servo plant, the paper's one-sample DC
+    gain has a straight-line yaw bias of centiradians per second; the settled mean shrinks
+    it, the wheel-servo restriction removes it; the held-out free-run fit is not worse."""
+    u, straight = SEQ.commands_m_s, np.array([0.25, 0.25])
+    yaw = {k: [] for k in ("free", "settled", "wheel_servo")}
+    fits = {k: [] for k in yaw}
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        y = servo_plant(u, rng)
+        u_val = random_held_normal(n=4000, dt_s=DT, rng=rng, std_m_s=0.2, hold_s=(0.5, 2.0))
+        y_val = servo_plant(u_val, rng)
+        for k in yaw:
+            fit = fir_from_steps(u, y, phases=SEQ, dc_gain=k, wheel_base_m=BASE)
+            yaw[k].append(abs(fit.taps.sum(axis=0)[1] @ straight))
+            fits[k].append(fit_percent(y_val, _free_run(fit, u_val)))
+    rms = {k: np.sqrt(np.mean(np.square(v))) for k, v in yaw.items()}
+    assert rms["free"] > 0.01                      # rad/s: ruins a route (docs/route.md)
+    assert rms["settled"] < 0.25 * rms["free"]
+    assert rms["wheel_servo"] < 1e-12
+    mean_fit = {k: np.mean(v, axis=0) for k, v in fits.items()}
+    assert np.all(mean_fit["wheel_servo"] >= mean_fit["free"]), mean_fit
+
+
+def test_quantised_plateaus_settle():
+    """Quantised counts leave most of a plateau on one level (median absolute deviation
+    zero): the settling band then uses the standard deviation, not 5 % of the peak only."""
+    u = SEQ.commands_m_s
+    fit = fir_from_steps(u, servo_plant(u, np.random.default_rng(0)), phases=SEQ,
+                         edges="rising")
+    assert fit.n_taps <= 25
+
+
+def test_bad_dc_gain_options_raise():
+    u, y = SEQ.commands_m_s, plant(SEQ.commands_m_s)
+    with pytest.raises(ValueError, match="dc_gain must be one of"):
+        fir_from_steps(u, y, phases=SEQ, dc_gain="servo")
+    with pytest.raises(ValueError, match="needs wheel_base_m"):
+        fir_from_steps(u, y, phases=SEQ, dc_gain="wheel_servo")
+    with pytest.raises(ValueError, match="wheel_base_m must be positive"):
+        fir_from_steps(u, y, phases=SEQ, dc_gain="wheel_servo", wheel_base_m=-0.2)
+    with pytest.raises(ValueError, match="edges must be"):
+        fir_from_steps(u, y, phases=SEQ, edges="falling")
+    # a response still moving at the end of its phase has no settled level to measure
+    late = y + 1e-6 * np.random.default_rng(0).normal(size=y.shape)
+    for phase in (SEQ.left_on, SEQ.right_on):
+        late[phase.stop - 1] += 0.5
+    with pytest.raises(CalibrationError, match="not settled"):
+        fir_from_steps(u, late, phases=SEQ, dc_gain="settled", edges="rising")
