@@ -7,13 +7,20 @@ each :class:`~fusion.monitor.AlarmEvent`:
   on the data since the alarm's estimated onset, when there is enough of it
   and it excites the model enough (``fit_arx`` raises
   :class:`~lti_motion.exceptions.NotExcitedError` or
-  :class:`~lti_motion.exceptions.CalibrationError` otherwise: the policy then
-  waits and tries again at the next alarm or :meth:`Recalibrator.retry`).
-  The newest ``validation_fraction`` of that data is held out; the new model
-  replaces the old only if its free-run fit there (mean of the two channels,
-  :meth:`MotionModel.fit_percent`) beats the old model's by at least
-  ``min_gain_pp`` percentage points. An adopted model is saved atomically
-  (:meth:`MotionModel.save`) when a path is given.
+  :class:`~lti_motion.exceptions.CalibrationError` otherwise). Normal driving
+  rarely excites an ARX model enough (a route of starts, stops and turns
+  repeats a few manoeuvres), so while the policy waits it calls the
+  application's ``request_excitation(alarm)`` once: the application decides
+  when and where a random-excitation manoeuvre (the calibration's) is safe
+  and drives it. Every :meth:`Recalibrator.add` while waiting retries the
+  refit once ``retry_samples`` more samples have come (also
+  :meth:`Recalibrator.retry`). Samples more than 1.5 periods apart start a
+  new segment (a refit never runs across a gap). The newest
+  ``validation_fraction`` of the data since the onset is held out; the new
+  model replaces the old only if its free-run fit there (mean of the two
+  channels, :meth:`MotionModel.fit_percent`) beats the old model's by at
+  least ``min_gain_pp`` percentage points. An adopted model is saved
+  atomically (:meth:`MotionModel.save`) when a path is given.
 - ``"scale_changed"``: the application's ``request_rotation`` callback is
   called (the robot decides when a rotation manoeuvre is safe).
 - sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``): no recalibration;
@@ -22,9 +29,11 @@ each :class:`~fusion.monitor.AlarmEvent`:
 Every decision is a frozen :class:`RecalibrationRecord` in
 :attr:`Recalibrator.history`: what, when, the fits before and after.
 
-Status: the policy works on simulator data with an alarm given to it
-(``tests/fusion/test_monitor.py``); the monitor's own dynamics alarms are not
-yet reliable (``docs/monitor.md``).
+Measured on the simulator with the monitor's own alarms and an excitation
+manoeuvre on request (``benchmarks/bench_monitor.py``, ``recalibration``;
+``docs/monitor.md``). Not done: a recursive-least-squares model in use while
+waiting (:class:`lti_motion.arx.RecursiveARX` exists), a landmark-based scale
+re-estimate.
 """
 
 from __future__ import annotations
@@ -105,17 +114,32 @@ class Recalibrator:
         Where an adopted model is saved (atomically).
     request_rotation : callable, optional
         Called with the alarm on ``"scale_changed"``.
+    request_excitation : callable, optional
+        Called with the alarm, once, when a dynamics refit has to wait for
+        data that excites the model.
+    retry_samples : int, optional
+        New samples between automatic retries while waiting (default
+        ``min_samples // 4``).
+    dc_gain : {"wheel_servo", "free"}, optional
+        Steady-state gain of the refit (:func:`lti_motion.model.fit_arx`);
+        default: as the model in use was fitted (``"wheel_servo"`` when its
+        diagnostics hold ``dc_gain_scale``).
     """
 
     def __init__(self, model: MotionModel, *, buffer_s: float = 120.0, min_samples: int = 2000,
                  validation_fraction: float = 0.3, min_gain_pp: float = 0.0,
                  orders: tuple[int, ...] | None = None, delays: tuple[int, ...] | None = None,
                  save_path: str | os.PathLike | None = None,
-                 request_rotation: Callable[[AlarmEvent], None] | None = None) -> None:
+                 request_rotation: Callable[[AlarmEvent], None] | None = None,
+                 request_excitation: Callable[[AlarmEvent], None] | None = None,
+                 retry_samples: int | None = None,
+                 dc_gain: Literal["wheel_servo", "free"] | None = None) -> None:
         if not (0.0 < validation_fraction < 1.0 and buffer_s > 0 and min_samples > 0):
             raise FilterOptionError(
                 f"need 0 < validation_fraction < 1, buffer_s > 0, min_samples > 0; got "
                 f"{validation_fraction}, {buffer_s}, {min_samples}")
+        if dc_gain not in (None, "wheel_servo", "free"):
+            raise FilterOptionError(f"dc_gain must be 'wheel_servo' or 'free', got {dc_gain!r}")
         self.model = model
         self.min_samples = int(min_samples)
         self.validation_fraction = float(validation_fraction)
@@ -125,6 +149,14 @@ class Recalibrator:
         self.delays = delays or tuple(range(0, 9))
         self.save_path = None if save_path is None else Path(save_path)
         self.request_rotation = request_rotation
+        self.request_excitation = request_excitation
+        self.retry_samples = max(1, int(retry_samples if retry_samples is not None
+                                        else self.min_samples // 4))
+        self.dc_gain = dc_gain or ("wheel_servo" if "dc_gain_scale" in model.diagnostics
+                                   else "free")
+        self._n_added = 0                         # samples added so far
+        self._next_try = 0                        # _n_added at which a waiting refit retries
+        self._excitation_asked = False
         self._buf: deque[tuple[float, np.ndarray, np.ndarray]] = deque(
             maxlen=max(1, round(buffer_s / model.dt_s)))
         self._pending: AlarmEvent | None = None
@@ -144,10 +176,20 @@ class Recalibrator:
             raise TimeOrderError(f"sample at t={t_s} s after one at t={self._buf[-1][0]} s")
         if np.all(np.isfinite(u_arr)) and np.all(np.isfinite(y_arr)):
             self._buf.append((float(t_s), u_arr, y_arr))
+            self._n_added += 1
+        if self._pending is not None and self._n_added >= self._next_try:
+            self.retry()
+
+    @property
+    def waiting(self) -> bool:
+        """Whether a dynamics refit waits for data."""
+        return self._pending is not None
 
     def on_alarm(self, event: AlarmEvent) -> RecalibrationRecord:
         """Answer an alarm (usable as the monitor's ``on_alarm`` callback)."""
         if event.kind == "dynamics_changed":
+            if self._pending is not None:          # still waiting: keep the earliest onset
+                event = min(event, self._pending, key=lambda e: e.onset_s)
             record = self._refit(event)
         elif event.kind == "scale_changed":
             if self.request_rotation is not None:
@@ -166,28 +208,52 @@ class Recalibrator:
             return None
         record = self._refit(self._pending)
         self.history.append(record)
+        _log.info("recalibration retry: %s %s", record.action, record.reason)
         return record
 
+    def _segments(self, onset_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Contiguous runs of buffered ``(u, y)`` since ``onset_s`` (split at time gaps)."""
+        rows = [(t, u, y) for t, u, y in self._buf if t >= onset_s]
+        runs: list[list[tuple[float, np.ndarray, np.ndarray]]] = []
+        for row in rows:
+            if not runs or row[0] - runs[-1][-1][0] > 1.5 * self.model.dt_s:
+                runs.append([])
+            runs[-1].append(row)
+        return [(np.stack([r[1] for r in run]), np.stack([r[2] for r in run])) for run in runs]
+
+    def _wait(self, event: AlarmEvent, n: int, reason: str) -> RecalibrationRecord:
+        self._pending = event
+        self._next_try = self._n_added + self.retry_samples
+        if self.request_excitation is not None and not self._excitation_asked:
+            self._excitation_asked = True
+            self.request_excitation(event)
+        return RecalibrationRecord(event.t_s, event, "waiting", n, reason=reason)
+
     def _refit(self, event: AlarmEvent) -> RecalibrationRecord:
-        since = [(u, y) for t, u, y in self._buf if t >= event.onset_s]
-        n = len(since)
+        # the shortest run fit_arx can use: the longest regressor of the grid, and some more
+        shortest = 10 * (max(self.orders) + max(self.delays) + 1)
+        runs = [r for r in self._segments(event.onset_s) if len(r[0]) >= shortest]
+        n = sum(len(r[0]) for r in runs)
         if n < self.min_samples:
-            self._pending = event
-            return RecalibrationRecord(event.t_s, event, "waiting", n,
-                                       reason=f"{n} samples since the onset, need "
-                                              f"{self.min_samples}")
-        u = np.stack([s[0] for s in since])
-        y = np.stack([s[1] for s in since])
-        n_val = max(1, round(self.validation_fraction * n))
-        train, val = [(u[:-n_val], y[:-n_val])], [(u[-n_val:], y[-n_val:])]
+            return self._wait(event, n, f"{n} samples since the onset, need {self.min_samples}")
+        n_val = max(shortest, round(self.validation_fraction * n))
+        u_last, y_last = runs[-1]
+        if len(u_last) - n_val < shortest:            # the newest run is all validation
+            train, val = runs[:-1], [runs[-1]]
+        else:
+            train = [*runs[:-1], (u_last[:-n_val], y_last[:-n_val])]
+            val = [(u_last[-n_val:], y_last[-n_val:])]
+        if not train:
+            return self._wait(event, n, "one short run since the onset: nothing to train on")
         try:
             new = fit_arx(train, dt_s=self.model.dt_s, wheel_base_m=self.model.wheel_base_m,
                           orders=self.orders, delays=self.delays,
-                          m_per_tick=self.model.m_per_tick, floor=self.model.floor)
+                          m_per_tick=self.model.m_per_tick, floor=self.model.floor,
+                          dc_gain=self.dc_gain)
         except CalibrationError as exc:      # not excited enough, too short, unstable
-            self._pending = event
-            return RecalibrationRecord(event.t_s, event, "waiting", n, reason=str(exc))
+            return self._wait(event, n, str(exc))
         self._pending = None
+        self._excitation_asked = False
         before = self.model.fit_percent(val)
         after = new.fit_percent(val)
         fits = (float(before[0]), float(before[1])), (float(after[0]), float(after[1]))
