@@ -79,30 +79,35 @@ def calibrated_model(*, seed: int = 1) -> MotionModel:
                      before_stage=to_open_floor).arx
 
 
-class _Recorder(Odometry):
-    """Encoder odometry that also keeps what the robot reported: commands and counts."""
+class RouteRecorder(Odometry):
+    """Encoder odometry that keeps what the robot reported: commands, counts, sightings."""
 
     def reset(self, n_robots: int, pose0: np.ndarray) -> None:
         super().reset(n_robots, pose0)
         self.cmd: list[np.ndarray] = []
         self.ticks: list[np.ndarray] = []
+        self.sightings: list = []
 
     def step(self, frame, cmd_m_s, observations=None):
         self.cmd.append(np.array(cmd_m_s, float))
         self.ticks.append(np.asarray(frame.ticks, np.int64))
+        self.sightings.append(observations)
         return super().step(frame, cmd_m_s, observations)
+
+    def tick_deltas(self) -> np.ndarray:
+        """Count changes of periods 1..n, unwrapped, ``(N, n, 2)`` [ticks]."""
+        ticks = np.stack(self.ticks, axis=1)
+        half = TICK_MODULUS // 2
+        return ((np.diff(ticks, axis=1) + half) % TICK_MODULUS - half).astype(float)
 
 
 def route_drives(model: MotionModel, seeds: Sequence[int], faults: Sequence[Fault] = ()
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Drive the route once per seed; commands and count changes of periods 1.., ``(N, n, 2)``."""
     p = get_preset("create2")
-    rec = _Recorder(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
+    rec = RouteRecorder(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
     drive_route(p, rec, seeds=list(seeds), faults=faults)
-    ticks = np.stack(rec.ticks, axis=1)
-    half = TICK_MODULUS // 2
-    deltas = (np.diff(ticks, axis=1) + half) % TICK_MODULUS - half
-    return np.stack(rec.cmd, axis=1)[:, 1:], deltas.astype(float)
+    return np.stack(rec.cmd, axis=1)[:, 1:], rec.tick_deltas()
 
 
 def fit_route_null(model: MotionModel, *, seeds: Sequence[int] = range(1000, 1030)

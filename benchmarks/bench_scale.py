@@ -30,47 +30,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks.bench_monitor import RouteRecorder, calibrated_model
 from benchmarks.harness import Figure, benchmark
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room, get_preset
+from drivers.sim_config import Fault, get_preset
 from fusion.scale_monitor import ScaleAlarm, ScaleMonitor
-from lti_motion.calibration import CalibrationPlan, calibrate
-from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, Odometry, drive_route
-from lti_motion.odometry import TICK_MODULUS
+from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, drive_route
 
 NOMINAL_H = 10.0
 N_FAULT_RUNS = 20
 BATCH = 100
-
-
-def calibrated_m_per_tick(*, seed: int = 1) -> float:
-    """Encoder scale [m/tick] of ``examples/ekf_plugin.py``'s calibration."""
-    p = get_preset("create2")
-    sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place((30.0, 30.0, 0.0))
-
-    return calibrate(sim, wheel_base_m=p.wheel_base_m, floor="hard",
-                     plan=CalibrationPlan(seed=seed + 2, excitation_s=180.0),
-                     before_stage=to_open_floor).m_per_tick
-
-
-class _Recorder(Odometry):
-    """Encoder odometry that keeps what the robot reported: commands, counts, sightings."""
-
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        super().reset(n_robots, pose0)
-        self.cmd: list[np.ndarray] = []
-        self.ticks: list[np.ndarray] = []
-        self.sightings: list = []
-
-    def step(self, frame, cmd_m_s, observations=None):
-        self.cmd.append(np.array(cmd_m_s, float))
-        self.ticks.append(np.asarray(frame.ticks, np.int64))
-        self.sightings.append(observations)
-        return super().step(frame, cmd_m_s, observations)
 
 
 @dataclass(frozen=True)
@@ -92,11 +60,9 @@ def route_drives(m_per_tick: float, seeds: Sequence[int], faults: Sequence[Fault
                  ) -> Drives:
     """Drive the route once per seed with the landmark sensor on."""
     p = get_preset("create2")
-    rec = _Recorder(m_per_tick=m_per_tick, wheel_base_m=p.wheel_base_m)
+    rec = RouteRecorder(m_per_tick=m_per_tick, wheel_base_m=p.wheel_base_m)
     res = drive_route(p, rec, seeds=list(seeds), faults=faults, landmarks=ROUTE_LANDMARKS)
-    ticks = np.stack(rec.ticks, axis=1)
-    half = TICK_MODULUS // 2
-    deltas = ((np.diff(ticks, axis=1) + half) % TICK_MODULUS - half).astype(float)
+    deltas = rec.tick_deltas()
     moving = np.any(np.stack(rec.cmd, axis=1) != 0.0, axis=2)
     last = np.array([np.flatnonzero(mv)[-1] + 1 if mv.any() else 0 for mv in moving])
     return Drives(deltas, rec.sightings[1:], last * p.period_s, res.true_poses)
@@ -194,7 +160,7 @@ def _pct(delays: np.ndarray, q: float) -> float:
 
 @benchmark("scale")
 def bench_scale() -> list[Figure]:
-    m_per_tick = calibrated_m_per_tick()
+    m_per_tick = calibrated_model().m_per_tick
     res = carpet_runs(m_per_tick)
     n = len(res.delays_s)
     med, p90 = _pct(res.delays_s, 0.5), _pct(res.delays_s, 0.9)

@@ -18,9 +18,7 @@ import pytest
 from benchmarks.bench_monitor import (
     DYNAMICS_FAULTS,
     alarm_times,
-    calibrated_model,
     fault_runs,
-    fit_route_null,
     route_drives,
 )
 from drivers.sim_config import Fault
@@ -36,13 +34,13 @@ from fusion.monitor import MonitorOptions, ResidualMonitor
 
 
 @pytest.fixture(scope="module")
-def model():
-    return calibrated_model()
+def model(route_model):
+    return route_model
 
 
 @pytest.fixture(scope="module")
-def null(model):
-    return fit_route_null(model)
+def null(route_null):
+    return route_null
 
 
 def _model_ticks(model, u):

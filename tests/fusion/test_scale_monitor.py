@@ -18,7 +18,6 @@ from scipy.stats import multivariate_normal
 # the route drives are the benchmark's own (pytest puts the project root on the path)
 from benchmarks.bench_scale import (
     alarms,
-    calibrated_m_per_tick,
     carpet_runs,
     route_drives,
     true_ratio,
@@ -38,8 +37,8 @@ LANDMARKS = LandmarkMap({1: (2.0, 1.0), 2: (4.0, -1.0)})
 
 
 @pytest.fixture(scope="module")
-def m_per_tick():
-    return calibrated_m_per_tick()
+def m_per_tick(route_model):
+    return route_model.m_per_tick
 
 
 # -- the batched filter ----------------------------------------------------------------------

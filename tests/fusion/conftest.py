@@ -1,0 +1,17 @@
+"""Fixtures shared by the monitor tests: one calibration and one nominal null per session."""
+
+import pytest
+
+from benchmarks.bench_monitor import calibrated_model, fit_route_null
+
+
+@pytest.fixture(scope="session")
+def route_model():
+    """The monitor benchmarks' ARX model (``examples/ekf_plugin.py``'s calibration, seed 1)."""
+    return calibrated_model()
+
+
+@pytest.fixture(scope="session")
+def route_null(route_model):
+    """The dynamics null of ``route_model``, fitted on 30 nominal route drives."""
+    return fit_route_null(route_model)
