@@ -11,8 +11,12 @@
   graph built from encoder odometry (the encoder speeds integrated between
   keyframes, a distance-proportional diagonal covariance), same smoother,
   same run. Timed: odometry or preintegration, factor building, updates.
-- ``graph.isam2_calibrated_s``: the same with the calibration-aware
-  ``CustomFactor`` and a calibration variable every 10 keyframes.
+- ``graph.isam2_calibrated_s``: the same with the calibration-aware factors
+  and a calibration variable (random walk) every 10 keyframes: each complete
+  group of 10 intervals is one ``CustomFactor``
+  (:func:`fusion.factors.calibrated_motion_group_factor`), the newest, still
+  open group native between-factors at the current calibration estimate
+  until it completes (:mod:`fusion.graph_builder`).
 
 One repeat of each iSAM2 variant, after a warm-up on 300 keyframes; the
 whole benchmark takes under a minute.

@@ -53,7 +53,6 @@ from drivers.sim_config import Room
 from fusion.aruco import MarkerDetector, MarkerObservation
 from fusion.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.ekf import ModelEKF
-from fusion.factors import LandmarkMap as GraphLandmarks
 from fusion.factors import RangeBearing
 from fusion.landmark_map import MarkerLandmark, MarkerMap
 from fusion.landmarks import LandmarkNoise
@@ -266,8 +265,7 @@ def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=keyframe_every, extra=detections.frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y)
-    ids = np.array(marker_map.ids)
-    landmarks = GraphLandmarks(ids, np.array([marker_map.marker(i).position_xy_m for i in ids]))
+    landmarks = marker_map.to_landmark_map()
     image_at = dict(zip(np.searchsorted(kf, detections.frames).tolist(), detections.by_image,
                         strict=True))
     sm = IncrementalSmoother(initial_pose=np.asarray(initial_pose, float), landmarks=landmarks,

@@ -25,8 +25,9 @@ from matplotlib.figure import Figure
 
 from drivers.sim import Simulator
 from drivers.sim_config import Fault, RobotParams, Room, get_preset
-from fusion.factors import LandmarkMap, RangeBearing, observe_landmarks
+from fusion.factors import RangeBearing, observe_landmarks
 from fusion.graph_noise import speed_covariance_from_data
+from fusion.landmarks import LandmarkMap
 from fusion.preintegration import compose_motions, fit_calibration, preintegrate_model
 from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
@@ -48,7 +49,7 @@ def landmark_grid(*, half_width_m: float = 5.0, spacing_m: float = 2.0) -> Landm
     """Markers on a square grid centred on the origin, offset by half a spacing."""
     axis = np.arange(-half_width_m, half_width_m + 1e-9, spacing_m)
     gx, gy = np.meshgrid(axis, axis)
-    return LandmarkMap(np.arange(gx.size), np.column_stack([gx.ravel(), gy.ravel()]))
+    return LandmarkMap.from_arrays(np.arange(gx.size), np.column_stack([gx.ravel(), gy.ravel()]))
 
 
 def _concat(parts: Sequence[FrameLog]) -> FrameLog:

@@ -18,6 +18,7 @@ __all__ = [
     "FilterOptionError",
     "FusionError",
     "LandmarkGeometryError",
+    "LandmarkIdError",
     "MeasurementShapeError",
     "NonFiniteInputError",
     "UnknownLandmarkError",
@@ -46,3 +47,7 @@ class FilterOptionError(FusionError):
 
 class LandmarkGeometryError(FusionError):
     """Range-bearing geometry is degenerate: the robot stands on the landmark (range ~ 0)."""
+
+
+class LandmarkIdError(FusionError):
+    """Landmark ids repeat, or are not integers where the factor graph keys them (``L(id)``)."""

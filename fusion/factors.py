@@ -3,17 +3,20 @@
 - :func:`motion_factor`: the plain factor, a native ``gtsam.BetweenFactorPose2``
   with the preintegrated relative pose and covariance
   (:mod:`fusion.preintegration`): no Python runs at optimisation time.
-- :func:`calibrated_motion_factor`: a ``gtsam.CustomFactor`` on (pose ``i``,
-  pose ``j``, calibration ``c = (s, g)``) that corrects the preintegrated pose
-  to first order in ``c``, as IMU preintegration corrects for the bias
-  (Forster et al. 2017, eq. 44), so a smoother with landmarks estimates the
-  calibration online. :func:`calibration_walk_factor` lets ``c`` drift.
+- :func:`calibrated_motion_factor` and :func:`calibrated_motion_group_factor`
+  (from :mod:`fusion.calibrated_factors`, re-exported): ``gtsam.CustomFactor``
+  on (poses, calibration ``c = (s, g)``) that correct the preintegrated pose to
+  first order in ``c``, as IMU preintegration corrects for the bias (Forster et
+  al. 2017, eq. 44), so a smoother with landmarks estimates the calibration
+  online. :func:`calibration_walk_factor` lets ``c`` drift.
 - :func:`range_bearing_factor`: a native ``gtsam.BearingRangeFactor2D`` to a
   landmark variable (known landmarks carry a prior, or a tight one for a
-  constant). :class:`RangeBearing` and :class:`LandmarkMap` are the minimal
-  observation and map types, with the measurement model
-  (:func:`predict_range_bearing`) and a simulator of observations
-  (:func:`observe_landmarks`) for experiments.
+  constant). :class:`RangeBearing` holds observations for the graph (one
+  noise level per set; :meth:`RangeBearing.from_observations` converts the
+  EKF's :class:`fusion.landmarks.Observations`), the map is
+  :class:`fusion.landmarks.LandmarkMap`; :func:`predict_range_bearing` is the
+  measurement model and :func:`observe_landmarks` a simulator of observations
+  for experiments.
 
 Variables: poses ``X(i)`` (``gtsam.Pose2``, ``wTb``: body in world), calibrations
 ``C(i)`` (``Point2`` holding ``(s, g)`` around ``(1, 1)``), landmarks ``L(id)``
@@ -34,6 +37,13 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import C, L, X
 
+from fusion.calibrated_factors import (
+    calibrated_motion_error,
+    calibrated_motion_factor,
+    calibrated_motion_group_factor,
+)
+from fusion.exceptions import LandmarkIdError
+from fusion.landmarks import LandmarkMap, Observations
 from fusion.preintegration import (
     EmptyIntervalError,
     GraphInputError,
@@ -50,12 +60,12 @@ __all__ = [
     "EmptyIntervalError",
     "GraphInputError",
     "KeyframeOrderError",
-    "LandmarkMap",
     "RangeBearing",
     "UnknownLandmarkError",
     "UnknownPoseError",
     "calibrated_motion_error",
     "calibrated_motion_factor",
+    "calibrated_motion_group_factor",
     "calibration_key",
     "calibration_walk_factor",
     "landmark_key",
@@ -111,111 +121,6 @@ def motion_factor(pre: Preintegrated, k: int, *, key_i: int, key_j: int
                                     gtsam.noiseModel.Gaussian.Covariance(pre.covariance[k]))
 
 
-def calibrated_motion_error(wTi: gtsam.Pose2, wTj: gtsam.Pose2, calibration: np.ndarray, *,
-                            measured_inverse: gtsam.Pose2, calibration_jacobian: np.ndarray,
-                            linearization_point: np.ndarray,
-                            jacobians: list[np.ndarray] | None = None) -> np.ndarray:
-    """Error of the calibration-aware motion factor, with its Jacobians on request.
-
-    Parameters
-    ----------
-    wTi, wTj : gtsam.Pose2
-        Poses of keyframes ``i`` and ``j`` in the world.
-    calibration : ndarray, shape (2,)
-        Current ``(s, g)``.
-    measured_inverse : gtsam.Pose2
-        ``iTj_hat^-1``, the inverse of the preintegrated relative pose.
-    calibration_jacobian : ndarray, shape (3, 2)
-        ``J_c`` of the preintegration.
-    linearization_point : ndarray, shape (2,)
-        ``c_bar``, the calibration the speeds were integrated with.
-    jacobians : list of 3 ndarray, optional
-        Filled with ``d e / d wTi``, ``d e / d wTj`` (3, 3, right perturbations
-        ``wT Exp(xi)``) and ``d e / d c`` (3, 2) when given.
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        ``e = Log(iTj_hat^-1 wTi^-1 wTj) - J_c (c - c_bar)`` (unwhitened).
-
-    Notes
-    -----
-    The preintegrated pose for calibration ``c`` is, to first order,
-    ``iTj(c) = iTj_hat Exp(J_c (c - c_bar))`` (Forster et al. 2017, eq. 44);
-    the error above equals ``Log(iTj(c)^-1 wTi^-1 wTj)`` to first order in the
-    error and in ``c - c_bar`` (Baker-Campbell-Hausdorff). It is exact in
-    ``s`` (positions scale linearly with ``s``). With ``D = iTj_hat^-1 B``,
-    ``B = wTi^-1 wTj`` and ``J_r^-1`` the inverse right Jacobian of ``Exp``
-    (``Pose2.LogmapDerivative``):
-    ``de/dwTi = -J_r^-1(Log D) Ad(B^-1)``, ``de/dwTj = J_r^-1(Log D)``,
-    ``de/dc = -J_c``.
-    """
-    between = wTi.between(wTj)
-    xi = gtsam.Pose2.Logmap(measured_inverse.compose(between))
-    err = xi - calibration_jacobian @ (calibration - linearization_point)
-    if jacobians is not None:
-        jr_inv = gtsam.Pose2.LogmapDerivative(xi)
-        jacobians[0] = -jr_inv @ between.inverse().AdjointMap()
-        jacobians[1] = jr_inv
-        jacobians[2] = -calibration_jacobian
-    return err
-
-
-def calibrated_motion_factor(pre: Preintegrated, k: int, *, key_i: int, key_j: int,
-                             key_c: int) -> gtsam.CustomFactor:
-    """The calibration-aware motion factor of interval ``k`` (a ``gtsam.CustomFactor``).
-
-    Parameters
-    ----------
-    pre : Preintegrated
-        Preintegrated intervals (with their calibration Jacobians).
-    k : int
-        Which interval.
-    key_i, key_j, key_c : int
-        Keys of the start pose, end pose (``Pose2``) and calibration (``Point2``).
-
-    Returns
-    -------
-    gtsam.CustomFactor
-        Three-dimensional error :func:`calibrated_motion_error`, Gaussian
-        noise ``pre.covariance[k]``; Jacobians are computed only when GTSAM
-        asks for them (linearisation), not for error evaluations.
-
-    Notes
-    -----
-    Per call: three value look-ups, one ``between``, one ``compose``, one
-    ``Logmap`` and a (3, 2) product, updated in place (about 5.1 us against
-    6.5 us for the direct form); the Jacobians add one ``LogmapDerivative``
-    and one adjoint. Keys, ``iTj_hat^-1``, ``J_c`` and ``J_c c_bar`` are bound
-    once, when the factor is made.
-    """
-    dx, dy, dth = pre.delta_pose[k]
-    m_inv = gtsam.Pose2(dx, dy, dth).inverse()
-    jc = np.array(pre.calibration_jacobian[k])
-    neg_jc = -jc
-    jc_c_bar = jc @ np.asarray(pre.calibration, dtype=float)     # J_c c_bar, bound once
-    logmap, logmap_derivative = gtsam.Pose2.Logmap, gtsam.Pose2.LogmapDerivative
-
-    def error(_: gtsam.CustomFactor, values: gtsam.Values,
-              jacobians: list[np.ndarray] | None) -> np.ndarray:
-        # calibrated_motion_error inlined (it is called at every linearisation), with
-        # e = Log(...) - J_c c + J_c c_bar in place: no temporaries beyond Logmap's and J_c c
-        between = values.atPose2(key_i).between(values.atPose2(key_j))
-        err = logmap(m_inv * between)
-        xi = err.copy() if jacobians is not None else err
-        err -= jc.dot(values.atPoint2(key_c))
-        err += jc_c_bar
-        if jacobians is not None:
-            jr_inv = logmap_derivative(xi)
-            jacobians[0] = -jr_inv @ between.inverse().AdjointMap()
-            jacobians[1] = jr_inv
-            jacobians[2] = neg_jc
-        return err
-
-    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(pre.covariance[k]),
-                              [key_i, key_j, key_c], error)
-
-
 def calibration_walk_factor(key_a: int, key_b: int, *, sigma_per_sqrt_s: np.ndarray,
                             duration_s: float) -> gtsam.BetweenFactorPoint2:
     """Random walk of the calibration between two keyframes.
@@ -237,53 +142,6 @@ def calibration_walk_factor(key_a: int, key_b: int, *, sigma_per_sqrt_s: np.ndar
     sig = np.asarray(sigma_per_sqrt_s, dtype=float) * np.sqrt(float(duration_s))
     return gtsam.BetweenFactorPoint2(key_a, key_b, np.zeros(2),
                                      gtsam.noiseModel.Diagonal.Sigmas(sig))
-
-
-@dataclass(frozen=True, eq=False)
-class LandmarkMap:
-    """Landmarks with known positions in the world.
-
-    Attributes
-    ----------
-    ids : ndarray of int, shape (k,)
-        Landmark identifiers (e.g. ArUco marker ids), distinct.
-    xy_m : ndarray, shape (k, 2)
-        Positions in the world frame [m].
-    sigma_m : float or None
-        Standard deviation of each position [m]; ``None`` means constant
-        (a prior of :data:`CONSTANT_SIGMA_M`).
-    """
-
-    ids: np.ndarray
-    xy_m: np.ndarray
-    sigma_m: float | None = None
-
-    def __post_init__(self) -> None:
-        ids = np.asarray(self.ids).astype(np.int64).reshape(-1)
-        xy = np.asarray(self.xy_m, dtype=float)
-        if xy.shape != (len(ids), 2):
-            raise ShapeError(f"expected xy_m of shape ({len(ids)}, 2) for {len(ids)} ids, "
-                             f"got {xy.shape}")
-        if len(np.unique(ids)) != len(ids):
-            raise GraphInputError("landmark ids must be distinct")
-        if not np.all(np.isfinite(xy)):
-            raise NonFiniteError("landmark positions hold NaN or infinite values")
-        if self.sigma_m is not None and not (np.isfinite(self.sigma_m) and self.sigma_m > 0):
-            raise ValueError(f"sigma_m must be positive or None, got {self.sigma_m}")
-        for name, arr in (("ids", ids), ("xy_m", xy)):
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-    def position(self, landmark_id: int) -> np.ndarray:
-        """Position ``(x, y)`` [m] of one landmark; :class:`UnknownLandmarkError` if absent."""
-        hit = np.flatnonzero(self.ids == int(landmark_id))
-        if hit.size == 0:
-            raise UnknownLandmarkError(f"landmark {landmark_id} is not in the map "
-                                       f"(ids {self.ids[:10].tolist()}...)")
-        return self.xy_m[hit[0]]
 
 
 @dataclass(frozen=True, eq=False)
@@ -347,6 +205,52 @@ class RangeBearing:
         return RangeBearing(pose_index, self.landmark_id, self.bearing_rad, self.range_m,
                             self.bearing_sigma_rad, self.range_sigma_m)
 
+    @classmethod
+    def from_observations(cls, observations: Observations, *, bearing_sigma_rad: float,
+                          range_sigma_m: float) -> RangeBearing:
+        """The EKF's :class:`fusion.landmarks.Observations` as graph observations.
+
+        Parameters
+        ----------
+        observations : Observations
+            ``pose_index`` becomes their ``frame``; ids must be integers.
+        bearing_sigma_rad, range_sigma_m : float
+            The noise the graph gives every row (``Observations`` carry none; a
+            :class:`fusion.landmarks.LandmarkNoise` with a range fraction has no
+            single range sigma, so choose one).
+
+        Raises
+        ------
+        LandmarkIdError
+            If an id is not an integer.
+        ValueError
+            If a range or a sigma is not positive.
+
+        Examples
+        --------
+        >>> from fusion.landmarks import Observations
+        >>> obs = Observations(np.array([3]), (7,), np.array([[2.0, 0.1]]))
+        >>> rb = RangeBearing.from_observations(obs, bearing_sigma_rad=0.02, range_sigma_m=0.05)
+        >>> rb.pose_index.tolist(), rb.landmark_id.tolist(), rb.range_m.tolist()
+        ([3], [7], [2.0])
+        >>> rb.to_observations().range_bearing.tolist()
+        [[2.0, 0.1]]
+        """
+        bad = [i for i in observations.landmark_id
+               if isinstance(i, bool) or not isinstance(i, (int, np.integer))]
+        if bad:
+            raise LandmarkIdError(f"the factor graph keys landmarks by integer id; got "
+                                  f"{bad[:5]!r}; number the landmarks first")
+        rb = np.asarray(observations.range_bearing, dtype=float).reshape(-1, 2)
+        return cls(observations.frame, np.array(observations.landmark_id, dtype=np.int64),
+                   rb[:, 1], rb[:, 0], bearing_sigma_rad, range_sigma_m)
+
+    def to_observations(self) -> Observations:
+        """These rows as :class:`fusion.landmarks.Observations` (``frame`` = ``pose_index``)."""
+        return Observations(frame=self.pose_index.copy(),
+                            landmark_id=tuple(self.landmark_id.tolist()),
+                            range_bearing=np.column_stack([self.range_m, self.bearing_rad]))
+
 
 def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bearing and range of world points seen from body poses (the measurement model).
@@ -385,8 +289,8 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     ----------
     wTb : array_like, shape (n, 3)
         True poses the robot observes from.
-    landmarks : LandmarkMap
-        The true landmark positions.
+    landmarks : fusion.landmarks.LandmarkMap
+        The true landmark positions (integer ids).
     rng : numpy.random.Generator
         Source of the measurement noise (seed it).
     bearing_sigma_rad, range_sigma_m : float
@@ -408,13 +312,14 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     idx = np.arange(len(poses)) if pose_index is None else np.asarray(pose_index).reshape(-1)
     if idx.shape != (len(poses),):
         raise ShapeError(f"pose_index has shape {idx.shape}, expected ({len(poses)},)")
+    ids = landmarks.integer_ids                      # raises for non-integer ids
     bearing, rng_m = predict_range_bearing(poses[:, None, :], landmarks.xy_m[None, :, :])
     seen = ((rng_m <= max_range_m) & (rng_m >= min_range_m)
             & (np.abs(bearing) <= 0.5 * field_of_view_rad))
     rows, cols = np.nonzero(seen)
     noisy_b = wrap_angle(bearing[rows, cols] + bearing_sigma_rad * rng.standard_normal(rows.size))
     noisy_r = np.abs(rng_m[rows, cols] + range_sigma_m * rng.standard_normal(rows.size))
-    return RangeBearing(idx[rows], landmarks.ids[cols], noisy_b, noisy_r,
+    return RangeBearing(idx[rows], ids[cols], noisy_b, noisy_r,
                         bearing_sigma_rad, range_sigma_m)
 
 

@@ -290,7 +290,7 @@ class MarkerMap:
         return tuple(known), tuple(unknown)
 
     def to_landmark_map(self) -> LandmarkMap:
-        """The 2-D landmark map of the filters: marker id -> centre ``(x, y)`` [m]."""
+        """The 2-D map of the EKF and the factor graph: marker id -> centre ``(x, y)`` [m]."""
         return LandmarkMap({m.marker_id: m.position_xy_m for m in self.markers})
 
     def to_dict(self) -> dict[str, Any]:

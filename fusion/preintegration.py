@@ -80,6 +80,7 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 
+from fusion import exceptions as _fusion_exceptions
 from fusion.graph_noise import filtered_speeds
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import pose_step_jacobians
@@ -130,8 +131,12 @@ class UnknownPoseError(GraphInputError):
     """An observation refers to a pose (keyframe) that is not in the graph."""
 
 
-class UnknownLandmarkError(GraphInputError):
-    """An observation or query refers to a landmark that was never declared."""
+class UnknownLandmarkError(GraphInputError, _fusion_exceptions.UnknownLandmarkError):
+    """An observation or query refers to a landmark that was never declared.
+
+    Also a :class:`fusion.exceptions.UnknownLandmarkError` (what
+    :meth:`fusion.landmarks.LandmarkMap.position` raises), so one ``except`` catches both.
+    """
 
 
 @dataclass(frozen=True, eq=False)

@@ -47,7 +47,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.stats
 
-import fusion.factors as graph_factors
 from drivers.datasets import (
     CREATE1_WHEEL_BASE_M,
     MrclamRobot,
@@ -180,18 +179,6 @@ def _observations(robot: MrclamRobot, seg: MrclamSegment, warmup: int,
                         bearing_sigma_rad=noise.bearing_std_rad, range_sigma_m=noise.range_std_m)
 
 
-def _smoother_map(landmarks: LandmarkMap) -> LandmarkMap:
-    """The map in the type :mod:`fusion.smoother` reads (``ids``, ``xy_m``, ``sigma_m``).
-
-    Until ``fusion.factors.LandmarkMap`` is merged into :class:`fusion.landmarks.LandmarkMap`
-    the smoother needs the former; once the merged type has ``xy_m``, it passes as it is.
-    """
-    if hasattr(landmarks, "xy_m"):
-        return landmarks
-    ids = list(landmarks.ids)
-    return graph_factors.LandmarkMap(np.array(ids), np.array([landmarks.position(i) for i in ids]))
-
-
 def _rms(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Squared position errors [m^2] of keyframes 1.. (keyframe 0 is the given start)."""
     return np.sum((est[1:, :2] - truth[1:, :2]) ** 2, axis=1)
@@ -258,7 +245,7 @@ def evaluate_graph(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: Mo
     train, test = split_halves(resample_robot(robot, dt_s=dt_s), min_samples=2 * warmup)
     noise = landmark_noise_from_truth(robot, train, landmarks)
     covs = speed_covariances(arx, train, warmup=warmup)
-    lmap = _smoother_map(LandmarkMap({lid: xy[:2] for lid, xy in landmarks.items()}))
+    lmap = LandmarkMap({lid: xy[:2] for lid, xy in landmarks.items()})
     options = SmootherOptions(initial_pose_sigmas=POSE_STD, calibrate=False,
                               landmark_huber_k=huber_k)
     sq: dict[str, dict[str, list[np.ndarray]]] = {

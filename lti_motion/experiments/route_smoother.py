@@ -25,7 +25,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from fusion import factors
 from fusion.factors import RangeBearing
 from fusion.landmarks import LandmarkMap, LandmarkNoise
 from fusion.preintegration import preintegrate_model
@@ -50,21 +49,6 @@ log = logging.getLogger(__name__)
 ROUTE_SMOOTHER_OPTIONS = SmootherOptions(initial_pose_sigmas=(0.005, 0.005, 0.005),
                                          calibration_prior_sigmas=(0.01, 0.01),
                                          calibration_walk_sigmas=(1e-4, 1e-4))
-
-
-def _graph_landmarks(landmarks: LandmarkMap):
-    """The map in the type :class:`IncrementalSmoother` reads (``ids``, ``xy_m``).
-
-    ``fusion.smoother`` still takes ``fusion.factors.LandmarkMap`` while it is being merged
-    into :class:`fusion.landmarks.LandmarkMap`; a map that already has ``xy_m`` is passed on.
-    """
-    if hasattr(landmarks, "xy_m"):
-        return landmarks
-    ids = list(landmarks.ids)
-    if not all(isinstance(i, (int, np.integer)) for i in ids):
-        raise TypeError(f"the smoother needs integer landmark ids, got {ids}")
-    return factors.LandmarkMap(np.array(ids, dtype=np.int64),
-                               np.array([landmarks.position(i) for i in ids]).reshape(-1, 2))
 
 
 class SmootherEstimator:
@@ -152,7 +136,6 @@ class SmootherEstimator:
         self.landmark_noise = landmark_noise or LandmarkNoise()
         self.keyframe_every = round(keyframe_s / model.dt_s)
         self.options = options or ROUTE_SMOOTHER_OPTIONS
-        self._graph_map = None if landmarks is None else _graph_landmarks(landmarks)
         self.smoothers: list[IncrementalSmoother] | None = None
 
     def reset(self, n_robots: int, pose0: np.ndarray) -> None:
@@ -202,7 +185,7 @@ class SmootherEstimator:
         self.pose = pose_step(self.pose, self._cal[:, 0] * y[:, 0], self._cal[:, 1] * y[:, 1],
                               m.dt_s)
         for i in range(n):
-            seen = [] if observations is None or self._graph_map is None else observations[i]
+            seen = [] if observations is None or self.landmarks is None else observations[i]
             if seen or self._n - self._kf_sample[i] >= self.keyframe_every:
                 self._keyframe(i, seen)
         return self.pose
@@ -217,7 +200,7 @@ class SmootherEstimator:
         self._kf_sample = np.zeros(n, np.int64)    # sample of each robot's newest keyframe
         self._cal = np.tile(np.asarray(self.options.calibration_prior, float), (n, 1))
         self.smoothers = [IncrementalSmoother(initial_pose=p, options=self.options,
-                                              landmarks=self._graph_map) for p in self.pose]
+                                              landmarks=self.landmarks) for p in self.pose]
 
     def _keyframe(self, i: int, seen: list[tuple[int, np.ndarray]]) -> None:
         """Close robot ``i``'s interval at the current sample: motion, observations, update."""

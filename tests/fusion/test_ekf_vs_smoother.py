@@ -13,7 +13,6 @@ import pytest
 
 from drivers.sim import Simulator
 from drivers.sim_config import Room
-from fusion.factors import LandmarkMap as GraphLandmarks
 from fusion.factors import RangeBearing
 from fusion.landmarks import LandmarkNoise, synthetic_observations
 from fusion.smoother import smooth_log
@@ -31,8 +30,6 @@ def runs(load_example):
     sim = Simulator("create2", n_robots=N_RUNS, seed=300, room=Room.box(5.0, 5.0),
                     initial_pose=ekf_ex.START_POSE)
     logs = ekf_ex.drive_route(sim, duration_s=DURATION_S, rng=np.random.default_rng(17))
-    ids = list(ekf_ex.LANDMARKS.ids)
-    graph_map = GraphLandmarks(np.array(ids), np.array([ekf_ex.LANDMARKS.position(i) for i in ids]))
     out = []
     for i in range(N_RUNS):
         log = logs.robot(i)
@@ -40,11 +37,10 @@ def runs(load_example):
                                      rng=np.random.default_rng(700 + i), noise=NOISE)
         ekf = ekf_ex.run_filter(model, log, initial_pose=log.true_pose[0], observations=obs,
                                 landmarks=ekf_ex.LANDMARKS, landmark_noise=NOISE)
-        rb = RangeBearing(pose_index=obs.frame, landmark_id=np.array(obs.landmark_id),
-                          bearing_rad=obs.range_bearing[:, 1], range_m=obs.range_bearing[:, 0],
-                          bearing_sigma_rad=NOISE.bearing_std_rad, range_sigma_m=0.05)
+        rb = RangeBearing.from_observations(obs, bearing_sigma_rad=NOISE.bearing_std_rad,
+                                            range_sigma_m=NOISE.range_std_m)
         sm = smooth_log(model, log, initial_pose=log.true_pose[0], observations=rb,
-                        landmarks=graph_map, mode="filtered")
+                        landmarks=ekf_ex.LANDMARKS, mode="filtered")
         kf = sm.keyframes
         out.append((ate(log.true_pose[kf], ekf.poses[kf]), ate(log.true_pose[kf], sm.poses)))
     return np.array(out)

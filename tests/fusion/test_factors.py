@@ -6,14 +6,16 @@ import pytest
 import scipy.linalg
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
+from fusion.calibrated_factors import pose2_log, pose2_log_derivative
+from fusion.exceptions import LandmarkIdError
 from fusion.factors import (
     EmptyIntervalError,
     GraphInputError,
     KeyframeOrderError,
-    LandmarkMap,
     RangeBearing,
     calibrated_motion_error,
     calibrated_motion_factor,
+    calibrated_motion_group_factor,
     calibration_key,
     calibration_walk_factor,
     landmark_key,
@@ -23,6 +25,7 @@ from fusion.factors import (
     predict_range_bearing,
     range_bearing_factor,
 )
+from fusion.landmarks import LandmarkMap, Observations
 from fusion.preintegration import (
     Preintegrated,
     compose_motions,
@@ -341,7 +344,7 @@ def test_range_bearing_model_agrees_with_gtsam():
 
 
 def test_observed_landmarks_are_in_range_and_in_view(rng):
-    lm = LandmarkMap(np.arange(4), [[1.0, 0.0], [0.1, 0.0], [-1.0, 0.0], [5.0, 0.0]])
+    lm = LandmarkMap.from_arrays(np.arange(4), [[1.0, 0.0], [0.1, 0.0], [-1.0, 0.0], [5.0, 0.0]])
     obs = observe_landmarks(np.zeros((3, 3)), lm, rng=rng, bearing_sigma_rad=1e-3,
                             range_sigma_m=1e-3, max_range_m=3.0, field_of_view_rad=np.pi)
     # only landmark 0: 1 too close, 2 behind, 3 too far
@@ -350,10 +353,16 @@ def test_observed_landmarks_are_in_range_and_in_view(rng):
 
 
 def test_landmark_map_and_observations_check_their_input():
-    with pytest.raises(GraphInputError, match="distinct"):
-        LandmarkMap([1, 1], [[0.0, 0.0], [1.0, 1.0]])
+    with pytest.raises(LandmarkIdError, match=r"distinct; repeated: \[1\]"):
+        LandmarkMap.from_arrays([1, 1], [[0.0, 0.0], [1.0, 1.0]])
     with pytest.raises(ShapeError, match=r"\(2, 2\)"):
-        LandmarkMap([1, 2], [[0.0, 0.0]])
+        LandmarkMap.from_arrays([1, 2], [[0.0, 0.0]])
+    with pytest.raises(LandmarkIdError, match="integer id"):
+        LandmarkMap.from_arrays(["door"], [[0.0, 0.0]])
+    with pytest.raises(LandmarkIdError, match="'door'"):      # the graph needs integer ids
+        observe_landmarks(np.zeros((1, 3)), LandmarkMap({"door": (1.0, 0.0)}),
+                          rng=np.random.default_rng(0), bearing_sigma_rad=0.01,
+                          range_sigma_m=0.01, max_range_m=3.0)
     with pytest.raises(ValueError, match="positive"):
         RangeBearing([0], [1], [0.1], [-1.0], 0.01, 0.01)
     with pytest.raises(NonFiniteError, match="bearing_rad"):
@@ -367,3 +376,98 @@ def test_preintegrated_slicing_keeps_the_keyframes_consistent(pre):
     np.testing.assert_array_equal(one.delta_pose[0], pre.delta_pose[1])
     with pytest.raises(IndexError):
         pre[::2]
+
+
+# -- the vectorised Pose2 helpers and the group factor ----------------------------------------
+
+@pytest.mark.parametrize("pose", [(0.3, -0.2, 0.4), (1.0, 2.0, 3.0), (-0.5, 0.1, -np.pi + 1e-3),
+                                  (0.3, -0.1, np.pi), (0.2, 0.1, 0.0), (0.2, 0.1, 3e-6),
+                                  (0.2, 0.1, -2e-5)])
+def test_vectorised_pose2_log_and_its_derivative_match_gtsam(pose):
+    p = np.array(pose)
+    np.testing.assert_allclose(pose2_log(p[None])[0], gtsam.Pose2.Logmap(gtsam.Pose2(*p)),
+                               atol=1e-12)
+    np.testing.assert_allclose(pose2_log_derivative(p[None])[0], gtsam.Pose2.LogmapDerivative(p),
+                               atol=1e-9)
+
+
+def test_pure_error_equals_gtsams_between_and_logmap(pre, rng):
+    values = _values(pre, 1, rng, cal=(1.05, 0.95))
+    wTi, wTj = values.atPose2(pose_key(0)), values.atPose2(pose_key(1))
+    c = values.atPoint2(calibration_key(0))
+    m_inv = gtsam.Pose2(*pre.delta_pose[1]).inverse()
+    expected = (gtsam.Pose2.Logmap(m_inv.compose(wTi.between(wTj)))
+                - pre.calibration_jacobian[1] @ (c - pre.calibration))
+    err = calibrated_motion_error(wTi, wTj, c, measured_inverse=m_inv,
+                                  calibration_jacobian=pre.calibration_jacobian[1],
+                                  linearization_point=pre.calibration)
+    np.testing.assert_allclose(err, expected, atol=1e-13)
+
+
+@pytest.fixture
+def group(rng):
+    """Three intervals, the last a spin of 4 rad (more than pi), and poses off their motion."""
+    speeds = np.concatenate([_speeds(rng, 120, turn=1.5), np.tile([0.05, 2.0], (133, 1))])
+    pre = preintegrate(speeds, DT, keyframes=[0, 50, 120, 253], speed_covariance=PHI,
+                       calibration=(1.02, 0.97))
+    values = gtsam.Values()
+    pose = gtsam.Pose2(*rng.uniform(-2, 2, 3))
+    for i in range(4):
+        values.insert(pose_key(i), pose)
+        if i < 3:
+            pose = pose.compose(gtsam.Pose2(*pre.delta_pose[i])).compose(
+                gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
+    values.insert(calibration_key(0), np.array([1.08, 0.93]))
+    return pre, values
+
+
+def test_group_factor_is_the_sum_of_its_intervals_factors(group):
+    pre, values = group
+    keys = [pose_key(i) for i in range(4)]
+    g = calibrated_motion_group_factor(pre, pose_keys=keys, key_c=calibration_key(0))
+    singles = [calibrated_motion_factor(pre, k, key_i=keys[k], key_j=keys[k + 1],
+                                        key_c=calibration_key(0)) for k in range(3)]
+    np.testing.assert_allclose(g.unwhitenedError(values),
+                               np.concatenate([f.unwhitenedError(values) for f in singles]),
+                               atol=1e-13)
+    assert g.error(values) == pytest.approx(sum(f.error(values) for f in singles), rel=1e-10)
+    # the same intervals given as separate preintegrations (other linearisation points)
+    parts = calibrated_motion_group_factor([pre[0], pre[1:]], pose_keys=keys,
+                                           key_c=calibration_key(0))
+    assert parts.error(values) == pytest.approx(g.error(values), rel=1e-12)
+    with pytest.raises(ShapeError, match="3 intervals need 4 pose keys, got 3"):
+        calibrated_motion_group_factor(pre, pose_keys=keys[:3], key_c=calibration_key(0))
+
+
+def test_group_factor_jacobians_match_numerical_derivatives(group):
+    pre, values = group
+    keys = [pose_key(i) for i in range(4)] + [calibration_key(0)]
+    g = calibrated_motion_group_factor(pre, pose_keys=keys[:4], key_c=keys[4])
+    cov = scipy.linalg.block_diag(*pre.covariance)
+    a_whitened, _ = g.linearize(values).jacobian()
+    analytic = np.linalg.solve(np.linalg.cholesky(np.linalg.inv(cov)).T, a_whitened)
+    for m, key in enumerate(keys):
+        x0 = values.atPoint2(key) if m == 4 else values.atPose2(key)
+
+        def error_at(x, key=key):
+            moved = gtsam.Values(values)
+            moved.update(key, x)
+            return g.unwhitenedError(moved)
+
+        numeric = numericalDerivative11(error_at, x0)
+        np.testing.assert_allclose(analytic[:, 3 * m:3 * m + numeric.shape[1]], numeric,
+                                   atol=1e-8)
+
+
+def test_range_bearing_converts_to_and_from_the_ekfs_observations():
+    obs = Observations(np.array([2, 2, 5]), (7, 9, 7), np.array([[1.0, 0.1], [2.0, -0.3],
+                                                                 [1.5, 3.0]]))
+    rb = RangeBearing.from_observations(obs, bearing_sigma_rad=0.02, range_sigma_m=0.05)
+    assert rb.pose_index.tolist() == [2, 2, 5] and rb.landmark_id.tolist() == [7, 9, 7]
+    np.testing.assert_array_equal(rb.bearing_rad, [0.1, -0.3, 3.0])
+    back = rb.to_observations()
+    assert back.landmark_id == obs.landmark_id
+    np.testing.assert_array_equal(back.range_bearing, obs.range_bearing)
+    with pytest.raises(LandmarkIdError, match="'door'"):
+        RangeBearing.from_observations(Observations(np.array([1]), ("door",), np.ones((1, 2))),
+                                       bearing_sigma_rad=0.02, range_sigma_m=0.05)

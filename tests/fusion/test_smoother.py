@@ -22,7 +22,9 @@ import pytest
 from scipy import stats
 
 from drivers.sim_config import Fault, get_preset
-from fusion.factors import LandmarkMap, RangeBearing
+from fusion.exceptions import LandmarkIdError
+from fusion.factors import RangeBearing
+from fusion.landmarks import LandmarkMap
 from fusion.preintegration import (
     EmptyIntervalError,
     KeyframeOrderError,
@@ -245,9 +247,9 @@ def test_unknown_landmarks_are_mapped_alongside_the_path(model, phi, landmarks, 
     true_xy = np.array([landmarks.position(i) for i in res.landmark_ids])
     assert np.abs(res.landmarks_xy - true_xy).max() < 0.1
     # landmarks with uncertain known positions (a prior, not a constant)
-    rough = LandmarkMap(landmarks.ids, landmarks.xy_m, sigma_m=0.05)
     res = smooth_log(model, run.log, initial_pose=run.log.true_pose[0], observations=run.obs,
-                     landmarks=rough, speed_covariance=phi)
+                     landmarks=landmarks, speed_covariance=phi,
+                     options=SmootherOptions(landmark_sigma_m=0.05))
     assert ate(run.truth, res.poses) < 0.02
 
 
@@ -269,7 +271,7 @@ def straight():
 
 
 def test_incremental_api_reads_poses_covariances_and_calibration(straight):
-    lm = LandmarkMap([7], [[0.1, 1.0]])
+    lm = LandmarkMap({7: (0.1, 1.0)})
     sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm)
     assert sm.add_motion(straight[0]) == 1
     sm.add_observations(RangeBearing([1], [7], [np.pi / 2], [1.0], 0.01, 0.01))
@@ -284,6 +286,59 @@ def test_incremental_api_reads_poses_covariances_and_calibration(straight):
     res = sm.result()
     assert res.landmark_ids.tolist() == [7]
     np.testing.assert_allclose(res.landmarks_xy[0], [0.1, 1.0], atol=1e-5)
+
+
+def _scaled_drive(n_intervals: int, *, scale: float):
+    """Arcs preintegrated at (1, 1) while the robot really moves ``scale`` times as far, seen
+    from a ring of landmarks at every keyframe (noise-free observations of the truth)."""
+    speeds = np.column_stack([np.full(50 * n_intervals, 0.2),
+                              0.6 * np.sin(np.arange(50 * n_intervals) * 0.004)])
+    kf = np.arange(0, 50 * n_intervals + 1, 50)
+    pre = preintegrate(speeds, 0.01, keyframes=kf, speed_covariance=np.eye(2) * 1e-5)
+    truth = compose_motions(preintegrate(speeds * [scale, 1.0], 0.01, keyframes=kf,
+                                         speed_covariance=np.eye(2) * 1e-5).delta_pose,
+                            initial_pose=np.zeros(3))
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    lm = LandmarkMap.from_arrays(np.arange(8), np.column_stack([3 * np.cos(angles),
+                                                                3 * np.sin(angles)]))
+    d = lm.xy_m[None, :, :] - truth[:, None, :2]
+    bearing = np.arctan2(d[..., 1], d[..., 0]) - truth[:, 2:3]
+    pose_index = np.repeat(np.arange(len(truth)), 8)
+    obs = RangeBearing(pose_index, np.tile(np.arange(8), len(truth)),
+                       np.arctan2(np.sin(bearing), np.cos(bearing)).ravel(),
+                       np.hypot(d[..., 0], d[..., 1]).ravel(), 0.01, 0.01)
+    return pre, obs, lm
+
+
+@pytest.mark.parametrize("read_midway", [False, True])
+def test_incremental_groups_end_as_the_batch_graph(read_midway):
+    """Closed groups are group factors, the open one natives until ``result`` closes it: the
+    final estimate is the batch solution of the same graph, whenever results were read."""
+    pre, obs, lm = _scaled_drive(25, scale=1.05)        # 2.5 calibration groups of 10
+    opts = SmootherOptions(calibration_walk_sigmas=(1e-4, 1e-4))
+    sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm, options=opts)
+    for k in range(len(pre) + 1):
+        if k > 0:
+            sm.add_motion(pre[k - 1])
+        sm.add_observations(obs.select(obs.pose_index == k))
+        sm.update()
+        if read_midway and k in (5, 13):               # partial group factors, replaced later
+            sm.result(covariances=False)
+    online = sm.result()
+    batch = smooth_batch(pre, initial_pose=np.zeros(3), observations=obs, landmarks=lm,
+                         options=opts)
+    np.testing.assert_allclose(online.calibrations, batch.calibrations, atol=2e-5)
+    np.testing.assert_allclose(online.poses, batch.poses, atol=1e-5)
+    np.testing.assert_allclose(online.calibrations[-1, 0], 1.05, atol=2e-3)
+    # marginals at iSAM2's linearisation point, not exactly the batch optimum's
+    sigmas = [np.sqrt(np.diagonal(r.calibration_covariances, axis1=1, axis2=2))
+              for r in (online, batch)]
+    np.testing.assert_allclose(*sigmas, rtol=0.01)
+
+
+def test_known_landmarks_need_integer_ids(straight):
+    with pytest.raises(LandmarkIdError, match="integer id"):
+        IncrementalSmoother(initial_pose=np.zeros(3), landmarks=LandmarkMap({"door": (1, 0)}))
 
 
 def test_observation_of_a_missing_pose_raises_unknown_pose_error(straight):
@@ -317,6 +372,7 @@ def test_calibration_queries_need_a_calibrating_smoother(straight):
     ({"calibration_every": 0}, "calibration_every"),
     ({"calibration_prior_sigmas": (0.1, -1.0)}, "calibration_prior_sigmas"),
     ({"relinearize_threshold": 0.0}, "relinearize_threshold"),
+    ({"landmark_sigma_m": -0.1}, "landmark_sigma_m"),
 ])
 def test_bad_options_are_refused(kwargs, match):
     with pytest.raises(ValueError, match=match):

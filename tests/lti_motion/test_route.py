@@ -107,7 +107,6 @@ def test_smoother_with_landmarks_closes_the_route_like_the_ekf(cal):
 
 
 def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
-    from fusion.factors import LandmarkMap as GraphMap
     from lti_motion.exceptions import ShapeError
     from lti_motion.experiments.route import ROUTE_LANDMARKS
     from lti_motion.experiments.route_smoother import SmootherEstimator
@@ -118,7 +117,7 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
     with pytest.raises(ValueError, match="at least one period"):
         SmootherEstimator(cal.arx, keyframe_s=0.001)
     with pytest.raises(TypeError, match=r"fusion\.landmarks\.LandmarkMap"):
-        SmootherEstimator(cal.arx, landmarks=GraphMap([1], [[0.0, 0.0]]))
+        SmootherEstimator(cal.arx, landmarks={1: (0.0, 0.0)})
     est = SmootherEstimator(cal.arx, landmarks=ROUTE_LANDMARKS)
     frame = SensorFrame(t_s=0.0, ticks=np.zeros((2, 2), np.int64),
                         light_bump=np.zeros((2, 6), np.int64), bumps=np.zeros((2, 2), bool),
