@@ -211,8 +211,8 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
         elif isinstance(target, str):        # relative to another row
             target = metrics["closure_offset_m"][target]["mean"]
         if got > target:
-            misses.append(f"{LABELS[name]}: target {text}; measured {got:.4f} m, "
-                          f"missed by {1000 * (got - target):.1f} mm")
+            misses.append(f"{LABELS[name]}: target {text}; measured {got:.4f} m against "
+                          f"{target:.4f} m, missed by {1000 * (got - target):.2g} mm")
     metrics["targets_missed"] = misses
     _plot_trajectories(results, out_dir / "trajectories.png")
     _plot_closure(results, out_dir / "closure.png")
