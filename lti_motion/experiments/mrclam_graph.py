@@ -14,7 +14,8 @@ factors (:func:`fusion.preintegration.preintegrate`, one between-factor per
 - ``"raw"``: the commands taken at face value.
 
 Each motion's per-sample speed covariance is *measured the same way* on the
-first half: the Newey-West long-run covariance
+first half (:func:`~lti_motion.experiments.mrclam_noise.speed_covariances`, which
+the landmark EKFs use too): the Newey-West long-run covariance
 (:func:`fusion.graph_noise.long_run_covariance`, 5 s bandwidth) of the speeds
 differentiated from Vicon minus the predicted speeds (the model's free run, or
 the commands), so that ``N Phi`` covers the error of ``N`` summed samples,
@@ -55,12 +56,16 @@ from drivers.datasets import (
     resample_robot,
 )
 from fusion.factors import RangeBearing
-from fusion.graph_noise import DEFAULT_BANDWIDTH_S, long_run_covariance
 from fusion.landmarks import LandmarkMap, LandmarkNoise
 from fusion.preintegration import Preintegrated, compose_motions, preintegrate
 from fusion.smoother import IncrementalSmoother, SmootherOptions, smooth_batch
 from lti_motion.experiments.mrclam import WARMUP_S, split_halves
-from lti_motion.experiments.mrclam_filters import POSE_STD, landmark_noise_from_truth
+from lti_motion.experiments.mrclam_filters import (
+    GATE_PROBABILITY,
+    POSE_STD,
+    landmark_noise_from_truth,
+)
+from lti_motion.experiments.mrclam_noise import VARIANTS, predicted_speeds, speed_covariances
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel, fit_arx
 
@@ -69,13 +74,8 @@ __all__ = ["GATE_PROBABILITY", "HUBER_K", "GraphResult", "evaluate_graph", "main
 
 log = logging.getLogger(__name__)
 
-#: The landmark EKFs' chi-square gate probability (:mod:`lti_motion.experiments.mrclam_filters`).
-GATE_PROBABILITY = 0.999
 #: Huber threshold [whitened sigmas]: the EKFs' gate as a distance, sqrt(chi2_2(0.999)) = 3.72.
 HUBER_K = float(np.sqrt(scipy.stats.chi2.ppf(GATE_PROBABILITY, df=2)))
-
-VARIANTS = ("model", "raw")
-
 
 @dataclass(frozen=True)
 class GraphResult:
@@ -111,59 +111,6 @@ class GraphResult:
     noise: LandmarkNoise
     speed_cov: dict[str, np.ndarray]
     seconds: float
-
-
-def _predicted_speeds(arx: MotionModel, seg: MrclamSegment, warmup: int) -> dict[str, np.ndarray]:
-    """Body speeds (v [m/s], w [rad/s]) after the warm-up: the model's free run and the commands.
-
-    The model's state is set from the warm-up samples' commands and true speeds, as the
-    landmark EKFs set theirs (:func:`~lti_motion.experiments.mrclam_filters.evaluate_filters`).
-    """
-    u = wheel_from_body(seg.commands_vw, wheel_base_m=CREATE1_WHEEL_BASE_M)
-    z0 = arx.state_from_data(u[:warmup], seg.speeds_vw[:warmup])
-    return {"model": arx.simulate(u[warmup:], z0=z0), "raw": seg.commands_vw[warmup:]}
-
-
-def speed_covariances(arx: MotionModel, segments: Sequence[MrclamSegment], *,
-                      warmup: int, bandwidth_s: float = DEFAULT_BANDWIDTH_S
-                      ) -> dict[str, np.ndarray]:
-    """Per-sample long-run covariance of each motion's speed error, on (training) segments.
-
-    Parameters
-    ----------
-    arx : MotionModel
-        The ARX model (its ``dt_s`` is the segments' grid step).
-    segments : sequence of MrclamSegment
-        The first half of a robot's run.
-    warmup : int
-        Leading samples per segment that only set the model's state.
-    bandwidth_s : float
-        Newey-West bandwidth [s].
-
-    Returns
-    -------
-    dict of str to ndarray, shape (2, 2)
-        ``"model"`` and ``"raw"``: ``Phi`` of (true speeds - predicted speeds)
-        [(m/s)^2, (rad/s)^2] (Newey & West 1987, eq. 2; not demeaned, so a
-        mean error counts as drift).
-
-    Raises
-    ------
-    ValueError
-        If no segment is longer than ``warmup`` or ``bandwidth_s`` is not positive.
-    """
-    if not (np.isfinite(bandwidth_s) and bandwidth_s > 0):
-        raise ValueError(f"bandwidth_s must be positive, got {bandwidth_s}")
-    usable = [s for s in segments if len(s.t_s) > warmup]
-    if not usable:
-        raise ValueError(f"need a segment longer than the {warmup}-sample warm-up, got "
-                         f"lengths {[len(s.t_s) for s in segments]}")
-    errors: dict[str, list[np.ndarray]] = {name: [] for name in VARIANTS}
-    for seg in usable:
-        for name, pred in _predicted_speeds(arx, seg, warmup).items():
-            errors[name].append(seg.speeds_vw[warmup:] - pred)
-    lag = round(bandwidth_s / arx.dt_s)
-    return {name: long_run_covariance(e, bandwidth=lag) for name, e in errors.items()}
 
 
 def _observations(robot: MrclamRobot, seg: MrclamSegment, warmup: int,
@@ -256,7 +203,7 @@ def evaluate_graph(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: Mo
         obs = _observations(robot, seg, warmup, noise)
         n_obs += len(obs)
         keyframes = np.arange(len(truth))          # one keyframe per grid time
-        for name, speeds in _predicted_speeds(arx, seg, warmup).items():
+        for name, speeds in predicted_speeds(arx, seg, warmup).items():
             pre = preintegrate(speeds[:-1], dt_s, keyframes=keyframes, speed_covariance=covs[name])
             res = smooth_batch(pre, initial_pose=truth[0], observations=obs, landmarks=lmap,
                                options=options, covariances=False)
