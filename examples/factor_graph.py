@@ -26,10 +26,10 @@ from matplotlib.figure import Figure
 from drivers.sim import Simulator
 from drivers.sim_config import Fault, RobotParams, Room, get_preset
 from fusion.factors import RangeBearing, observe_landmarks
-from fusion.graph_noise import speed_covariance_from_data
 from fusion.landmarks import LandmarkMap
 from fusion.preintegration import compose_motions, fit_calibration, preintegrate_model
 from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from fusion.transient_noise import TransientSpeedCovariance, transient_speed_covariance_from_data
 from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
@@ -139,12 +139,12 @@ class Track:
 
 def run_smoother(model: MotionModel, log: FrameLog, observations: RangeBearing,
                  landmarks: LandmarkMap, *, initial_pose: np.ndarray,
-                 speed_covariance: np.ndarray | None = None,
+                 speed_covariance: np.ndarray | TransientSpeedCovariance | None = None,
                  options: SmootherOptions | None = None) -> Track:
     """iSAM2 over one log, one update per keyframe, recording the online calibration.
 
     ``speed_covariance``: the long-run speed covariance measured on the calibration
-    log (:func:`calibrated_model_and_noise`); ``None`` uses the model's own.
+    logs (:func:`calibrated_model_and_noise`); ``None`` uses the model's own.
     """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=KEYFRAME_EVERY, extra=observations.pose_index)
@@ -229,11 +229,14 @@ def plot(track: Track, true_poses: np.ndarray, landmarks: LandmarkMap, *, path: 
     return path
 
 
-def calibrated_model_and_noise(*, seed: int = 1) -> tuple[MotionModel, np.ndarray]:
+def calibrated_model_and_noise(*, seed: int = 1
+                               ) -> tuple[MotionModel, TransientSpeedCovariance]:
     """The ARX model of the nominal Create 2, calibrated on hard floor by driving, and the
-    long-run covariance of its sensor-less speed errors measured on its own calibration
-    excitation log against the encoders (:func:`fusion.graph_noise.speed_covariance_from_data`,
-    Newey-West, 5 s bandwidth): the covariance to preintegrate with, no hand factor."""
+    long-run covariance of its sensor-less speed errors measured on its own three
+    calibration logs (rotation, steps, excitation) against the encoders, conditioned on
+    the model's wheel tracking error
+    (:func:`fusion.transient_noise.transient_speed_covariance_from_data`: Newey-West, 5 s
+    bandwidth, 0.15 s window): the covariance to preintegrate with, no hand factor."""
     p = get_preset("create2")
     sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
 
@@ -243,9 +246,10 @@ def calibrated_model_and_noise(*, seed: int = 1) -> tuple[MotionModel, np.ndarra
 
     cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
                     floor="hard", before_stage=to_open_floor)
-    u, y = speeds_from_log(cal.logs["excitation"], m_per_tick=cal.m_per_tick,
-                           wheel_base_m=p.wheel_base_m)
-    return cal.arx, speed_covariance_from_data(cal.arx, [(u, y)])
+    runs = [speeds_from_log(cal.logs[name], m_per_tick=cal.m_per_tick,
+                            wheel_base_m=p.wheel_base_m)
+            for name in ("rotation", "steps", "excitation")]
+    return cal.arx, transient_speed_covariance_from_data(cal.arx, runs)
 
 
 def calibrated_model(*, seed: int = 1) -> MotionModel:
@@ -254,7 +258,8 @@ def calibrated_model(*, seed: int = 1) -> MotionModel:
 
 
 def run(*, seed: int = 0, duration_s: float = 120.0, out: Path = Path("out/factor_graph.png"),
-        model: MotionModel | None = None, speed_covariance: np.ndarray | None = None
+        model: MotionModel | None = None,
+        speed_covariance: np.ndarray | TransientSpeedCovariance | None = None
         ) -> dict[str, float]:
     """Calibrate (unless given a model and its speed covariance), drive, smooth, plot;
     return summary figures."""

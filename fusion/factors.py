@@ -42,7 +42,7 @@ from fusion.calibrated_factors import (
     calibrated_motion_factor,
     calibrated_motion_group_factor,
 )
-from fusion.exceptions import LandmarkIdError
+from fusion.exceptions import LandmarkIdError, MeasurementShapeError, NonFiniteInputError
 from fusion.landmarks import LandmarkMap, Observations
 from fusion.preintegration import (
     EmptyIntervalError,
@@ -52,7 +52,6 @@ from fusion.preintegration import (
     UnknownLandmarkError,
     UnknownPoseError,
 )
-from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
@@ -179,17 +178,18 @@ class RangeBearing:
         k = len(cols["pose_index"])
         for name, arr in cols.items():
             if arr.shape != (k,):
-                raise ShapeError(f"RangeBearing.{name} has shape {arr.shape}, expected ({k},)")
+                raise MeasurementShapeError(f"RangeBearing.{name} has shape {arr.shape}, "
+                                            f"expected ({k},)")
             if not np.all(np.isfinite(arr)):
-                raise NonFiniteError(f"RangeBearing.{name} holds NaN or infinite values")
+                raise NonFiniteInputError(f"RangeBearing.{name} holds NaN or infinite values")
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
         if np.any(cols["range_m"] <= 0):
-            raise ValueError("ranges must be positive")
+            raise GraphInputError("ranges must be positive")
         for name in ("bearing_sigma_rad", "range_sigma_m"):
             value = float(getattr(self, name))
             if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"RangeBearing.{name} must be positive, got {value}")
+                raise GraphInputError(f"RangeBearing.{name} must be positive, got {value}")
             object.__setattr__(self, name, value)
 
     def __len__(self) -> int:
@@ -311,7 +311,8 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     poses = np.asarray(wTb, dtype=float).reshape(-1, 3)
     idx = np.arange(len(poses)) if pose_index is None else np.asarray(pose_index).reshape(-1)
     if idx.shape != (len(poses),):
-        raise ShapeError(f"pose_index has shape {idx.shape}, expected ({len(poses)},)")
+        raise MeasurementShapeError(f"pose_index has shape {idx.shape}, expected "
+                                    f"({len(poses)},)")
     ids = landmarks.integer_ids                      # raises for non-integer ids
     bearing, rng_m = predict_range_bearing(poses[:, None, :], landmarks.xy_m[None, :, :])
     seen = ((rng_m <= max_range_m) & (rng_m >= min_range_m)

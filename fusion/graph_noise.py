@@ -15,6 +15,9 @@ covariance of the encoder-filtered speeds:
 - :func:`long_run_covariance`: the long-run covariance (spectral density at
   frequency zero) of such errors, by the Newey-West (Bartlett-kernel)
   estimator, pooled over runs.
+- :func:`long_run_contributions`: the same estimator split into one term per
+  sample (their mean is :func:`long_run_covariance`), for a long-run
+  covariance conditioned on the motion (:mod:`fusion.transient_noise`).
 - :func:`speed_covariance_from_data`: both together, the ``Phi`` to
   preintegrate with.
 - :func:`filtered_speeds`: the model's Kalman-filtered (posterior) speeds
@@ -78,6 +81,7 @@ __all__ = [
     "DEFAULT_BANDWIDTH_S",
     "DEFAULT_ENCODER_STD",
     "filtered_speeds",
+    "long_run_contributions",
     "long_run_covariance",
     "model_speed_errors",
     "slip_covariance",
@@ -216,6 +220,58 @@ def long_run_covariance(errors: Sequence[np.ndarray] | np.ndarray, *, bandwidth:
     tail = np.einsum("t,tij->ij", weights, gammas[1:])
     phi = gammas[0] + tail + tail.T
     return 0.5 * (phi + phi.T)
+
+
+def long_run_contributions(errors: np.ndarray, *, bandwidth: int) -> np.ndarray:
+    """Per-sample terms of the Newey-West long-run covariance of one run.
+
+    Parameters
+    ----------
+    errors : ndarray, shape (n, d)
+        Error samples of one run.
+    bandwidth : int
+        Lags ``L >= 0`` included, as in :func:`long_run_covariance`.
+
+    Returns
+    -------
+    ndarray, shape (n, d, d)
+        ``h_k = (e_k s_k^T + s_k e_k^T) / 2`` with the Bartlett-weighted
+        neighbourhood sum ``s_k = sum_{|tau| <= L} (1 - |tau| / (L + 1)) e_{k+tau}``
+        (inside the run). Their mean over the run is exactly
+        ``long_run_covariance(errors, bandwidth=L)``: every lagged product of the
+        estimator (Newey & West 1987, eq. 2) is counted once, split between its two
+        samples. A single ``h_k`` need not be positive semi-definite; what a
+        regression of ``h_k`` on features of sample ``k`` estimates is the
+        long-run covariance *conditioned* on those features.
+
+    Raises
+    ------
+    ShapeError, NonFiniteError, ValueError
+        Malformed or non-finite errors, or a negative bandwidth.
+
+    Examples
+    --------
+    >>> e = np.random.default_rng(0).standard_normal((500, 2))
+    >>> bool(np.allclose(long_run_contributions(e, bandwidth=7).mean(axis=0),
+    ...                  long_run_covariance(e, bandwidth=7)))
+    True
+    """
+    e = np.asarray(errors, dtype=float)
+    if e.ndim != 2:
+        raise ShapeError(f"expected errors of shape (n, d), got {e.shape}")
+    if not np.all(np.isfinite(e)):
+        raise NonFiniteError("errors hold NaN or infinite values")
+    lag = int(bandwidth)
+    if lag < 0:
+        raise ValueError(f"bandwidth must be >= 0, got {bandwidth}")
+    n = len(e)
+    kernel = 1.0 - np.abs(np.arange(-lag, lag + 1)) / (lag + 1.0)          # Bartlett
+    # s_k = sum_tau w_tau e_{k+tau}: a centred convolution, cut to the run (FFT for speed)
+    size = 1 << int(np.ceil(np.log2(max(n + 2 * lag + 1, 2))))
+    f = np.fft.rfft(e, n=size, axis=0) * np.fft.rfft(kernel, n=size)[:, None]
+    s = np.fft.irfft(f, n=size, axis=0)[lag:lag + n]
+    h = e[:, :, None] * s[:, None, :]
+    return 0.5 * (h + np.swapaxes(h, 1, 2))
 
 
 def speed_covariance_from_data(model: MotionModel, runs: Runs, *,

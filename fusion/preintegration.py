@@ -50,7 +50,10 @@ covariance of a *chain* of intervals grows as the true one does, whatever
 the keyframe spacing. Using ``Gamma_0`` alone would treat correlated errors
 as white and make long chains over-confident. With encoders
 (``mode="one_step"``) the errors of the one-step predictor are the
-innovations ``e``, white by construction: ``Phi = R``.
+innovations ``e``, white by construction: ``Phi = R``. ``Phi`` may also vary
+per sample (shape ``(n, 2, 2)``): :mod:`fusion.transient_noise` measures it
+as a function of the model's wheel tracking error, larger in the transients
+after command steps that a linear model cannot follow.
 
 The relative-pose error is, to first order, ``delta = sum_k G_k eps_k``
 with ``G_k = T (F_speed,k + [J (p_j - p_{k+1}) dt_k; 0] e_w^T)``: the
@@ -81,8 +84,9 @@ import numpy as np
 import scipy.linalg
 
 from fusion import exceptions as _fusion_exceptions
+from fusion.exceptions import FusionError, MeasurementShapeError, NonFiniteInputError
 from fusion.graph_noise import filtered_speeds
-from lti_motion.exceptions import NonFiniteError, ShapeError
+from fusion.transient_noise import TransientSpeedCovariance
 from lti_motion.kinematics import pose_step_jacobians
 from lti_motion.model import MotionModel
 
@@ -106,8 +110,9 @@ __all__ = [
 
 #: Default :func:`preintegrate` ``slip_density``: 1 mm and 1 mrad per square-root second.
 SLIP_DENSITY = (1e-6, 1e-6, 1e-6)
-#: :func:`preintegrate_model`'s ``slip_density`` in ``mode="filtered"``: 0.1 mm and 0.1 mrad
-#: per square-root second (slip along the track and in heading is in the per-sample
+#: :func:`preintegrate_model`'s ``slip_density`` in ``mode="filtered"`` and with a
+#: :class:`~fusion.transient_noise.TransientSpeedCovariance`: 0.1 mm and 0.1 mrad per
+#: square-root second (slip along the track and in heading is in the per-sample
 #: covariance there; this keeps the sideways direction positive definite).
 FILTERED_SLIP_DENSITY = (1e-8, 1e-8, 1e-8)
 #: Where the speeds come from: commands only, the one-step predictor with encoders, or
@@ -115,8 +120,14 @@ FILTERED_SLIP_DENSITY = (1e-8, 1e-8, 1e-8)
 SpeedMode = Literal["free_run", "one_step", "filtered"]
 
 
-class GraphInputError(ValueError):
-    """Bad input to preintegration or a factor graph (base class)."""
+class GraphInputError(FusionError):
+    """Bad input to preintegration or a factor graph (base class).
+
+    A :class:`fusion.exceptions.FusionError`, hence a ``ValueError``. Shape and
+    non-finite input raise :class:`fusion.exceptions.MeasurementShapeError` and
+    :class:`fusion.exceptions.NonFiniteInputError` (also the core package's
+    ``ShapeError`` and ``NonFiniteError``).
+    """
 
 
 class KeyframeOrderError(GraphInputError):
@@ -232,7 +243,7 @@ def speed_error_covariance(model: MotionModel, *, mode: SpeedMode = "free_run") 
     if mode == "one_step":
         return np.array(model.R)
     if mode != "free_run":
-        raise ValueError(f"mode must be 'free_run' or 'one_step', got {mode!r}")
+        raise GraphInputError(f"mode must be 'free_run' or 'one_step', got {mode!r}")
     a, c = model.A, model.C
     if model.n_states == 0:
         return np.array(model.R)
@@ -249,7 +260,8 @@ def speed_error_covariance(model: MotionModel, *, mode: SpeedMode = "free_run") 
 def _check_keyframes(keyframes: np.ndarray, n: int) -> np.ndarray:
     kf = np.asarray(keyframes)
     if kf.ndim != 1 or kf.size < 2:
-        raise ShapeError(f"expected keyframes of shape (m + 1,) with m >= 1, got {kf.shape}")
+        raise MeasurementShapeError(f"expected keyframes of shape (m + 1,) with m >= 1, got "
+                                    f"{kf.shape}")
     if not np.issubdtype(kf.dtype, np.integer):
         if not (np.all(np.isfinite(kf)) and np.array_equal(kf, np.round(kf))):
             raise GraphInputError(f"keyframes must be integer sample indices, got {kf[:5]}...")
@@ -307,8 +319,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
 
     Raises
     ------
-    ShapeError, NonFiniteError
-        Malformed or non-finite arrays.
+    MeasurementShapeError, NonFiniteInputError
+        Malformed or non-finite arrays (also ``lti_motion``'s ``ShapeError`` and
+        ``NonFiniteError``).
     KeyframeOrderError, EmptyIntervalError, GraphInputError
         Keyframes out of order, repeated, or outside the samples.
 
@@ -329,23 +342,24 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     """
     sp = np.asarray(speeds, dtype=float)
     if sp.ndim != 2 or sp.shape[1] != 2:
-        raise ShapeError(f"expected speeds of shape (n, 2) (v, w), got {sp.shape}")
+        raise MeasurementShapeError(f"expected speeds of shape (n, 2) (v, w), got {sp.shape}")
     n = len(sp)
     kf = _check_keyframes(keyframes, n)
     dt = np.broadcast_to(np.asarray(dt_s, dtype=float), (n,)) if np.ndim(dt_s) == 0 else (
         np.asarray(dt_s, dtype=float))
     if dt.shape != (n,):
-        raise ShapeError(f"expected dt_s a number or of shape ({n},), got {dt.shape}")
+        raise MeasurementShapeError(f"expected dt_s a number or of shape ({n},), got {dt.shape}")
     phi_cov = np.asarray(speed_covariance, dtype=float)
     if phi_cov.shape not in ((2, 2), (n, 2, 2)):
-        raise ShapeError(f"expected speed_covariance of shape (2, 2) or ({n}, 2, 2), got "
-                         f"{phi_cov.shape}")
+        raise MeasurementShapeError(f"expected speed_covariance of shape (2, 2) or ({n}, 2, 2), "
+                                    f"got {phi_cov.shape}")
     slip = np.asarray(slip_density, dtype=float)
     if slip.shape != (3,) or not np.all(slip >= 0):
-        raise ValueError(f"slip_density must be three non-negative densities, got {slip_density}")
+        raise GraphInputError(f"slip_density must be three non-negative densities, got "
+                              f"{slip_density}")
     cal = np.asarray(calibration, dtype=float)
     if cal.shape != (2,):
-        raise ShapeError(f"expected calibration (s, g) of shape (2,), got {cal.shape}")
+        raise MeasurementShapeError(f"expected calibration (s, g) of shape (2,), got {cal.shape}")
     lo, hi = int(kf[0]), int(kf[-1])
     sp, dt = sp[lo:hi], dt[lo:hi]
     if phi_cov.ndim == 3:
@@ -353,9 +367,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     for name, arr in (("speeds", sp), ("dt_s", dt), ("speed_covariance", phi_cov),
                       ("calibration", cal)):
         if not np.all(np.isfinite(arr)):
-            raise NonFiniteError(f"{name} holds NaN or infinite values; clean the input first")
+            raise NonFiniteInputError(f"{name} holds NaN or infinite values; clean the input first")
     if np.any(dt <= 0):
-        raise ValueError(f"dt_s must be positive, got min {dt.min()}")
+        raise GraphInputError(f"dt_s must be positive, got min {dt.min()}")
 
     starts = kf[:-1] - lo                       # interval starts within the used samples
     lengths = np.diff(kf)
@@ -408,7 +422,7 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
 def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarray,
                        mode: SpeedMode = "free_run", y_measured: np.ndarray | None = None,
                        z0: np.ndarray | None = None, covariance_scale: float = 1.0,
-                       speed_covariance: np.ndarray | None = None,
+                       speed_covariance: np.ndarray | TransientSpeedCovariance | None = None,
                        calibration: tuple[float, float] | np.ndarray = (1.0, 1.0),
                        slip_density: tuple[float, float, float] | np.ndarray | None = None,
                        ) -> Preintegrated:
@@ -434,15 +448,21 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
         Model state before sample 0 (zeros: at rest).
     covariance_scale : float
         Factor on the speed covariance; 1 (the default) trusts it.
-    speed_covariance : array_like, shape (2, 2) or (n, 2, 2), optional
+    speed_covariance : array_like or TransientSpeedCovariance, optional
         The speed covariance to use instead of the model's own
-        (:func:`speed_error_covariance`), e.g. measured on the calibration
-        log (:func:`fusion.graph_noise.speed_covariance_from_data`).
+        (:func:`speed_error_covariance`): shape (2, 2) or (n, 2, 2), e.g.
+        measured on the calibration log
+        (:func:`fusion.graph_noise.speed_covariance_from_data`); or a
+        :class:`fusion.transient_noise.TransientSpeedCovariance`, evaluated
+        per sample at the commands and the predicted speeds (larger during
+        the model's transients).
     calibration : (float, float)
         Linearisation point ``(s, g)``.
     slip_density : (float, float, float), optional
         Pose noise outside the model, as in :func:`preintegrate`; default
-        :data:`SLIP_DENSITY`, or :data:`FILTERED_SLIP_DENSITY` for ``"filtered"``.
+        :data:`SLIP_DENSITY`, or :data:`FILTERED_SLIP_DENSITY` when the per-sample
+        covariance already holds the ground slip (``"filtered"``, or a
+        ``TransientSpeedCovariance`` with ``slip``).
 
     Returns
     -------
@@ -450,12 +470,12 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
 
     Raises
     ------
-    ValueError
+    GraphInputError
         For an unknown mode, a missing ``y_measured``, a non-positive
         ``covariance_scale``; and as :func:`preintegrate`.
     """
     if mode in ("one_step", "filtered") and y_measured is None:
-        raise ValueError(f"mode={mode!r} needs y_measured (encoder speeds, shape (n, 2))")
+        raise GraphInputError(f"mode={mode!r} needs y_measured (encoder speeds, shape (n, 2))")
     if mode == "free_run":
         speeds = model.simulate(u, z0=z0)
         phi = speed_error_covariance(model, mode=mode)
@@ -465,14 +485,20 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
     elif mode == "filtered":
         speeds, phi = filtered_speeds(model, u, y_measured, z0=z0)
     else:
-        raise ValueError(f"mode must be 'free_run', 'one_step' or 'filtered', got {mode!r}")
+        raise GraphInputError(f"mode must be 'free_run', 'one_step' or 'filtered', got {mode!r}")
     scale = float(covariance_scale)
     if not (np.isfinite(scale) and scale > 0):
-        raise ValueError(f"covariance_scale must be positive and finite, got {covariance_scale}")
-    if speed_covariance is not None:
+        raise GraphInputError(f"covariance_scale must be positive and finite, got "
+                              f"{covariance_scale}")
+    if isinstance(speed_covariance, TransientSpeedCovariance):
+        phi = speed_covariance.per_sample(u, speeds, wheel_base_m=model.wheel_base_m,
+                                          dt_s=model.dt_s)
+    elif speed_covariance is not None:
         phi = np.asarray(speed_covariance, dtype=float)
     if slip_density is None:
-        slip_density = FILTERED_SLIP_DENSITY if mode == "filtered" else SLIP_DENSITY
+        with_slip = mode == "filtered" or (isinstance(speed_covariance, TransientSpeedCovariance)
+                                           and speed_covariance.slip is not None)
+        slip_density = FILTERED_SLIP_DENSITY if with_slip else SLIP_DENSITY
     return preintegrate(speeds, model.dt_s, keyframes=keyframes, speed_covariance=scale * phi,
                         calibration=calibration, slip_density=slip_density)
 
@@ -501,7 +527,8 @@ def compose_motions(delta_pose: np.ndarray, *, initial_pose: np.ndarray) -> np.n
     d = np.asarray(delta_pose, dtype=float)
     start = np.asarray(initial_pose, dtype=float)
     if d.ndim != 2 or d.shape[1] != 3 or start.shape != (3,):
-        raise ShapeError(f"expected delta_pose (m, 3) and initial_pose (3,), got {d.shape} and "
+        raise MeasurementShapeError(f"expected delta_pose (m, 3) and initial_pose (3,), got "
+                                    f"{d.shape} and "
                          f"{start.shape}")
     theta = start[2] + np.concatenate([[0.0], np.cumsum(d[:, 2])])
     c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
@@ -538,7 +565,8 @@ def relative_pose_errors(pre: Preintegrated, poses: np.ndarray) -> np.ndarray:
     """
     ref = np.asarray(poses, dtype=float)
     if ref.shape != (len(pre) + 1, 3):
-        raise ShapeError(f"expected poses of shape ({len(pre) + 1}, 3), got {ref.shape}")
+        raise MeasurementShapeError(f"expected poses of shape ({len(pre) + 1}, 3), got "
+                                    f"{ref.shape}")
     c, s = np.cos(ref[:-1, 2]), np.sin(ref[:-1, 2])
     dx, dy = ref[1:, 0] - ref[:-1, 0], ref[1:, 1] - ref[:-1, 1]
     bx, by = c * dx + s * dy, -s * dx + c * dy                    # wTi^-1 wTj

@@ -35,6 +35,7 @@ from fusion.graph_builder import GraphBuilder
 from fusion.landmarks import LandmarkMap
 from fusion.preintegration import Preintegrated, SpeedMode, UnknownPoseError, preintegrate_model
 from fusion.smoother_options import SmootherOptions, SmootherResult
+from fusion.transient_noise import TransientSpeedCovariance
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
@@ -293,7 +294,8 @@ def log_keyframes(n_samples: int, *, every: int, extra: np.ndarray | Sequence[in
 def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
                observations: RangeBearing | None = None, landmarks: LandmarkMap | None = None,
                keyframe_every: int = 33, mode: SpeedMode = "free_run",
-               covariance_scale: float = 1.0, speed_covariance: np.ndarray | None = None,
+               covariance_scale: float = 1.0,
+               speed_covariance: np.ndarray | TransientSpeedCovariance | None = None,
                options: SmootherOptions | None = None,
                method: Literal["isam2", "batch"] = "isam2", covariances: bool = False
                ) -> SmootherResult:
@@ -318,9 +320,11 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
         model's Kalman-filtered speeds (:func:`~fusion.preintegration.preintegrate_model`).
     covariance_scale : float
         Factor on the speed-error covariance.
-    speed_covariance : array_like, shape (2, 2), optional
+    speed_covariance : array_like, shape (2, 2), or TransientSpeedCovariance, optional
         Speed-error covariance instead of the model's own, e.g. measured on
-        the calibration log (:func:`fusion.graph_noise.speed_covariance_from_data`).
+        the calibration logs (:func:`fusion.graph_noise.speed_covariance_from_data`,
+        or conditioned on the model's transients:
+        :func:`fusion.transient_noise.transient_speed_covariance_from_data`).
     options : SmootherOptions, optional
         Graph settings.
     method : {"isam2", "batch"}

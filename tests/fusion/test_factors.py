@@ -7,12 +7,14 @@ import scipy.linalg
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
 from fusion.calibrated_factors import pose2_log, pose2_log_derivative
-from fusion.exceptions import LandmarkIdError
+from fusion.exceptions import FusionError, LandmarkIdError
 from fusion.factors import (
     EmptyIntervalError,
     GraphInputError,
     KeyframeOrderError,
     RangeBearing,
+    UnknownLandmarkError,
+    UnknownPoseError,
     calibrated_motion_error,
     calibrated_motion_factor,
     calibrated_motion_group_factor,
@@ -232,9 +234,24 @@ def test_an_interval_with_no_samples_raises_empty_interval_error():
 ])
 def test_bad_preintegration_input_raises_value_errors(kwargs, error, match):
     args = {"speed_covariance": PHI, **kwargs}
-    with pytest.raises(error, match=match):
+    with pytest.raises(error, match=match) as info:
         preintegrate(np.zeros((50, 2)), DT, **args)
     assert issubclass(error, ValueError)
+    assert isinstance(info.value, FusionError)          # the fusion package's own classes
+
+
+@pytest.mark.parametrize("error", [GraphInputError, KeyframeOrderError, EmptyIntervalError,
+                                   UnknownPoseError, UnknownLandmarkError])
+def test_graph_errors_are_fusion_errors_and_value_errors(error):
+    assert issubclass(error, FusionError) and issubclass(error, ValueError)
+
+
+def test_bad_range_bearing_input_raises_fusion_errors():
+    with pytest.raises(ShapeError, match="expected") as info:
+        RangeBearing([1, 2], [0], [0.0, 0.0], [1.0, 1.0], 0.01, 0.01)
+    assert isinstance(info.value, FusionError)
+    with pytest.raises(FusionError, match="ranges must be positive"):
+        RangeBearing([1], [0], [0.0], [-1.0], 0.01, 0.01)
 
 
 def test_non_finite_speeds_are_refused():

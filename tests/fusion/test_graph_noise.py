@@ -5,6 +5,7 @@ import pytest
 
 from fusion.graph_noise import (
     filtered_speeds,
+    long_run_contributions,
     long_run_covariance,
     model_speed_errors,
     slip_covariance,
@@ -105,3 +106,16 @@ def test_per_sample_speed_covariance_equals_a_constant_one(rng):
 def test_filtered_mode_needs_encoders(static_model):
     with pytest.raises(ValueError, match="y_measured"):
         preintegrate_model(static_model, np.zeros((10, 2)), keyframes=[0, 10], mode="filtered")
+
+
+@pytest.mark.parametrize("n, lag", [(500, 0), (500, 7), (100, 300), (1, 3)])
+def test_long_run_contributions_average_to_the_long_run_covariance(rng, n, lag):
+    """Each lagged product of Newey-West split between its two samples (no edge loss)."""
+    e = np.cumsum(rng.standard_normal((n, 2)), axis=0) * 0.1      # correlated errors
+    h = long_run_contributions(e, bandwidth=lag)
+    assert h.shape == (n, 2, 2)
+    np.testing.assert_allclose(h, np.swapaxes(h, 1, 2))
+    np.testing.assert_allclose(h.mean(axis=0), long_run_covariance(e, bandwidth=lag),
+                               rtol=1e-10, atol=1e-14)
+    with pytest.raises(ValueError, match="bandwidth"):
+        long_run_contributions(e, bandwidth=-1)

@@ -68,7 +68,9 @@ def model(calibration):
 
 @pytest.fixture(scope="module")
 def phi(calibration):
-    """Long-run speed covariance measured on the model's calibration log (no hand factor)."""
+    """Long-run speed covariance measured on the model's calibration logs, conditioned on its
+    wheel tracking error, plus the EKF's ground-slip prior (no hand factor;
+    fusion.transient_noise)."""
     return calibration[1]
 
 
@@ -151,27 +153,49 @@ def _nees(run: Run) -> np.ndarray:
     return np.einsum("ki,kij,kj->k", err, np.linalg.inv(cov), err)
 
 
+def _keyframe_anees(runs: list[Run]) -> tuple[np.ndarray, float, float]:
+    """Per-keyframe ANEES over the runs (keyframe 0, the prior, and 1 skipped) and the
+    two-sided 95% interval of a consistent estimator."""
+    n = min(len(r.result.keyframes) for r in runs)
+    anees = np.array([_nees(r)[2:n] for r in runs]).mean(axis=0)
+    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * len(runs)) / len(runs)
+    return anees, lo, hi
+
+
 def test_pose_nees_is_inside_the_95_percent_interval(nominal):
     """No hand factor: the motion factors carry the long-run covariance of the model's
-    speed errors measured on its calibration log (Newey-West, 5 s; fusion.graph_noise).
-    Measured ANEES 3.45-3.74 on four seed sets (95% interval 2.02-4.16), 70-80% of the
-    keyframes inside (the model's own covariance: 7-9; docs/factor_graph.md)."""
-    n = min(len(r.result.keyframes) for r in nominal)
-    nees = np.array([_nees(r)[2:n] for r in nominal])   # skip keyframe 0 (the prior)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * N_RUNS) / N_RUNS
-    anees = nees.mean(axis=0)                                     # over runs, per keyframe
+    speed errors measured on its calibration logs, conditioned on the wheel tracking error
+    (fusion.transient_noise), plus the EKF's slip prior. Measured ANEES 2.78 (seeds 3;
+    2.43-3.01 on eight design seed sets; 95% interval 2.02-4.16); with the unconditioned
+    covariance 3.60 (3.13-3.84), the model's own 7-9 (docs/factor_graph.md)."""
+    anees, lo, hi = _keyframe_anees(nominal)
     assert lo < anees.mean() < hi, (lo, anees.mean(), hi)
 
 
-@pytest.mark.xfail(strict=True, reason="known gap: without the former hand factor of 3, "
-                   "69.7% of the keyframes' ANEES are inside (seeds 3; 70-80% on seeds 4, 8, "
-                   "13); heavy tails at sharp turns put about a quarter above the interval")
+def test_few_keyframes_are_over_confident(nominal):
+    """The heavy tails at sharp turns: with one long-run covariance for all driving, 26% of
+    the keyframes' ANEES were above the interval (seeds 3; 14-31% on eight design sets).
+    Conditioned on the transients: 4.9% (0-1.6% on the design sets)."""
+    anees, _, hi = _keyframe_anees(nominal)
+    assert np.mean(anees > hi) < 0.1, np.mean(anees > hi)
+
+
 def test_most_keyframes_have_their_anees_inside_the_interval(nominal):
-    n = min(len(r.result.keyframes) for r in nominal)
-    anees = np.array([_nees(r)[2:n] for r in nominal]).mean(axis=0)
-    lo, hi = stats.chi2.ppf([0.025, 0.975], 3 * N_RUNS) / N_RUNS
-    # a consistent estimator has 95% of keyframes inside; the hand factor gave 77%
-    assert np.mean((anees > lo) & (anees < hi)) > 0.7, np.mean((anees > lo) & (anees < hi))
+    """Measured 82.0% inside (seeds 3), 78-97% on eight design seed sets (mean 89%); the
+    unconditioned covariance gave 69% (68-80%, mean 73%)."""
+    anees, lo, hi = _keyframe_anees(nominal)
+    assert np.mean((anees > lo) & (anees < hi)) > 0.75, np.mean((anees > lo) & (anees < hi))
+
+
+@pytest.mark.xfail(strict=True, reason="known gap: 82.0% of the keyframes' ANEES inside "
+                   "(seeds 3; 78-97% on eight design sets); the rest mostly *below* the "
+                   "interval (13% on seeds 3): on straight driving one 0.5 s interval's "
+                   "covariance is 3-4x its error (the long-run covariance is made for long "
+                   "chains), while the sharpest turns stay 1.5-2x over-confident")
+def test_ninety_percent_of_keyframes_have_their_anees_inside_the_interval(nominal):
+    anees, lo, hi = _keyframe_anees(nominal)
+    # a consistent estimator has 95% of keyframes inside
+    assert np.mean((anees > lo) & (anees < hi)) >= 0.9, np.mean((anees > lo) & (anees < hi))
 
 
 def test_marginal_covariances_are_symmetric_positive_definite(nominal):
