@@ -54,11 +54,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize
 
+from fusion.dynamics_start import StartNull, drive_start_anchors, fit_start_null, start_evidence
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from lti_motion.model import MotionModel
 
@@ -156,6 +157,12 @@ class DynamicsNull:
         :data:`INFORMATIVE_B` (for the lag test's threshold).
     lag_information_median : float
         Median ``b`` of the informative windows [1/period^2].
+    start : StartNull or None
+        Nominal distribution of the start score
+        (:mod:`fusion.dynamics_start`, eq. 7); ``None``: too few starts.
+    skip_windows : int
+        Windows at the start of each run left out of the fit; the monitor
+        leaves out as many after it starts.
     """
 
     window_periods: int
@@ -166,6 +173,8 @@ class DynamicsNull:
     n_windows: int = 0
     informative_fraction: float = 0.0
     lag_information_median: float = 0.0
+    start: StartNull | None = None
+    skip_windows: int = 0
 
 
 def _wheel_matrix(wheel_base_m: float) -> np.ndarray:
@@ -224,6 +233,11 @@ class WindowIntegrator:
     def at_window_start(self) -> bool:
         """Whether the next period opens a window."""
         return self._h == 0
+
+    @property
+    def period_in_window(self) -> int:
+        """Position ``0 .. H-1`` of the next period in its window."""
+        return self._h
 
     def step(self, cmd_m_s: np.ndarray, tick_deltas: np.ndarray) -> tuple | None:
         """One period of all robots, ``(n_robots, 2)`` each [m/s], [ticks].
@@ -386,7 +400,9 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
     """Fit :class:`DynamicsNull` by maximum likelihood on nominal drives.
 
     The mean by weighted least squares and the covariance parameters by
-    minimising the Gaussian negative log-likelihood (Powell), alternated.
+    minimising the Gaussian negative log-likelihood (Powell), alternated;
+    then the start score's nominal mean and spread on the drive starts of the
+    same windows (:func:`fusion.dynamics_start.fit_start_null`, eq. 7).
 
     Parameters
     ----------
@@ -411,10 +427,12 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
     """
     parts: list[list[np.ndarray]] = [[], [], [], []]
     skip = math.ceil(skip_s / (model.dt_s * window_periods))
+    kept = []
     for cmd, deltas in runs:
         w = integrated_residuals(model, cmd, deltas, window_periods=window_periods)
         ok = w.valid.copy()
         ok[..., :skip] = False
+        kept.append((w, ok, drive_start_anchors(cmd, window_periods=window_periods)))
         for acc, arr in zip(parts, (w.residual_ticks, w.lag_signature_ticks, w.predicted_ticks,
                                     w.previous_signature_ticks), strict=True):
             acc.append(arr[ok])
@@ -451,11 +469,16 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
     b = _statistics(r - phi @ beta, _covariance(base, term_var, wheel_var, phi, s, p),
                     s).lag_information
     informative = b > INFORMATIVE_B
-    return DynamicsNull(window_periods=int(window_periods), base_cov_ticks2=base,
+    null = DynamicsNull(window_periods=int(window_periods), base_cov_ticks2=base,
                         term_std=np.sqrt(term_var),
                         wheel_lag_std_periods=(float(math.sqrt(wheel_var[0])),
                                                float(math.sqrt(wheel_var[1]))),
                         mean_coefficients=beta, n_windows=len(r),
                         informative_fraction=float(np.mean(informative)),
                         lag_information_median=float(np.median(b[informative]))
-                        if informative.any() else 0.0)
+                        if informative.any() else 0.0, skip_windows=skip)
+    z = [start_evidence(*_error_and_cov(null, w.residual_ticks, w.lag_signature_ticks,
+                                        w.predicted_ticks, w.previous_signature_ticks),
+                        w.lag_signature_ticks, ok, anchors).reshape(-1, 3)
+         for w, ok, anchors in kept]
+    return replace(null, start=fit_start_null(np.concatenate(z)))
