@@ -173,6 +173,11 @@ class MonitorOptions:
         Target false-alarm rate of the whole monitor, split in three equal shares.
     gate_probability : float
         Per-sample gate: a good sample is a glitch with probability ``1 - gate_probability``.
+    encoder_gate_nis : float, optional
+        The encoder stream's per-sample gate as a NIS value, set from measured
+        nominal driving instead of the chi-square law (a model miss at a start
+        from rest exceeds its 1e-12 tail); ``gate_probability`` then applies to
+        the landmark stream only.
     burst_count, burst_window : int
         ``burst_count`` glitches within ``burst_window`` samples make a burst.
     decimation : int
@@ -199,6 +204,7 @@ class MonitorOptions:
     dt_s: float = 0.015
     false_alarms_per_hour: float = 1.0
     gate_probability: float = 1.0 - 1e-12
+    encoder_gate_nis: float | None = None
     burst_count: int = 3
     burst_window: int = 20
     decimation: int = 8
@@ -213,6 +219,8 @@ class MonitorOptions:
     def __post_init__(self) -> None:
         checks = {"dt_s": self.dt_s > 0, "false_alarms_per_hour": self.false_alarms_per_hour > 0,
                   "gate_probability": 0.0 < self.gate_probability < 1.0,
+                  "encoder_gate_nis": self.encoder_gate_nis is None
+                  or self.encoder_gate_nis > 0,
                   "burst_count": self.burst_count >= 2,
                   "burst_window": self.burst_window >= self.burst_count,
                   "decimation": self.decimation >= 1, "cusum_k": self.cusum_k > 0,
@@ -284,7 +292,8 @@ def cusum_threshold(k: float, arl0: float) -> float:
 
 
 def design_thresholds(options: MonitorOptions, *, n_channels: int = 2,
-                      samples_per_hour: float | None = None) -> Thresholds:
+                      samples_per_hour: float | None = None,
+                      stream: StreamKind = "encoders") -> Thresholds:
     """Thresholds that meet ``options.false_alarms_per_hour`` (module docstring arithmetic).
 
     Parameters
@@ -295,6 +304,8 @@ def design_thresholds(options: MonitorOptions, *, n_channels: int = 2,
         Residual dimension ``m``.
     samples_per_hour : float, optional
         Innovations an hour (default ``3600 / dt_s``).
+    stream : {"encoders", "landmark"}
+        The stream (``encoder_gate_nis`` applies to the encoders only).
 
     Examples
     --------
@@ -306,6 +317,9 @@ def design_thresholds(options: MonitorOptions, *, n_channels: int = 2,
     share = options.false_alarms_per_hour / 3.0
     p = 1.0 - options.gate_probability
     gate = float(chi2.ppf(options.gate_probability, n_channels))
+    if stream == "encoders" and options.encoder_gate_nis is not None:
+        gate = float(options.encoder_gate_nis)       # measured gate; its chi-square tail
+        p = float(chi2.sf(gate, n_channels))
     b, n = options.burst_count, options.burst_window
     burst_rate = n_hour * float(comb(n - 1, b - 1)) * p ** b
     windows = n_hour / options.nis_window
@@ -447,7 +461,8 @@ class ResidualMonitor:
         opt = self.options
         self._streams = {
             "encoders": _Stream(design_thresholds(opt), "dynamics_changed"),
-            "landmark": _Stream(design_thresholds(opt, samples_per_hour=3600.0
+            "landmark": _Stream(design_thresholds(opt, stream="landmark",
+                                                  samples_per_hour=3600.0
                                                   * opt.landmark_rate_hz), "scale_changed"),
         }
         self.events: list[AlarmEvent] = []

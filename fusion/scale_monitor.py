@@ -294,6 +294,21 @@ class ScaleMonitor:
         return 1.0 + self._x[:self.n_robots, _KV]
 
     @property
+    def scale_ratio_std(self) -> np.ndarray:
+        """Standard deviation of :attr:`scale_ratio` (the main filters' ``k_v``), (n_robots,)."""
+        return np.sqrt(self._P[:self.n_robots, _KV, _KV])
+
+    @property
+    def yaw_ratio(self) -> np.ndarray:
+        """Main filters' ground turn per encoder turn ``1 + k_w``, (n_robots,)."""
+        return 1.0 + self._x[:self.n_robots, _KW]
+
+    @property
+    def yaw_ratio_std(self) -> np.ndarray:
+        """Standard deviation of :attr:`yaw_ratio`, (n_robots,)."""
+        return np.sqrt(self._P[:self.n_robots, _KW, _KW])
+
+    @property
     def pose(self) -> np.ndarray:
         """Main filters' poses ``(x [m], y [m], theta [rad])``, (n_robots, 3)."""
         return self._x[:self.n_robots, :3].copy()

@@ -119,6 +119,9 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         raise ValueError("--fault injects a simulator fault; it needs --sim")
     if args.listen and args.sim:
         raise ValueError("--listen reads a robot's stream; it needs --port")
+    if args.nominal and args.sim:
+        raise ValueError("--nominal reads logs of a robot's nominal drives; it needs --port "
+                         "(--sim drives --nominal-drives itself)")
     if args.model is not None:
         model = _load_model(args.model)
     elif args.sim:
@@ -137,14 +140,16 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     if args.sim:
         live_monitor.run_on_simulator(model, preset=args.sim, duration_s=args.duration,
                                       seed=args.seed, floor=args.floor, fault=args.fault,
-                                      fault_at_s=args.fault_at, record=args.record)
+                                      fault_at_s=args.fault_at, record=args.record,
+                                      nominal_drives=args.nominal_drives)
     else:
         from drivers.exceptions import PassiveModeError
 
         try:
             live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
                                      clock_rate=args.clock_rate, listen=args.listen,
-                                     seed=args.seed, record=args.record)
+                                     seed=args.seed, record=args.record,
+                                     nominal_logs=args.nominal or ())
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
     return 0
@@ -251,7 +256,9 @@ def build_parser() -> argparse.ArgumentParser:
         "monitor", help="drive (or listen), run the EKF and the residual monitor, print alarms",
         description="Drives a rounded-rectangle route with speed changes (the simulator or a "
                     "robot; --listen only reads a robot), runs the model's EKF on the encoders "
-                    "with the residual monitor, and prints each alarm as it is raised (time, "
+                    "with the residual monitor (gate and glitch bursts, stuck encoder, dynamics "
+                    "tests after a Phase-I fit on nominal drives, and on --sim the landmark "
+                    "scale test), and prints each alarm as it is raised (time, "
                     "kind, test, statistic > threshold, onset) and a summary. Without --model, "
                     "--sim calibrates the simulated robot first; --port needs --model. See "
                     "docs/guide_alarms.md.")
@@ -261,8 +268,15 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
                     help="robot seconds to drive or listen (default 30)")
-    mo.add_argument("--fault", choices=["stuck-encoder", "spikes", "payload", "motor", "delay"],
+    mo.add_argument("--fault", choices=["stuck-encoder", "spikes", "payload", "motor", "delay",
+                                        "carpet"],
                     help="--sim only: inject this simulator fault")
+    mo.add_argument("--nominal-drives", type=int, default=20,
+                    help="--sim: nominal drives of the same length first, for the dynamics "
+                         "null and the encoder gate (default 20; 0: dynamics tests off)")
+    mo.add_argument("--nominal", nargs="+", metavar="LOG.npz",
+                    help="--port: logs of nominal drives (--record) for the dynamics null and "
+                         "the encoder gate (without: dynamics tests off)")
     mo.add_argument("--fault-at", type=float, default=None,
                     help="onset of --fault [s] (default: half the duration)")
     mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")

@@ -97,3 +97,127 @@ def test_after_the_monitors_alarm_the_fit_returns_within_2_points(model, null, k
         assert res.actions == ["adopted"] * 4
         assert np.all(res.fit_old[done] < res.fit_before[done] - 2.0)   # the fault shows
         assert np.all(res.fit_in_use[done] > res.fit_old[done] + 2.0)
+
+
+# -- scale: rescaled model, landmark re-estimate, rotation fallback ----------------------------
+def _scale_alarm(t_s, ratio, std, yaw=0.95, yaw_std=0.003, onset_s=None):
+    from fusion.scale_monitor import ScaleAlarm
+
+    onset = t_s - 6.0 if onset_s is None else onset_s
+    a = ScaleAlarm(0, t_s, 10.5, 9.8, onset, ratio, std, yaw, yaw_std)
+    return AlarmEvent(t_s, "scale_changed", "scale_glr", 10.5, 9.8, onset, scale=a)
+
+
+def test_rescaled_model_predicts_the_same_counts(model):
+    from fusion.model_rescale import rescaled_model
+
+    u, y = excitation_speeds(model, [], seed=4, duration_s=10.0)
+    m_new, b_new = 0.965 * model.m_per_tick, model.wheel_base_m * 0.965 / 0.951
+    new = rescaled_model(model, m_per_tick=m_new, wheel_base_m=b_new)
+
+    def ticks(m, yy):          # wheel count changes a model's speeds stand for (paper eq. 11)
+        wheel = np.stack([yy[:, 0] - yy[:, 1] * m.wheel_base_m / 2,
+                          yy[:, 0] + yy[:, 1] * m.wheel_base_m / 2], axis=1)
+        return wheel * m.dt_s / m.m_per_tick
+
+    np.testing.assert_allclose(ticks(new, new.simulate(u)), ticks(model, model.simulate(u)),
+                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(new.A - new.K @ new.C, model.A - model.K @ model.C, atol=1e-12)
+    np.testing.assert_allclose(new.Q, model.Q)
+    # the same counts converted with the new scale: the fit [%] is the old one's
+    s = np.array([0.965, 0.951])
+    np.testing.assert_allclose(new.fit_percent([(u, y * s)]), model.fit_percent([(u, y)]),
+                               atol=1e-9)
+    # the raw ARX coefficients follow the matrices: realised again, the same free run
+    from lti_motion.arx import ArxFit
+    fit = model.selection.fit
+    ss = ArxFit(new.coefficients["a"], new.coefficients["b"], fit.delay, fit.residual_cov,
+                fit.n_rows, fit.rank, fit.condition_number, fit.input_condition_number,
+                fit.information_inv).state_space()
+    z, y_re = np.zeros(ss.A.shape[0]), []
+    for uk in u:
+        y_re.append(ss.C @ z + ss.D @ uk)
+        z = ss.A @ z + ss.B @ uk
+    np.testing.assert_allclose(np.array(y_re), new.simulate(u), atol=1e-9)
+
+
+def test_precise_scale_alarm_is_adopted_at_once_and_saved(model, tmp_path):
+    from lti_motion.model import MotionModel
+
+    rc = Recalibrator(model, save_path=tmp_path / "model.json")
+    dt = model.dt_s
+    for k in range(100):                                      # buffered encoder speeds
+        rc.add(k * dt, np.full(2, 0.2), np.array([0.2, 0.1]))
+    record = rc.on_alarm(_scale_alarm(1.5, 0.965, 0.003, yaw=0.951, yaw_std=0.003))
+    assert record.action == "adopted" and not rc.scale_waiting
+    m0, b0 = model.m_per_tick, model.wheel_base_m
+    assert record.m_per_tick == (m0, pytest.approx(0.965 * m0))
+    assert record.wheel_base_m == (b0, pytest.approx(b0 * 0.965 / 0.951))
+    saved = MotionModel.load(record.saved_to)
+    assert saved.m_per_tick == pytest.approx(0.965 * m0)
+    np.testing.assert_allclose(saved.C, rc.model.C)
+    # the buffer now holds the speeds the new scale gives for the same counts
+    _, _, y = rc._buf[0]
+    np.testing.assert_allclose(y, [0.2 * 0.965, 0.1 * 0.951])
+    # a yaw ratio that is not precise leaves the wheel base as it was
+    rc2 = Recalibrator(model)
+    record2 = rc2.on_alarm(_scale_alarm(1.5, 0.965, 0.003, yaw=0.9, yaw_std=0.02))
+    assert record2.action == "adopted" and record2.wheel_base_m == (b0, b0)
+
+
+def test_imprecise_scale_alarm_waits_for_the_running_estimate(model):
+    asked = []
+    rc = Recalibrator(model, request_rotation=asked.append, max_scale_std=0.004,
+                      scale_settle_s=30.0)
+    assert rc.update_scale(1.0, 0.96, 0.001) is None                 # nothing waits
+    first = rc.on_alarm(_scale_alarm(20.0, 1.01, 0.048))               # raised in a turn
+    assert first.action == "waiting" and rc.scale_waiting and rc.model is model
+    assert rc.update_scale(25.0, 0.955, 0.009) is None                 # still too wide
+    record = rc.update_scale(32.0, 0.962, 0.0039, 0.955, 0.0030)
+    assert record.action == "adopted" and record.t_s == 32.0 and record.alarm is first.alarm
+    assert record.m_per_tick[1] == pytest.approx(0.962 * model.m_per_tick)
+    assert not rc.scale_waiting and asked == []
+    assert [r.action for r in rc.history] == ["waiting", "adopted"]
+
+
+def test_scale_that_does_not_settle_asks_for_a_rotation(model):
+    asked = []
+    rc = Recalibrator(model, request_rotation=asked.append, scale_settle_s=10.0)
+    event = _scale_alarm(20.0, 0.97, 0.02)
+    rc.on_alarm(event)
+    assert rc.update_scale(29.0, 0.97, 0.01) is None
+    record = rc.update_scale(30.0, 0.97, 0.01)
+    assert record.action == "rotation_requested" and asked == [event] and rc.model is model
+    # the wait also ends in add() (no estimate fed), and without a callback the old scale stays
+    rc2 = Recalibrator(model, scale_settle_s=10.0)
+    rc2.on_alarm(event)
+    rc2.add(25.0, np.zeros(2), np.zeros(2))
+    assert rc2.scale_waiting
+    rc2.add(30.5, np.zeros(2), np.zeros(2))
+    assert not rc2.scale_waiting and rc2.history[-1].action == "kept_old"
+    assert "no request_rotation" in rc2.history[-1].reason
+    # scale_settle_s = 0: an imprecise alarm asks at once
+    rc3 = Recalibrator(model, request_rotation=asked.append, scale_settle_s=0.0)
+    assert rc3.on_alarm(event).action == "rotation_requested" and len(asked) == 2
+
+
+def test_scale_options_are_checked(model):
+    with pytest.raises(FilterOptionError, match="max_scale_std"):
+        Recalibrator(model, max_scale_std=0.0)
+    with pytest.raises(FilterOptionError, match="scale_reference"):
+        Recalibrator(model, scale_reference=(0.0, 0.235))
+
+
+def test_carpet_scale_from_landmarks_is_close_to_the_truth(model):
+    # benchmark (python -m benchmarks scale_recalibration, 20 runs; 40 fresh runs in
+    # docs/monitor.md): all adopted, |error| median 0.58%, max 1.17% (fresh: 0.39%, 1.43%),
+    # median wait 17.6 s from the onset. Here 8 runs.
+    from benchmarks.bench_scale_recalibration import scale_recalibration_runs
+
+    res = scale_recalibration_runs(model, n=8)
+    assert res.adopted == 8 and res.adopted_before_onset == 0, res.actions
+    err = np.abs(res.m_error_pct)
+    assert np.median(err) <= 1.0 and err.max() <= 2.0, res.m_error_pct
+    # without the landmark scale the error would be the carpet's 3.5% (true ratio 0.965);
+    # the wait runs from the onset: the alarm (<= 10 s) plus at most scale_settle_s (30 s)
+    assert np.all(res.wait_s <= 40.0) and np.all(np.abs(res.b_error_pct) <= 3.0)

@@ -83,6 +83,22 @@ def test_monitor_sim_prints_the_stuck_encoder_alarm_and_records_a_log(model_file
     assert len(rows) == 1 + round(12 / 0.015)            # header + one pose per frame
 
 
+def test_monitor_sim_runs_the_dynamics_and_scale_tests_after_phase_one(model_file, capsys):
+    assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "40",
+                 "--fault", "carpet", "--fault-at", "15", "--nominal-drives", "8"]) == 0
+    out = capsys.readouterr().out
+    assert "phase I: fitting the dynamics null and the encoder gate on 8 nominal drives" in out
+    assert "dynamics lag and covariance CUSUMs" in out and "scale test on 4 landmarks" in out
+    gate = float(out.split("encoder gate NIS ")[1].split()[0])
+    assert gate > 55.3                                  # set from the nominal drives
+    scale = [line for line in out.splitlines()
+             if line.startswith("ALARM") and "scale_changed" in line]
+    assert scale and "travel x" in scale[0], out
+    t_first = float(scale[0].split("t=")[1].split()[0])
+    assert 15.0 < t_first < 30.0, scale[0]
+    assert "first scale_changed alarm at" in out
+
+
 def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
     from drivers.virtual_roomba import VirtualRoomba
 
@@ -93,6 +109,21 @@ def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
     out = capsys.readouterr().out
     assert f"driving the robot on {vr.device_path}" in out and "monitored" in out
     assert driven > 200                      # 4 s at 15 ms, robot time
+
+
+def test_monitor_port_fits_phase_one_on_recorded_nominal_drives(model_file, tmp_path, capsys):
+    from drivers.virtual_roomba import VirtualRoomba
+
+    log = tmp_path / "nominal.npz"                # a nominal drive, recorded as on a robot
+    assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "60",
+                 "--nominal-drives", "0", "--record", str(log), "--seed", "3"]) == 0
+    assert "dynamics tests off" in capsys.readouterr().out
+    with VirtualRoomba(seed=5, speed=10.0) as vr:
+        assert main(["monitor", "--port", vr.device_path, "--clock-rate", "10",
+                     "--model", model_file, "--duration", "4", "--nominal", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "phase I: fitting the dynamics null and the encoder gate on 1 nominal drive" in out
+    assert "null from 1 nominal drives, 1.0 min" in out and "monitored" in out
 
 
 def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path, tmp_path,
@@ -116,6 +147,7 @@ def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path
     (["monitor", "--port", "/dev/nope"], "needs --model FILE"),
     (["monitor", "--port", "/dev/does-not-exist", "--model", "{model}"], "/dev/does-not-exist"),
     (["monitor", "--port", "/dev/nope", "--fault", "spikes"], "needs --sim"),
+    (["monitor", "--sim", "create2", "--nominal", "{log}"], "needs --port"),
 ])
 def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model_file, tmp_path,
                                                             capsys):
