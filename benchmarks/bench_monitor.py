@@ -218,7 +218,8 @@ def nominal_false_alarms(model: MotionModel, null: DynamicsNull, *, hours: float
     return alarms, seconds / 3600.0
 
 
-def _pct(delays: np.ndarray, q: float) -> float:
+def delay_quantile(delays: np.ndarray, q: float) -> float:
+    """Quantile ``q`` of the detection delays [s] of the detected runs (NaN if none)."""
     finite = delays[np.isfinite(delays)]
     return float(np.quantile(finite, q)) if finite.size else float("nan")
 
@@ -232,7 +233,7 @@ def bench_monitor() -> list[Figure]:
     for label, (kind, params) in DYNAMICS_FAULTS.items():
         res = fault_runs(model, null, kind, params)
         n = len(res.delays_s)
-        med, p90 = _pct(res.delays_s, 0.5), _pct(res.delays_s, 0.9)
+        med, p90 = delay_quantile(res.delays_s, 0.5), delay_quantile(res.delays_s, 0.9)
         rows.append(f"| {label} | {n} | {res.detected} | {med:.2f} s | {p90:.2f} s | "
                     f"{res.detected_within(HORIZON_S)} | {np.median(res.first_start_s):.2f} s | "
                     f"{np.min(res.left_s):.1f} s |")

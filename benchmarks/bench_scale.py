@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchmarks.bench_monitor import RouteRecorder, calibrated_model
+from benchmarks.bench_monitor import RouteRecorder, calibrated_model, delay_quantile
 from benchmarks.harness import Figure, benchmark
 from drivers.sim_config import Fault, get_preset
 from fusion.scale_monitor import ScaleAlarm, ScaleMonitor
@@ -153,17 +153,12 @@ def nominal_false_alarms(m_per_tick: float, *, hours: float = NOMINAL_H, seed0: 
     return count, seconds / 3600.0
 
 
-def _pct(delays: np.ndarray, q: float) -> float:
-    finite = delays[np.isfinite(delays)]
-    return float(np.quantile(finite, q)) if finite.size else float("nan")
-
-
 @benchmark("scale")
 def bench_scale() -> list[Figure]:
     m_per_tick = calibrated_model().m_per_tick
     res = carpet_runs(m_per_tick)
     n = len(res.delays_s)
-    med, p90 = _pct(res.delays_s, 0.5), _pct(res.delays_s, 0.9)
+    med, p90 = delay_quantile(res.delays_s, 0.5), delay_quantile(res.delays_s, 0.9)
     count, hours = nominal_false_alarms(m_per_tick)
     count += res.false_before
     hours += res.hours_before
