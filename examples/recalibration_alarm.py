@@ -177,7 +177,7 @@ class MonitoredDrive(Odometry):
         t = ekf.t_s
         v, w = ekf.speeds
         half_b = 0.5 * m.wheel_base_m
-        mon.update_counts(t, d, np.array([v - w * half_b, v + w * half_b]))
+        mon.update_counts(t, d, np.array([v - w * half_b, v + w * half_b]), cmd_m_s=cmd)
         record = ekf.update_encoders(ticks)
         mon.update_record(record)
         mon.update_commands(t, cmd, d)
@@ -234,7 +234,7 @@ class Result:
     fits: dict[str, float]
     validation: dict[str, np.ndarray]
     route_s: float
-    dynamics_tests: list[str]
+    dynamics_tests: dict[tuple[float, float], str]    # (statistic, onset_s) -> sub-test
     thresholds: dict[str, float]
 
 
@@ -319,7 +319,8 @@ def run(*, seed: int = 0, spikes_at_s: float = 8.0, carpet_at_s: float = 18.0,
                     # the original model's predicted counts, in the new scale (for the plot)
                     "s": output_scaling(model, m_per_tick=in_use.m_per_tick,
                                         wheel_base_m=in_use.wheel_base_m)},
-        route_s=route_s, dynamics_tests=[a.test for a in app.dynamics.alarms],
+        route_s=route_s,
+        dynamics_tests={(a.statistic, a.onset_s): a.test for a in app.dynamics.alarms},
         thresholds={"gate": app.monitor.thresholds().gate, "lag": app.dynamics.lag_threshold,
                     "covariance": app.dynamics.covariance_threshold,
                     "scale": app.scale.threshold})
@@ -336,11 +337,10 @@ def alarm_rows(result: Result) -> list[str]:
     rows = ["| t [s] | kind | test | statistic / threshold | onset [s] | true onset [s] "
             "| delay [s] |",
             "| --- | --- | --- | --- | --- | --- | --- |"]
-    tests = iter(result.dynamics_tests)
     for e in result.events:
         test = e.test
-        if e.test == "integrated":                       # the dynamics sub-test
-            test = f"integrated ({next(tests, '?')})"
+        if e.test == "integrated":     # the dynamics sub-test (held-off alarms are not events)
+            test = f"integrated ({result.dynamics_tests.get((e.statistic, e.onset_s), '?')})"
         fault = FAULT_OF_KIND.get(e.kind, "")
         true_onset = result.onsets.get(fault, float("nan"))
         end = true_onset + 2.0 if fault == "encoder_spikes" else float("inf")

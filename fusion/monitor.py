@@ -23,8 +23,10 @@ Tests on the residual stream, per stream ("encoders" or "landmark"):
    residuals, reference ``k``, threshold ``h``; the onset estimate is the
    start of the block at which the tripping statistic last left zero.
 6. **Stuck encoder** (:meth:`ResidualMonitor.update_counts`): a wheel's count
-   stays flat while the predicted wheel travel adds up to ``stuck_ticks``
-   ticks over at least ``stuck_periods`` periods.
+   stays flat while the wheel travel that the command and the model's
+   prediction agree on (the smaller speed when both point the same way; the
+   prediction alone without commands) adds up to ``stuck_ticks`` ticks over
+   at least ``stuck_periods`` periods.
 
 Tests 4 and 5 raise ``"dynamics_changed"`` on the encoder stream and
 ``"scale_changed"`` on the landmark stream. Optional replacements:
@@ -193,7 +195,8 @@ class MonitorOptions:
     landmark_rate_hz : float
         Rate of landmark innovations, for the landmark stream's share.
     stuck_ticks : float
-        Predicted wheel travel [ticks] with a flat count that makes an encoder stuck.
+        Wheel travel [ticks] with a flat count that makes an encoder stuck (the
+        travel the command and the prediction agree on, :meth:`ResidualMonitor.update_counts`).
     stuck_periods : int
         Least number of flat periods before a stuck alarm.
     refractory_s : float
@@ -614,8 +617,9 @@ class ResidualMonitor:
         return self._emit(raised)
 
     def update_counts(self, t_s: float, tick_deltas: np.ndarray,
-                      predicted_wheel_m_s: np.ndarray) -> list[AlarmEvent]:
-        """Stuck-encoder check on one period's count changes and the predicted wheel speeds.
+                      predicted_wheel_m_s: np.ndarray, *,
+                      cmd_m_s: np.ndarray | None = None) -> list[AlarmEvent]:
+        """Stuck-encoder check on one period's count changes, predicted speeds and commands.
 
         Parameters
         ----------
@@ -626,13 +630,32 @@ class ResidualMonitor:
         predicted_wheel_m_s : array_like, shape (2,)
             Model-predicted (left, right) wheel speeds of the period [m/s]
             (``v -/+ w b / 2`` from the predicted body speeds).
+        cmd_m_s : array_like, shape (2,), optional
+            (left, right) wheel commands in effect over the period [m/s]. With
+            them a period's evidence is the travel that the command and the
+            prediction agree on (Notes); without them, the predicted travel
+            alone, which raises false alarms where a stop command meets a
+            model that lags the real stop (``docs/monitor.md``).
 
         Returns
         -------
         list of AlarmEvent
             A ``"stuck_encoder"`` alarm when a wheel's count stayed flat while
-            the predicted travel reached ``stuck_ticks`` over at least
+            the evidence reached ``stuck_ticks`` over at least
             ``stuck_periods`` periods.
+
+        Notes
+        -----
+        A wheel servo without overshoot moves its speed monotonically from
+        the current speed towards the command, so the wheel surely turns only
+        while the command and the model's prediction point the same way, and
+        at least at the smaller of the two speeds: the command bounds a
+        slowing wheel from below, the prediction a speeding-up one. The
+        period's evidence is therefore
+        ``min(|v_pred|, |v_cmd|) dt / m_per_tick`` ticks when
+        ``sign(v_pred) = sign(v_cmd)``, else 0 (a wheel commanded to stop, or
+        to reverse, may honestly keep a flat count whatever a lagging linear
+        model says).
         """
         if self.m_per_tick is None:
             raise FilterOptionError("update_counts needs the encoder scale: pass m_per_tick=...")
@@ -642,9 +665,14 @@ class ResidualMonitor:
         if d.shape != (2,) or v.shape != (2,):
             raise MeasurementShapeError(f"expected tick deltas (2,) and wheel speeds (2,), got "
                                         f"{d.shape} and {v.shape}")
-        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(v))):
+        c = v if cmd_m_s is None else np.asarray(cmd_m_s, dtype=float)
+        if c.shape != (2,):
+            raise MeasurementShapeError(f"expected wheel commands (2,), got {c.shape}")
+        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(v)) and np.all(np.isfinite(c))):
             self.counts["missing"] += 1
             return []
+        # the speed the command and the prediction agree on (Notes); v itself without commands
+        v = np.where(np.sign(v) == np.sign(c), np.minimum(np.abs(v), np.abs(c)), 0.0)
         opt = self.options
         predicted_ticks = np.abs(v) * opt.dt_s / self.m_per_tick
         # evidence only while the wheel is predicted to turn (half a tick a period or more):

@@ -230,15 +230,17 @@ def monitor_frames(model: MotionModel,
             ekf = ModelEKF(model, initial_ticks=ticks, history=0)
             last_ticks = ticks
             continue
-        ekf.predict(np.asarray(frame.cmd_m_s, float))
+        cmd = np.asarray(frame.cmd_m_s, float)
+        ekf.predict(cmd)
         if not bool(np.all(frame.valid)):
             continue
         v, w = ekf.speeds                        # predicted speeds of the period
         deltas = tick_deltas(np.stack([last_ticks, ticks]), axis=0)[0]
-        mon.update_counts(ekf.t_s, deltas, np.array([v - w * half_b, v + w * half_b]))
+        mon.update_counts(ekf.t_s, deltas, np.array([v - w * half_b, v + w * half_b]),
+                          cmd_m_s=cmd)
         mon.update_record(ekf.update_encoders(ticks))
         if dynamics is not None:
-            mon.update_commands(ekf.t_s, np.asarray(frame.cmd_m_s, float), deltas)
+            mon.update_commands(ekf.t_s, cmd, deltas)
         if scale is not None:
             mon.update_landmarks(ekf.t_s, deltas, seen)
         last_ticks = ticks
@@ -263,8 +265,9 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     else:
         lines.append(f"tests: encoder gate NIS {gate:.0f} (nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
-                     f"dynamics lag and covariance CUSUMs (thresholds "
-                     f"{mon.dynamics.lag_threshold:.2f}, {mon.dynamics.covariance_threshold:.1f};"
+                     f"dynamics lag and covariance CUSUMs and start test (thresholds "
+                     f"{mon.dynamics.lag_threshold:.2f}, {mon.dynamics.covariance_threshold:.1f}"
+                     f", start {mon.dynamics.start_threshold:.2f};"
                      f" null from {nominal.n_drives} nominal drives, "
                      f"{nominal.duration_s / 60.0:.1f} min)")
     if landmarks is not None:

@@ -180,6 +180,52 @@ def test_stuck_encoder_check():
     assert event.t_s == pytest.approx(102 * DT)          # 3 periods of 6.7 predicted ticks
 
 
+def _stop_with_a_lagging_model(mon, *, with_commands):
+    """Drive at 0.2 m/s, then a stop command: the wheels stop at once (flat counts) while
+    the model's predicted speed decays over several periods."""
+    for i in range(50):
+        mon.update_counts(DT * i, np.array([7.0, 7.0]), np.array([0.2, 0.2]),
+                          **({"cmd_m_s": np.array([0.2, 0.2])} if with_commands else {}))
+    for j, v in enumerate(0.2 * 0.75 ** np.arange(1, 20)):
+        mon.update_counts(DT * (50 + j), np.zeros(2), np.array([v, v]),
+                          **({"cmd_m_s": np.zeros(2)} if with_commands else {}))
+
+
+def test_stuck_check_stays_quiet_at_a_commanded_stop():
+    mpt = 4.45e-4
+    # without commands the predicted travel alone is evidence: a false alarm at the stop
+    mon = ResidualMonitor(MonitorOptions(dt_s=DT), m_per_tick=mpt)
+    _stop_with_a_lagging_model(mon, with_commands=False)
+    assert [e.kind for e in mon.events] == ["stuck_encoder"]
+    # with them, a wheel commanded to stop may keep a flat count
+    mon = ResidualMonitor(MonitorOptions(dt_s=DT), m_per_tick=mpt)
+    _stop_with_a_lagging_model(mon, with_commands=True)
+    assert mon.events == []
+
+
+def test_stuck_check_with_commands_uses_the_travel_both_agree_on():
+    mpt = 4.45e-4
+    mon = ResidualMonitor(MonitorOptions(dt_s=DT), m_per_tick=mpt)
+    # commanded to reverse while the model still predicts forward: no evidence
+    for i in range(10):
+        mon.update_counts(DT * i, np.array([0.0, 7.0]), np.array([0.2, 0.2]),
+                          cmd_m_s=np.array([-0.2, 0.2]))
+    assert mon.events == []
+    # slowing down (command 0.1 m/s below the predicted 0.2): 3.4 ticks a period, so the
+    # 6-tick threshold is crossed at the second flat period, the alarm at the third
+    for i in range(10, 20):
+        mon.update_counts(DT * i, np.array([0.0, 7.0]), np.array([0.2, 0.2]),
+                          cmd_m_s=np.array([0.1, 0.2]))
+    event = mon.events[0]
+    assert (event.kind, event.channel) == ("stuck_encoder", 0)
+    assert event.t_s == pytest.approx(12 * DT)
+    assert event.statistic == pytest.approx(3 * 0.1 * DT / mpt)
+    with pytest.raises(ValueError, match="wheel commands"):
+        mon.update_counts(1.0, np.zeros(2), np.zeros(2), cmd_m_s=np.zeros(3))
+    mon.update_counts(1.0, np.zeros(2), np.zeros(2), cmd_m_s=np.array([np.nan, 0.0]))
+    assert mon.counts["missing"] == 1
+
+
 # -- bad input ---------------------------------------------------------------------------------
 def test_nan_residuals_are_counted_as_missing():
     mon = ResidualMonitor()
@@ -241,7 +287,8 @@ def _monitor_run(model, log, start_pose):
         ekf.predict(log.cmd_m_s[k])
         v, w = ekf.speeds                     # predicted speeds of the period
         t = ekf.t_s
-        mon.update_counts(t, deltas[k - 1], np.array([v - w * half_b, v + w * half_b]))
+        mon.update_counts(t, deltas[k - 1], np.array([v - w * half_b, v + w * half_b]),
+                          cmd_m_s=log.cmd_m_s[k])
         mon.update_record(ekf.update_encoders(log.ticks[k]))
     return mon
 
