@@ -33,7 +33,8 @@ from drivers.sim_config import Room, get_preset
 from fusion import ekf_functions as ef
 from fusion.ekf import ModelEKF
 from fusion.landmarks import LandmarkMap
-from lti_motion.calibration import CalibrationPlan, calibrate
+from lti_motion.calibration import CalibrationPlan
+from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.model import MotionModel
 
 N_STEPS = 2000
@@ -44,14 +45,7 @@ ALPHAS = (0.01, 0.001, 0.001, 0.01)     # Thrun table 5.3 motion noise parameter
 def _model_and_drive() -> tuple[MotionModel, np.ndarray, np.ndarray, np.ndarray]:
     """The simulator-calibrated ARX model and a drive: commands, counts, encoder (v, w)."""
     p = get_preset("create2")
-    sim = Simulator(p, seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place((30.0, 30.0, 0.0))
-
-    cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
-                    before_stage=to_open_floor)
+    cal = calibrate_simulator(p, seed=1, plan=CalibrationPlan(seed=3))
     k = np.arange(N_STEPS + 1)
     cmd = np.stack([0.2 + 0.05 * np.sin(k / 80.0), 0.2 + 0.05 * np.cos(k / 80.0)], axis=1)
     log = Simulator(p, seed=2, room=Room.empty()).run(cmd)

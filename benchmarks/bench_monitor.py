@@ -67,11 +67,11 @@ from fusion.dynamics_start import (
 )
 from fusion.monitor import MonitorOptions, ResidualMonitor
 from fusion.recalibration import Recalibrator
-from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
-from lti_motion.experiments.route import Odometry, drive_route
+from lti_motion.experiments.route import RecordingOdometry, drive_route
+from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS
 
 NOMINAL_H = 10.0
 N_FAULT_RUNS = 20
@@ -86,45 +86,15 @@ DYNAMICS_FAULTS = {
 
 def calibrated_model(*, seed: int = 1) -> MotionModel:
     """The ARX model of ``examples/ekf_plugin.py`` (rotation, steps, 180 s excitation)."""
-    p = get_preset("create2")
-    sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place((30.0, 30.0, 0.0))
-
-    return calibrate(sim, wheel_base_m=p.wheel_base_m, floor="hard",
-                     plan=CalibrationPlan(seed=seed + 2, excitation_s=180.0),
-                     before_stage=to_open_floor).arx
-
-
-class RouteRecorder(Odometry):
-    """Encoder odometry that keeps what the robot reported: commands, counts, sightings."""
-
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        super().reset(n_robots, pose0)
-        self.cmd: list[np.ndarray] = []
-        self.ticks: list[np.ndarray] = []
-        self.sightings: list = []
-
-    def step(self, frame, cmd_m_s, observations=None):
-        self.cmd.append(np.array(cmd_m_s, float))
-        self.ticks.append(np.asarray(frame.ticks, np.int64))
-        self.sightings.append(observations)
-        return super().step(frame, cmd_m_s, observations)
-
-    def tick_deltas(self) -> np.ndarray:
-        """Count changes of periods 1..n, unwrapped, ``(N, n, 2)`` [ticks]."""
-        ticks = np.stack(self.ticks, axis=1)
-        half = TICK_MODULUS // 2
-        return ((np.diff(ticks, axis=1) + half) % TICK_MODULUS - half).astype(float)
+    return calibrate_simulator("create2", seed=seed,
+                               plan=CalibrationPlan(seed=seed + 2, excitation_s=180.0)).arx
 
 
 def route_drives(model: MotionModel, seeds: Sequence[int], faults: Sequence[Fault] = ()
                  ) -> tuple[np.ndarray, np.ndarray]:
     """Drive the route once per seed; commands and count changes of periods 1.., ``(N, n, 2)``."""
     p = get_preset("create2")
-    rec = RouteRecorder(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
+    rec = RecordingOdometry(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
     drive_route(p, rec, seeds=list(seeds), faults=faults)
     return np.stack(rec.cmd, axis=1)[:, 1:], rec.tick_deltas()
 

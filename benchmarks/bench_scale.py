@@ -30,11 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from benchmarks.bench_monitor import RouteRecorder, calibrated_model, delay_quantile
+from benchmarks.bench_monitor import calibrated_model, delay_quantile
 from benchmarks.harness import Figure, benchmark
 from drivers.sim_config import Fault, get_preset
 from fusion.scale_monitor import ScaleAlarm, ScaleMonitor
-from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, drive_route
+from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, RecordingOdometry, drive_route
 
 NOMINAL_H = 10.0
 N_FAULT_RUNS = 20
@@ -60,7 +60,7 @@ def route_drives(m_per_tick: float, seeds: Sequence[int], faults: Sequence[Fault
                  ) -> Drives:
     """Drive the route once per seed with the landmark sensor on."""
     p = get_preset("create2")
-    rec = RouteRecorder(m_per_tick=m_per_tick, wheel_base_m=p.wheel_base_m)
+    rec = RecordingOdometry(m_per_tick=m_per_tick, wheel_base_m=p.wheel_base_m)
     res = drive_route(p, rec, seeds=list(seeds), faults=faults, landmarks=ROUTE_LANDMARKS)
     deltas = rec.tick_deltas()
     moving = np.any(np.stack(rec.cmd, axis=1) != 0.0, axis=2)

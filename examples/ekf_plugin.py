@@ -36,10 +36,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room, get_preset
+from drivers.sim_config import Fault, Room
 from fusion.ekf import FilterStats, ModelEKF
 from fusion.landmarks import LandmarkMap, Observations, synthetic_observations
-from lti_motion.calibration import CalibrationPlan, calibrate
+from lti_motion.calibration import CalibrationPlan
+from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.frames import FrameLog
 from lti_motion.kinematics import integrate_poses, wrap_angle
 from lti_motion.model import MotionModel
@@ -63,23 +64,13 @@ __all__ = [
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 #: Start of the route: middle of the square's bottom edge, heading along it.
 START_POSE = (2.5, 1.3, 0.0)
-OPEN_FLOOR = (30.0, 30.0, 0.0)
 
 
 def calibrate_model(*, preset: str = "create2", seed: int = 1, excitation_s: float = 180.0
                     ) -> MotionModel:
     """Calibrate the ARX model on the simulator (``tests/lti_motion/test_calibration_sim.py``)."""
-    p = get_preset(preset)
-    sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place(OPEN_FLOOR)
-
-    cal = calibrate(sim, wheel_base_m=p.wheel_base_m, floor="hard",
-                    plan=CalibrationPlan(seed=seed + 2, excitation_s=excitation_s),
-                    before_stage=to_open_floor)
-    return cal.arx
+    return calibrate_simulator(preset, seed=seed, plan=CalibrationPlan(
+        seed=seed + 2, excitation_s=excitation_s)).arx
 
 
 def rounded_square(*, center: tuple[float, float] = (2.5, 2.5), half_side_m: float = 1.2,

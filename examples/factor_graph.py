@@ -30,7 +30,8 @@ from fusion.landmarks import LandmarkMap
 from fusion.preintegration import compose_motions, fit_calibration, preintegrate_model
 from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from fusion.transient_noise import TransientSpeedCovariance, transient_speed_covariance_from_data
-from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
+from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
 from lti_motion.model import MotionModel
@@ -238,14 +239,7 @@ def calibrated_model_and_noise(*, seed: int = 1
     (:func:`fusion.transient_noise.transient_speed_covariance_from_data`: Newey-West, 5 s
     bandwidth, 0.15 s window): the covariance to preintegrate with, no hand factor."""
     p = get_preset("create2")
-    sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place((30.0, 30.0, 0.0))
-
-    cal = calibrate(sim, wheel_base_m=p.wheel_base_m, plan=CalibrationPlan(seed=3),
-                    floor="hard", before_stage=to_open_floor)
+    cal = calibrate_simulator(p, seed=seed, plan=CalibrationPlan(seed=3))
     runs = [speeds_from_log(cal.logs[name], m_per_tick=cal.m_per_tick,
                             wheel_base_m=p.wheel_base_m)
             for name in ("rotation", "steps", "excitation")]

@@ -57,13 +57,20 @@ from fusion.model_rescale import output_scaling
 from fusion.monitor import AlarmEvent, ResidualMonitor
 from fusion.recalibration import RecalibrationRecord, Recalibrator
 from fusion.scale_monitor import ScaleMonitor
-from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
 from lti_motion.experiments.monitor_setup import NominalFit, fit_nominal
-from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, Odometry, drive_route
+from lti_motion.experiments.route import (
+    ROUTE_LANDMARKS,
+    ROUTE_M,
+    Odometry,
+    RecordingOdometry,
+    drive_route,
+)
+from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS
+from lti_motion.odometry import tick_deltas
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",
@@ -74,35 +81,8 @@ KIND_COLOURS = {"glitch_burst": "tab:red", "stuck_encoder": "tab:purple",
 
 def calibrated_model(*, seed: int = 1, excitation_s: float = 180.0) -> MotionModel:
     """An ARX calibration of the simulated Create 2 (rotation in clutter, then open floor)."""
-    p = get_preset("create2")
-    sim = Simulator(p, seed=seed, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
-
-    def to_open_floor(stage: str) -> None:
-        if stage != "rotation":
-            sim.place((30.0, 30.0, 0.0))
-
-    return calibrate(sim, wheel_base_m=p.wheel_base_m, floor="hard",
-                     plan=CalibrationPlan(seed=seed + 2, excitation_s=excitation_s),
-                     before_stage=to_open_floor).arx
-
-
-class _Recorder(Odometry):
-    """Encoder odometry that keeps the commands and counts (for Phase I)."""
-
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        super().reset(n_robots, pose0)
-        self.cmd: list[np.ndarray] = []
-        self.ticks: list[np.ndarray] = []
-
-    def step(self, frame, cmd_m_s, observations=None):
-        self.cmd.append(np.array(cmd_m_s, float))
-        self.ticks.append(np.asarray(frame.ticks, np.int64))
-        return super().step(frame, cmd_m_s, observations)
-
-
-def _deltas(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
-    half = TICK_MODULUS // 2
-    return ((np.asarray(now, np.int64) - prev + half) % TICK_MODULUS - half).astype(float)
+    return calibrate_simulator("create2", seed=seed,
+                               plan=CalibrationPlan(seed=seed + 2, excitation_s=excitation_s)).arx
 
 
 def phase_one(model: MotionModel, *, runs: int, seed0: int = 1000) -> NominalFit:
@@ -113,7 +93,7 @@ def phase_one(model: MotionModel, *, runs: int, seed0: int = 1000) -> NominalFit
     (``benchmarks/bench_monitor.py``, whose false-alarm rate it measured).
     """
     p = get_preset("create2")
-    rec = _Recorder(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
+    rec = RecordingOdometry(m_per_tick=model.m_per_tick, wheel_base_m=p.wheel_base_m)
     drive_route(p, rec, seeds=list(range(seed0, seed0 + runs)))
     cmd, ticks = np.stack(rec.cmd, axis=1), np.stack(rec.ticks, axis=1)
     return fit_nominal(model, [(cmd[i, 1:], ticks[i]) for i in range(runs)], skip_s=3.0)
@@ -170,7 +150,7 @@ class MonitoredDrive(Odometry):
             self._prev = ticks
             return pose
         cmd = np.asarray(cmd_m_s, float)[0]
-        d = _deltas(self._prev, ticks)
+        d = tick_deltas(np.stack([self._prev, ticks])).astype(float)[0]
         self._prev = ticks
         ekf, mon, m = self.ekf, self.monitor, self.model
         ekf.predict(cmd)

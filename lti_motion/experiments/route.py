@@ -28,7 +28,7 @@ from fusion.landmarks import LandmarkMap, LandmarkNoise, range_bearing
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS
+from lti_motion.odometry import tick_deltas
 
 __all__ = [
     "ROUTE_LANDMARKS",
@@ -37,6 +37,7 @@ __all__ = [
     "EkfEstimator",
     "Estimator",
     "Odometry",
+    "RecordingOdometry",
     "RouteResult",
     "SensorLess",
     "drive_route",
@@ -68,8 +69,7 @@ class Estimator(Protocol):
 
 
 def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
-    half = TICK_MODULUS // 2
-    return (np.asarray(now, np.int64) - prev + half) % TICK_MODULUS - half
+    return tick_deltas(np.stack([np.asarray(prev, np.int64), np.asarray(now, np.int64)]))[0]
 
 
 class Odometry:
@@ -103,6 +103,31 @@ class Odometry:
         w = (d[:, 1] - d[:, 0]) / self.wheel_base_m
         self.pose = pose_step(self.pose, v, w, 1.0)
         return self.pose
+
+
+class RecordingOdometry(Odometry):
+    """Encoder odometry that keeps what the robot reported: commands, counts, sightings.
+
+    For experiments that replay a route's drives through other code (monitors, Phase I):
+    after :func:`drive_route`, ``cmd``, ``ticks`` and ``sightings`` hold one entry per
+    period, and :meth:`tick_deltas` the unwrapped count changes.
+    """
+
+    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
+        super().reset(n_robots, pose0)
+        self.cmd: list[np.ndarray] = []
+        self.ticks: list[np.ndarray] = []
+        self.sightings: list = []
+
+    def step(self, frame, cmd_m_s, observations=None):
+        self.cmd.append(np.array(cmd_m_s, float))
+        self.ticks.append(np.asarray(frame.ticks, np.int64))
+        self.sightings.append(observations)
+        return super().step(frame, cmd_m_s, observations)
+
+    def tick_deltas(self) -> np.ndarray:
+        """Count changes of periods 1..n, unwrapped, ``(N, n, 2)`` [ticks]."""
+        return tick_deltas(np.stack(self.ticks, axis=1), axis=1).astype(float)
 
 
 class SensorLess:
