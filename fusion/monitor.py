@@ -573,15 +573,20 @@ class ResidualMonitor:
         t = self._check_time(t_s)
         hits = self.dynamics.update(t, cmd_m_s, tick_deltas)
         st = self._streams["encoders"]
-        sensor_t = max(self._stuck_alarm_t, st.last_alarm.get("glitch_burst", -math.inf))
         raised = []
         for _, g, h, onset in hits:
-            if t - sensor_t < self.options.refractory_s or not self._allowed(
-                    st, "dynamics_changed", t):
+            if self._sensor_alarm_recent(t) or not self._allowed(st, "dynamics_changed", t):
                 continue
             st.last_alarm["dynamics_changed"] = t
             raised.append(AlarmEvent(t, "dynamics_changed", "integrated", g, h, onset))
         return self._emit(raised)
+
+    def _sensor_alarm_recent(self, t: float) -> bool:
+        """A stuck-encoder or glitch-burst alarm within ``refractory_s`` before ``t``: it
+        explains residuals and odometry errors, so model alarms are held off."""
+        sensor_t = max(self._stuck_alarm_t,
+                       self._streams["encoders"].last_alarm.get("glitch_burst", -math.inf))
+        return t - sensor_t < self.options.refractory_s
 
     def update_landmarks(self, t_s: float, tick_deltas: np.ndarray,
                          sightings: Sequence[tuple[Hashable, np.ndarray]] = ()
@@ -609,11 +614,9 @@ class ResidualMonitor:
         t = self._check_time(t_s)
         hits = self.scale.update(t, np.asarray(tick_deltas, dtype=float).reshape(1, 2),
                                  [list(sightings)])
-        st = self._streams["encoders"]
-        sensor_t = max(self._stuck_alarm_t, st.last_alarm.get("glitch_burst", -math.inf))
         raised = [AlarmEvent(t, "scale_changed", "scale_glr", a.statistic, a.threshold,
                              a.onset_s, scale=a)
-                  for a in hits if t - sensor_t >= self.options.refractory_s]
+                  for a in hits if not self._sensor_alarm_recent(t)]
         return self._emit(raised)
 
     def update_counts(self, t_s: float, tick_deltas: np.ndarray,

@@ -329,18 +329,22 @@ def _ticks_for(model, rng, n):
     return u, counts.astype(np.int64)
 
 
+def _run_encoders(model, u, ticks):
+    """A ModelEKF through the commands and counts: the filter and its encoder records."""
+    ekf = ModelEKF(model, initial_ticks=ticks[0])
+    recs = []
+    for k in range(len(u)):
+        ekf.predict(u[k])
+        recs.append(ekf.update_encoders(ticks[k + 1] % 65536))
+    return ekf, recs
+
+
 def test_a_spike_is_rejected_counted_and_its_period_recovered_at_the_next_frame(model, rng):
     u, clean = _ticks_for(model, rng, 300)
     spiked = clean.copy()
     spiked[150, 1] += 4000                              # one frame of the right wheel
-    runs = {}
-    for name, ticks in (("clean", clean), ("spiked", spiked)):
-        ekf = ModelEKF(model, initial_ticks=ticks[0])
-        recs = []
-        for k in range(len(u)):
-            ekf.predict(u[k])
-            recs.append(ekf.update_encoders(ticks[k + 1] % 65536))
-        runs[name] = (ekf, recs)
+    runs = {name: _run_encoders(model, u, ticks)
+            for name, ticks in (("clean", clean), ("spiked", spiked))}
     ekf, recs = runs["spiked"]
     assert recs[149].reason == "gated" and recs[149].nis > 1e3
     assert recs[150].accepted                    # counts against the last fused frame: clean
@@ -354,14 +358,8 @@ def test_a_stuck_encoder_is_gated_and_the_filter_recovers_after_it(model, rng):
     stuck = clean.copy()
     stuck[200:260, 0] = clean[200, 0]                   # left counts freeze for 0.9 s ...
     stuck[260:, 0] -= clean[259, 0] - clean[200, 0]     # ... and resume without the lost ticks
-    runs = {}
-    for name, ticks in (("clean", clean), ("stuck", stuck)):
-        ekf = ModelEKF(model, initial_ticks=ticks[0])
-        recs = []
-        for k in range(len(u)):
-            ekf.predict(u[k])
-            recs.append(ekf.update_encoders(ticks[k + 1] % 65536))
-        runs[name] = (ekf, recs)
+    runs = {name: _run_encoders(model, u, ticks)
+            for name, ticks in (("clean", clean), ("stuck", stuck))}
     ekf, recs = runs["stuck"]
     assert sum(r.accepted for r in recs[205:258]) <= 2, "a frozen wheel's readings are gated"
     assert sum(r.accepted for r in recs[300:]) >= 295, "and fused again once it turns"
