@@ -1,21 +1,21 @@
 """Benchmark ``aruco``: marker detection plus range-bearing and covariance, on one core.
 
-Input: 24 seeded 640 x 480 images from :class:`fusion.camera.SyntheticCamera`
+Input: 24 seeded 640 x 480 images from :class:`fusion.landmarks.SyntheticCamera`
 (fx = fy = 500 px, mounted 0.1 m forward and 0.2 m up), each with three 15 cm
 ``DICT_4X4_50`` markers 1-3 m away, up to 25 degrees off the heading and up
 to 50 degrees oblique. OpenCV runs on one thread (``cv2.setNumThreads(1)``,
 restored afterwards).
 
-- ``aruco.images_per_s``: :meth:`fusion.aruco.MarkerDetector.detect` over the
+- ``aruco.images_per_s``: :meth:`fusion.landmarks.MarkerDetector.detect` over the
   images (input checks, ``detectMarkers`` with sub-pixel refinement, then per
   marker the edge-bias correction, ``solvePnP`` IPPE_SQUARE, LM refinement,
   the covariance and the robot-frame range and bearing). Target 100 images/s.
   Baseline in the same process: ``cv2.aruco.ArucoDetector.detectMarkers``
   alone with the same parameters, so the ratio is what the pose and
   covariance cost.
-- ``aruco.observation_us``: :func:`fusion.aruco.observation_from_corners` on
+- ``aruco.observation_us``: :func:`fusion.landmarks.aruco.observation_from_corners` on
   one marker's detected corners (no target).
-- ``aruco.render_ms``: one :meth:`fusion.camera.SyntheticCamera.render` of a
+- ``aruco.render_ms``: one :meth:`fusion.landmarks.SyntheticCamera.render` of a
   three-marker scene, for simulator budgets (no target).
 """
 
@@ -27,9 +27,9 @@ import cv2
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from fusion.aruco import MarkerDetector, observation_from_corners
-from fusion.camera import CameraIntrinsics, CameraMount, SyntheticCamera
-from fusion.landmark_map import MarkerLandmark, MarkerMap
+from fusion.landmarks.aruco import MarkerDetector, observation_from_corners
+from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
+from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
 
 __all__ = ["bench_aruco", "make_scenes"]
 

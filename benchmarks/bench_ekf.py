@@ -13,7 +13,7 @@
 - ``ekf.steps_per_s``: the same loop as sensor periods per second (target 10,000).
 - ``ekf.landmark_update_us``: one range-bearing update (no target).
 - ``ekf.stock_plain_functions_us``: a stock filterpy EKF driven by
-  :mod:`fusion.ekf_functions` (predict and encoder update, no gate or record),
+  :mod:`fusion.ekf.functions` (predict and encoder update, no gate or record),
   for users who keep their own filter (no target).
 """
 
@@ -28,13 +28,13 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from benchmarks.harness import Figure, benchmark
-from drivers.sim import Simulator
-from drivers.sim_config import Room, get_preset
-from fusion import ekf_functions as ef
-from fusion.ekf import ModelEKF
-from fusion.landmarks import LandmarkMap
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Room, get_preset
+from drivers.sim.simulator import Simulator
+from fusion.ekf import functions as ef
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.landmark_map import LandmarkMap
 from lti_motion.calibration import CalibrationPlan
-from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.model import MotionModel
 
 N_STEPS = 2000

@@ -1,12 +1,12 @@
 """Factor-graph speed (factor-graph issue): preintegration, and iSAM2 with model factors.
 
-- ``graph.preintegrate_msamples_s``: :func:`fusion.preintegration.preintegrate`
+- ``graph.preintegrate_msamples_s``: :func:`fusion.graph.preintegrate`
   on one million speed samples in 0.5 s intervals (mean, covariance and
   calibration Jacobian); ``graph.preintegrate_model_msamples_s`` includes the
   model's sensor-less prediction of the speeds.
 - ``graph.isam2_model_s``: a 10,000-keyframe drive (0.5 s keyframes, 83 min of
   simulated driving) with landmark observations, through
-  :class:`fusion.smoother.IncrementalSmoother`, one iSAM2 update per keyframe,
+  :class:`fusion.graph.IncrementalSmoother`, one iSAM2 update per keyframe,
   plain model factors (native ``BetweenFactorPose2``). Baseline: the same
   graph built from encoder odometry (the encoder speeds integrated between
   keyframes, a distance-proportional diagonal covariance), same smoother,
@@ -14,9 +14,9 @@
 - ``graph.isam2_calibrated_s``: the same with the calibration-aware factors
   and a calibration variable (random walk) every 10 keyframes: each complete
   group of 10 intervals is one ``CustomFactor``
-  (:func:`fusion.factors.calibrated_motion_group_factor`), the newest, still
+  (:func:`fusion.graph.factors.calibrated_motion_group_factor`), the newest, still
   open group native between-factors at the current calibration estimate
-  until it completes (:mod:`fusion.graph_builder`).
+  until it completes (:mod:`fusion.graph.builder`).
 
 One repeat of each iSAM2 variant, after a warm-up on 300 keyframes; the
 whole benchmark takes under a minute.
@@ -31,10 +31,10 @@ from collections.abc import Callable
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from drivers.sim_config import get_preset
-from fusion.factors import RangeBearing, observe_landmarks
-from fusion.preintegration import Preintegrated, preintegrate, preintegrate_model
-from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from drivers.sim.config import get_preset
+from fusion.graph.factors import RangeBearing, observe_landmarks
+from fusion.graph.preintegration import Preintegrated, preintegrate, preintegrate_model
+from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from lti_motion.calibration import speeds_from_log
 from lti_motion.kinematics import integrate_poses
 

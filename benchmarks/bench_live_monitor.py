@@ -2,9 +2,9 @@
 
 The model the command fits without ``--model`` (``calibrate_simulator``, seed
 0, 60 s of excitation). Phase I as the command's: 20 nominal drives of the
-monitor route (:func:`~lti_motion.experiments.monitor_setup.monitor_route`),
+monitor route (:func:`~lti_motion.app.monitor_setup.monitor_route`),
 60 s each, seeds 1000-1019. Each drive then goes through
-:func:`~lti_motion.experiments.live_monitor.monitor_frames` with the dynamics
+:func:`~lti_motion.app.monitor.monitor_frames` with the dynamics
 tests and the simulated landmark sensor, as the command runs it.
 
 - ``live_monitor.false_alarms_per_h``: nominal drives of 60 s (seeds
@@ -32,19 +32,19 @@ from collections.abc import Sequence
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room
-from fusion.monitor import AlarmEvent
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.experiments.live_monitor import FAULTS, fault_for, monitor_frames
-from lti_motion.experiments.monitor_setup import (
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Fault, Room
+from drivers.sim.simulator import Simulator
+from fusion.monitoring.residual import AlarmEvent
+from lti_motion.app.monitor import FAULTS, fault_for, monitor_frames
+from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
     NominalFit,
     monitor_route,
     nominal_on_simulator,
     sightings,
 )
-from lti_motion.experiments.sim_calibration import calibrate_simulator
+from lti_motion.calibration import CalibrationPlan
 from lti_motion.frames import SensorFrame
 from lti_motion.model import MotionModel
 

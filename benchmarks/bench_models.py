@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from drivers.sim import Simulator
-from drivers.sim_config import Room, get_preset
+from drivers.sim.config import Room, get_preset
+from drivers.sim.simulator import Simulator
 from lti_motion.arx import RecursiveARX, arx_regression, estimate_arx
 from lti_motion.calibration import speeds_from_log
 from lti_motion.excitation import random_held_normal

@@ -1,12 +1,12 @@
 """Residual monitor (fault-detection issue): dynamics faults and false alarms on the route.
 
-The experiments issue's closed route (:func:`lti_motion.experiments.route.drive_route`:
+The experiments issue's closed route (:func:`lti_motion.app.route.drive_route`:
 stop, turn in place, drive at 0.25 m/s, slow down at each checkpoint), many
 robots in lock step, steering on encoder odometry; the monitor sees commands
 and encoder counts only (the route strips the simulator's truth).
 
 - One ARX calibration (``examples/ekf_plugin.py``'s, seed 1).
-- The null of :mod:`fusion.dynamics_monitor` fitted on 30 nominal runs
+- The null of :mod:`fusion.monitoring.dynamics` fitted on 30 nominal runs
   (seeds 1000-1029, about 30 minutes of driving).
 - ``monitor.false_alarms_per_h``: nominal runs (seeds 2000 onwards) until
   ``NOMINAL_H`` hours; target 1 an hour.
@@ -22,13 +22,13 @@ Run ``python -m benchmarks monitor``; the detection table is printed too.
 ``python -m benchmarks monitor_threshold`` (about 40 s): the start test's
 threshold from the per-run maxima of its CUSUM on 10.8 h of nominal route
 driving (seeds 5000-5649, a design set used for nothing else), for 0.1 false
-alarms an hour (:data:`fusion.dynamics_monitor.START_THRESHOLD` holds the value).
+alarms an hour (:data:`fusion.monitoring.dynamics.START_THRESHOLD` holds the value).
 
 ``python -m benchmarks recalibration`` (the recalibration that follows a
 dynamics alarm, about 40 s): per dynamics fault the same 20 route runs,
-each streamed through a :class:`~fusion.monitor.ResidualMonitor` whose own
+each streamed through a :class:`~fusion.monitoring.ResidualMonitor` whose own
 first ``dynamics_changed`` alarm after the onset goes to a
-:class:`~fusion.recalibration.Recalibrator` (fed the route's commands and
+:class:`~fusion.monitoring.Recalibrator` (fed the route's commands and
 encoder speeds). The route since the onset does not excite an ARX refit, so
 the policy waits and calls ``request_excitation``; the application answers
 with ``EXCITATION_S`` of the calibration's random excitation (fault in
@@ -52,25 +52,25 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room, get_preset
-from fusion.dynamics_monitor import (
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Fault, Room, get_preset
+from drivers.sim.simulator import Simulator
+from fusion.monitoring.dynamics import (
     DynamicsMonitor,
     DynamicsNull,
     fit_dynamics_null,
     integrated_residuals,
     start_scores,
 )
-from fusion.dynamics_start import (
+from fusion.monitoring.dynamics_start import (
     start_cusum_maxima,
     start_threshold_from_maxima,
 )
-from fusion.monitor import MonitorOptions, ResidualMonitor
-from fusion.recalibration import Recalibrator
+from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.residual import MonitorOptions, ResidualMonitor
+from lti_motion.app.route import RecordingOdometry, drive_route
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
-from lti_motion.experiments.route import RecordingOdometry, drive_route
-from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.model import MotionModel
 
 NOMINAL_H = 10.0

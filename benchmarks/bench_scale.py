@@ -1,9 +1,9 @@
 """Scale monitor (fault-detection issue): the floor changes to carpet; landmarks at 2 Hz see it.
 
-The experiments issue's closed route (:func:`lti_motion.experiments.route.drive_route`),
+The experiments issue's closed route (:func:`lti_motion.app.route.drive_route`),
 many robots in lock step, steering on encoder odometry, with the route's four
-landmarks (:data:`~lti_motion.experiments.route.ROUTE_LANDMARKS`) each seen at
-2 Hz (2% of range, 1 degree). The monitor (:class:`fusion.scale_monitor.ScaleMonitor`)
+landmarks (:data:`~lti_motion.app.route.ROUTE_LANDMARKS`) each seen at
+2 Hz (2% of range, 1 degree). The monitor (:class:`fusion.monitoring.ScaleMonitor`)
 sees encoder counts and landmark sightings only; the simulator's truth scores it.
 
 - The encoder scale of one calibration (``examples/ekf_plugin.py``'s, seed 1).
@@ -32,9 +32,9 @@ import numpy as np
 
 from benchmarks.bench_monitor import calibrated_model, delay_quantile
 from benchmarks.harness import Figure, benchmark
-from drivers.sim_config import Fault, get_preset
-from fusion.scale_monitor import ScaleAlarm, ScaleMonitor
-from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M, RecordingOdometry, drive_route
+from drivers.sim.config import Fault, get_preset
+from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
+from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M, RecordingOdometry, drive_route
 
 NOMINAL_H = 10.0
 N_FAULT_RUNS = 20

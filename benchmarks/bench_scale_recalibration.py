@@ -2,10 +2,10 @@
 
 The carpet runs of ``benchmarks/bench_scale.py`` (the route, landmarks at
 2 Hz, the floor turning to carpet at an onset uniform in 15-40 s), streamed
-through one batched :class:`~fusion.scale_monitor.ScaleMonitor`; each robot's
-alarms go to its own :class:`~fusion.recalibration.Recalibrator`, fed the
+through one batched :class:`~fusion.monitoring.ScaleMonitor`; each robot's
+alarms go to its own :class:`~fusion.monitoring.Recalibrator`, fed the
 monitor's running estimate every period while a scale alarm waits
-(:meth:`~fusion.recalibration.Recalibrator.update_scale`). The monitor and the
+(:meth:`~fusion.monitoring.Recalibrator.update_scale`). The monitor and the
 policy see counts and sightings only; the simulator's truth scores them:
 
 - the adopted encoder scale against the true carpet ground travel per tick,
@@ -33,11 +33,11 @@ import numpy as np
 from benchmarks.bench_monitor import calibrated_model
 from benchmarks.bench_scale import Drives, route_drives, true_ratio
 from benchmarks.harness import Figure, benchmark
-from drivers.sim_config import Fault, get_preset
-from fusion.monitor import AlarmEvent
-from fusion.recalibration import Recalibrator
-from fusion.scale_monitor import ScaleMonitor
-from lti_motion.experiments.route import ROUTE_LANDMARKS, ROUTE_M
+from drivers.sim.config import Fault, get_preset
+from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.residual import AlarmEvent
+from fusion.monitoring.scale import ScaleMonitor
+from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M
 from lti_motion.model import MotionModel
 
 

@@ -2,10 +2,10 @@
 
 The experiments issue's route (``benchmarks/bench_monitor.py``'s drives and
 calibration); per run a :class:`~fusion.ekf.ModelEKF` on the encoders and a
-:class:`~fusion.monitor.ResidualMonitor` with the gate, glitch bursts and the
+:class:`~fusion.monitoring.ResidualMonitor` with the gate, glitch bursts and the
 stuck check (no dynamics or scale test). Two gates: the chi-square default
 (NIS 55.3) and the Phase-I gate
-(:func:`lti_motion.experiments.monitor_setup.fit_nominal`, 10 times the
+(:func:`lti_motion.app.monitor_setup.fit_nominal`, 10 times the
 largest encoder NIS of 30 nominal runs, seeds 1000-1029: the runs that fit
 the dynamics null).
 
@@ -31,10 +31,10 @@ import numpy as np
 
 from benchmarks.bench_monitor import calibrated_model, route_drives
 from benchmarks.harness import Figure, benchmark
-from drivers.sim_config import Fault
-from fusion.ekf import ModelEKF
-from fusion.monitor import AlarmEvent, MonitorOptions, ResidualMonitor
-from lti_motion.experiments.monitor_setup import fit_nominal
+from drivers.sim.config import Fault
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from lti_motion.app.monitor_setup import fit_nominal
 from lti_motion.model import MotionModel
 from lti_motion.odometry import TICK_MODULUS
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from drivers.sim import Simulator
-from drivers.sim_config import Room
+from drivers.sim.config import Room
+from drivers.sim.simulator import Simulator
 
 DURATION_S = 60.0
 N_BATCH = 30

@@ -1,18 +1,20 @@
-"""Where data comes from: the physics simulator, the Roomba Open Interface, logs."""
+"""Where data comes from, as wings: the simulator and the Roomba; logs and data sets.
 
-from drivers.exceptions import SimulatorError
-from drivers.sim import Simulator, ground_m_per_tick
-from drivers.sim_config import FLOORS, PRESETS, Fault, FloorMap, RobotParams, Room, get_preset
+- :mod:`drivers.sim`: the physics simulator of a differential-drive robot (the
+  embedded default), its configuration and compiled kernel;
+- :mod:`drivers.roomba`: the Roomba / Create 2 Open Interface, the pyserial robot,
+  the virtual Roomba on a pseudo-terminal, the stream clock;
+- :mod:`drivers.logs`, :mod:`drivers.datasets`: recorded logs and public data sets.
 
-__all__ = [
-    "FLOORS",
-    "PRESETS",
-    "Fault",
-    "FloorMap",
-    "RobotParams",
-    "Room",
-    "Simulator",
-    "SimulatorError",
-    "get_preset",
-    "ground_m_per_tick",
-]
+Importing this package loads only its exceptions; each wing loads what it needs.
+"""
+
+from drivers.exceptions import (
+    DatasetError,
+    PortError,
+    ProtocolError,
+    SimulatorError,
+    StreamStalledError,
+)
+
+__all__ = ["DatasetError", "PortError", "ProtocolError", "SimulatorError", "StreamStalledError"]

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from drivers.exceptions import DatasetError
+
 __all__ = [
     "CREATE1_WHEEL_BASE_M",
     "MrclamDataset",
@@ -36,8 +38,6 @@ __all__ = [
 CREATE1_WHEEL_BASE_M = 0.258
 
 
-class DatasetError(ValueError):
-    """A dataset folder that is missing files or holds malformed ones."""
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 __all__ = [
     "ChecksumError",
+    "DatasetError",
     "PassiveModeError",
     "PortError",
     "ProtocolError",
@@ -47,3 +48,7 @@ class UnknownPacketError(ProtocolError):
 
 class StreamBandwidthError(ProtocolError):
     """A stream request whose frame does not fit in one 15 ms period at the baud (spec §4.1)."""
+
+
+class DatasetError(ValueError):
+    """A dataset folder that is missing files or holds malformed ones."""

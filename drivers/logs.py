@@ -9,7 +9,7 @@ as frames, so recorded drives can be fed to the same code as live ones.
 Examples
 --------
 >>> import tempfile, pathlib
->>> from drivers.sim import Simulator
+>>> from drivers.sim.simulator import Simulator
 >>> sim, rec = Simulator("create2", seed=0), Recorder()
 >>> rec.extend(sim.step([0.1, 0.1]) for _ in range(5))
 >>> path = rec.save(pathlib.Path(tempfile.mkdtemp()) / "drive.npz")
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.oi import STREAM_PERIOD_S
+from drivers.roomba.oi import STREAM_PERIOD_S
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.logfile import load_log, save_log
 

@@ -4,11 +4,11 @@
 2. Drive the EKF example's rounded square in a 5 m x 5 m room (:meth:`Room.box`) whose
    walls carry twelve 15 cm ArUco markers (``DICT_4X4_50``) at camera height, facing in.
 3. At 5 Hz (every 13th or 14th 15 ms frame) render the camera image from the robot's
-   *true* pose (:class:`fusion.camera.SyntheticCamera`, 640 x 480, fx 500 px: the
-   physical world) and detect the markers in it (:class:`fusion.aruco.MarkerDetector`):
+   *true* pose (:class:`fusion.landmarks.SyntheticCamera`, 640 x 480, fx 500 px: the
+   physical world) and detect the markers in it (:class:`fusion.landmarks.MarkerDetector`):
    range, bearing and a per-detection covariance. Ids not in the map are dropped.
 4. Fuse the same detections, with the commands and encoder counts, in
-   :class:`fusion.ekf.ModelEKF` (causal) and :class:`fusion.smoother.IncrementalSmoother`
+   :class:`fusion.ekf.ModelEKF` (causal) and :class:`fusion.graph.IncrementalSmoother`
    (iSAM2 over keyframes; every image is a keyframe, plus one every 33 frames).
 5. Report position RMS errors and plot truth, EKF and smoother into ``OUT/aruco_end_to_end.png``.
 
@@ -17,9 +17,9 @@ Run::
     python examples/aruco_end_to_end.py --out out/aruco_end_to_end [--duration-s 300]
         [--seed 0] [--short]
 
-Measurement noise: each detection's covariance ``C`` (``fusion.aruco``, eq. 2-3) enters
+Measurement noise: each detection's covariance ``C`` (``fusion.landmarks.aruco``, eq. 2-3) enters
 both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``:
-``ModelEKF.update_landmark`` takes a :class:`fusion.landmarks.LandmarkNoise` per
+``ModelEKF.update_landmark`` takes a :class:`fusion.landmark_map.LandmarkNoise` per
 observation (a diagonal model) and the smoother's ``RangeBearing`` holds one pair of
 sigmas per batch, so each detection goes in as a batch of its own. The range-bearing
 correlation dropped that way is not negligible (median |rho| about 0.5, printed;
@@ -48,16 +48,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from drivers.sim import Simulator
-from drivers.sim_config import Room
-from fusion.aruco import MarkerDetector, MarkerObservation
-from fusion.camera import CameraIntrinsics, CameraMount, SyntheticCamera
-from fusion.ekf import ModelEKF
-from fusion.factors import RangeBearing
-from fusion.landmark_map import MarkerLandmark, MarkerMap
-from fusion.landmarks import LandmarkNoise
-from fusion.preintegration import preintegrate_model
-from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from drivers.sim.config import Room
+from drivers.sim.simulator import Simulator
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.graph.factors import RangeBearing
+from fusion.graph.preintegration import preintegrate_model
+from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from fusion.landmarks.aruco import MarkerDetector, MarkerObservation
+from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
+from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
+from fusion.noise import LandmarkNoise
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel

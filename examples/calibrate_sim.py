@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.sim import Simulator
-from drivers.sim_config import Room, get_preset
+from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
+from drivers.sim.config import Room, get_preset
+from drivers.sim.simulator import Simulator
+from lti_motion.app.plots import plot_calibration, plot_validation
 from lti_motion.calibration import Calibration, CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
-from lti_motion.experiments.plots import plot_calibration, plot_validation
-from lti_motion.experiments.sim_calibration import calibrate_simulator, print_progress, summarize
 from lti_motion.model import MotionModel
 
 

@@ -35,12 +35,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room
-from fusion.ekf import FilterStats, ModelEKF
-from fusion.landmarks import LandmarkMap, Observations, synthetic_observations
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Fault, Room
+from drivers.sim.simulator import Simulator
+from fusion.ekf.model_ekf import FilterStats, ModelEKF
+from fusion.landmark_map import LandmarkMap
+from fusion.landmarks.synthetic import synthetic_observations
+from fusion.range_bearing import Observations
 from lti_motion.calibration import CalibrationPlan
-from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.frames import FrameLog
 from lti_motion.kinematics import integrate_poses, wrap_angle
 from lti_motion.model import MotionModel

@@ -3,7 +3,7 @@
 A Create 2 drives for two minutes among ArUco-like landmarks with known
 positions; halfway through it rolls from hard floor onto carpet, which shrinks
 the ground travelled per encoder tick by about 4%. An iSAM2 smoother with the
-calibration-aware model factors (:mod:`fusion.smoother`) estimates the pose
+calibration-aware model factors (:mod:`fusion.graph.smoother`) estimates the pose
 and the model's speed scale ``s`` and yaw-rate gain ``g`` online. The figure
 shows the true path, the smoother's, sensor-less dead reckoning with the same
 model, and the calibration estimates over time against the truth.
@@ -23,15 +23,18 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, RobotParams, Room, get_preset
-from fusion.factors import RangeBearing, observe_landmarks
-from fusion.landmarks import LandmarkMap
-from fusion.preintegration import compose_motions, fit_calibration, preintegrate_model
-from fusion.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
-from fusion.transient_noise import TransientSpeedCovariance, transient_speed_covariance_from_data
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Fault, RobotParams, Room, get_preset
+from drivers.sim.simulator import Simulator
+from fusion.graph.factors import RangeBearing, observe_landmarks
+from fusion.graph.preintegration import compose_motions, fit_calibration, preintegrate_model
+from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from fusion.graph.transient_noise import (
+    TransientSpeedCovariance,
+    transient_speed_covariance_from_data,
+)
+from fusion.landmark_map import LandmarkMap
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.experiments.sim_calibration import calibrate_simulator
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
 from lti_motion.model import MotionModel
@@ -171,7 +174,7 @@ def true_calibration(model: MotionModel, log: FrameLog, keyframes: np.ndarray, *
                      ) -> list[tuple[float, float, np.ndarray]]:
     """The calibration the true poses imply before and after the floor change.
 
-    :func:`~fusion.preintegration.fit_calibration` on the true keyframe poses
+    :func:`~fusion.graph.preintegration.fit_calibration` on the true keyframe poses
     of each span (the first ``settle_s`` after the change left out).
     """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
@@ -236,7 +239,7 @@ def calibrated_model_and_noise(*, seed: int = 1
     long-run covariance of its sensor-less speed errors measured on its own three
     calibration logs (rotation, steps, excitation) against the encoders, conditioned on
     the model's wheel tracking error
-    (:func:`fusion.transient_noise.transient_speed_covariance_from_data`: Newey-West, 5 s
+    (:func:`fusion.graph.transient_noise.transient_speed_covariance_from_data`: Newey-West, 5 s
     bandwidth, 0.15 s window): the covariance to preintegrate with, no hand factor."""
     p = get_preset("create2")
     cal = calibrate_simulator(p, seed=seed, plan=CalibrationPlan(seed=3))

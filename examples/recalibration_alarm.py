@@ -5,18 +5,18 @@ drive at 0.25 m/s, slow down at each checkpoint; steering on its encoder
 odometry) with four landmarks seen at 2 Hz. On the way its left encoder
 spikes for a second (20 Hz of 150-tick spikes), the floor turns to carpet
 (3.5% less ground per tick, invisible to the encoders) and it takes on a
-+1.8 kg payload (+50%). One :class:`~fusion.monitor.ResidualMonitor` watches
++1.8 kg payload (+50%). One :class:`~fusion.monitoring.ResidualMonitor` watches
 everything, fed per period with what a robot reports (commands, counts,
 sightings; never the simulator's truth):
 
 - the per-sample gate and glitch bursts on the innovations of the model's
   EKF (:class:`~fusion.ekf.ModelEKF`, encoders only), and the stuck-encoder check;
-- the dynamics tests (:class:`~fusion.dynamics_monitor.DynamicsMonitor`: lag
+- the dynamics tests (:class:`~fusion.monitoring.DynamicsMonitor`: lag
   and covariance CUSUMs on integrated residuals), their null fitted at start
   on nominal route drives (a Phase-I fit, as ``benchmarks/bench_monitor.py``);
-- the scale test (:class:`~fusion.scale_monitor.ScaleMonitor`, landmarks).
+- the scale test (:class:`~fusion.monitoring.ScaleMonitor`, landmarks).
 
-A :class:`~fusion.recalibration.Recalibrator` answers the alarms: a glitch
+A :class:`~fusion.monitoring.Recalibrator` answers the alarms: a glitch
 burst is ignored; a scale alarm is answered from the landmarks (the running
 scale estimate is adopted once precise: new encoder scale and wheel base,
 the model's outputs rescaled), and from then on the robot steers with the
@@ -49,25 +49,25 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim import Simulator
-from drivers.sim_config import Fault, Room, get_preset
-from fusion.dynamics_monitor import DynamicsMonitor
-from fusion.ekf import ModelEKF
-from fusion.model_rescale import output_scaling
-from fusion.monitor import AlarmEvent, ResidualMonitor
-from fusion.recalibration import RecalibrationRecord, Recalibrator
-from fusion.scale_monitor import ScaleMonitor
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.experiments.monitor_setup import NominalFit, fit_nominal
-from lti_motion.experiments.route import (
+from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Fault, Room, get_preset
+from drivers.sim.simulator import Simulator
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.monitoring.dynamics import DynamicsMonitor
+from fusion.monitoring.recalibration import RecalibrationRecord, Recalibrator
+from fusion.monitoring.rescale import output_scaling
+from fusion.monitoring.residual import AlarmEvent, ResidualMonitor
+from fusion.monitoring.scale import ScaleMonitor
+from lti_motion.app.monitor_setup import NominalFit, fit_nominal
+from lti_motion.app.route import (
     ROUTE_LANDMARKS,
     ROUTE_M,
     Odometry,
     RecordingOdometry,
     drive_route,
 )
-from lti_motion.experiments.sim_calibration import calibrate_simulator
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
+from lti_motion.excitation import random_held_normal
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -88,7 +88,7 @@ def calibrated_model(*, seed: int = 1, excitation_s: float = 180.0) -> MotionMod
 def phase_one(model: MotionModel, *, runs: int, seed0: int = 1000) -> NominalFit:
     """The dynamics null and the encoder gate from ``runs`` nominal route drives.
 
-    Commands and counts only (:func:`~lti_motion.experiments.monitor_setup.fit_nominal`);
+    Commands and counts only (:func:`~lti_motion.app.monitor_setup.fit_nominal`);
     the null leaves out each drive's first 3 s, as the benchmark's
     (``benchmarks/bench_monitor.py``, whose false-alarm rate it measured).
     """
@@ -118,7 +118,7 @@ class Trace:
 class MonitoredDrive(Odometry):
     """The application: steers on encoder odometry, runs the monitors, answers their alarms.
 
-    An :class:`~lti_motion.experiments.route.Estimator` for one robot: each
+    An :class:`~lti_motion.app.route.Estimator` for one robot: each
     period it feeds the EKF, the monitor's four inputs and the policy, and
     after a scale adoption it steers with the adopted encoder scale and wheel
     base.

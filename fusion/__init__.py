@@ -1,33 +1,31 @@
-"""Estimators that use a calibrated motion model: the filterpy EKF plug-in, GTSAM
-preintegrated factors and an iSAM2 smoother, ArUco landmarks, residual monitoring."""
+"""Estimators that use a calibrated motion model, as wings over a small shared base.
 
-from fusion.aruco import MarkerDetector, MarkerObservation
-from fusion.dynamics_monitor import DynamicsMonitor, DynamicsNull, fit_dynamics_null
-from fusion.ekf import ModelEKF, UpdateRecord
-from fusion.landmarks import LandmarkMap, LandmarkNoise
-from fusion.monitor import AlarmEvent, ResidualMonitor
-from fusion.preintegration import preintegrate, preintegrate_model
-from fusion.scale_monitor import ScaleMonitor, ScaleOptions
-from fusion.smoother import IncrementalSmoother, SmootherOptions
-from fusion.velocity_ekf import VelocityModelEKF
+The base (this package's modules) holds what every wing shares: the noise types
+(:mod:`fusion.noise`), the landmark map (:mod:`fusion.landmark_map`), the
+range-bearing measurement model and observation type (:mod:`fusion.range_bearing`)
+and the exceptions (:mod:`fusion.exceptions`). The wings, each a subpackage whose
+``__init__`` re-exports its public names:
+
+- :mod:`fusion.ekf`: the filterpy EKF with the model inside, its plain functions,
+  the textbook velocity-model EKF;
+- :mod:`fusion.graph`: GTSAM preintegrated factors and the iSAM2 smoother;
+- :mod:`fusion.monitoring`: residual, dynamics and scale tests, recalibration;
+- :mod:`fusion.landmarks`: ArUco detection, a synthetic camera, marker maps.
+
+Importing this package loads only the base (numpy and scipy); filterpy, gtsam and
+OpenCV load with the wing that uses them.
+"""
+
+from fusion.exceptions import FusionError
+from fusion.landmark_map import LandmarkMap
+from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
+from fusion.range_bearing import Observations
 
 __all__ = [
-    "AlarmEvent",
-    "DynamicsMonitor",
-    "DynamicsNull",
-    "IncrementalSmoother",
+    "FusionError",
     "LandmarkMap",
     "LandmarkNoise",
-    "MarkerDetector",
-    "MarkerObservation",
-    "ModelEKF",
-    "ResidualMonitor",
-    "ScaleMonitor",
-    "ScaleOptions",
-    "SmootherOptions",
-    "UpdateRecord",
-    "VelocityModelEKF",
-    "fit_dynamics_null",
-    "preintegrate",
-    "preintegrate_model",
+    "Observations",
+    "ScaleErrors",
+    "SlipNoise",
 ]

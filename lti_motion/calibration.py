@@ -156,7 +156,7 @@ def drive(robot: Robot, commands_m_s: np.ndarray, *,
 
     Examples
     --------
-    >>> from drivers.sim import Simulator
+    >>> from drivers.sim.simulator import Simulator
     >>> log = drive(Simulator("create2", seed=0), np.full((10, 2), 0.2))
     >>> len(log), bool(log.ticks[-1, 0] > 0)
     (10, True)

@@ -10,6 +10,7 @@ __all__ = [
     "CalibrationError",
     "CalibrationNonFiniteError",
     "CalibrationShapeError",
+    "LogFileError",
     "ModelFileError",
     "NoSignalError",
     "NonFiniteError",
@@ -59,3 +60,7 @@ class CalibrationShapeError(ShapeError, CalibrationError):
 class CalibrationNonFiniteError(NonFiniteError, CalibrationError):
     """Calibration inputs hold NaN or infinite samples; both a ``NonFiniteError`` and a
     ``CalibrationError``."""
+
+
+class LogFileError(ModelFileError):
+    """A log file that is damaged, of another format, or of an unknown version."""

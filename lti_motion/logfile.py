@@ -21,10 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lti_motion.exceptions import ModelFileError
+from lti_motion.exceptions import LogFileError
 from lti_motion.frames import FrameLog
 
-__all__ = ["LOG_FORMAT", "LOG_VERSION", "LogFileError", "load_log", "save_log"]
+__all__ = [
+    "LOG_FORMAT",
+    "LOG_VERSION",
+    "load_log",
+    "save_log",
+]
 
 LOG_FORMAT = "lti-motion-log"
 LOG_VERSION = 1
@@ -32,8 +37,6 @@ _ARRAYS = ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s", "valid")
 _TRUTH = ("true_pose", "true_body_m_s")
 
 
-class LogFileError(ModelFileError):
-    """A log file that is damaged, of another format, or of an unknown version."""
 
 
 def save_log(path: str | os.PathLike, log: FrameLog) -> Path:

@@ -1,4 +1,14 @@
-"""The core package never imports an outer layer or an adapter's library (STYLE rule 1)."""
+"""The layers of ``docs/architecture.md``, checked by package (STYLE rule 1).
+
+- the core (``lti_motion`` outside ``lti_motion.app``) imports numpy, scipy and itself:
+  neither ``fusion`` nor ``drivers``, nor an adapter's library;
+- ``fusion`` and ``drivers`` never import each other;
+- nothing in the three packages imports ``lti_motion.app``, the application, and
+  the examples (what users copy) do not either;
+- no package holds an import cycle among its modules (deferred imports included).
+"""
+
+from __future__ import annotations
 
 import ast
 from pathlib import Path
@@ -6,32 +16,109 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-FORBIDDEN = {"fusion", "drivers", "filterpy", "gtsam", "serial", "cv2", "matplotlib", "numba"}
-APPLICATION = {"cli.py", "experiments.py"}
+PACKAGES = ("lti_motion", "fusion", "drivers")
+ADAPTERS = {"fusion", "drivers", "filterpy", "gtsam", "serial", "cv2", "matplotlib", "numba",
+            "rosbags"}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
 
 
 def _imports(path: Path) -> set[str]:
+    """Every absolute module an import statement names, anywhere in the file (also deferred
+    imports inside functions); ``from pkg import name`` counts ``pkg.name`` too, in case
+    ``name`` is a module."""
     tree = ast.parse(path.read_text(), filename=str(path))
     names = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            names.update(alias.name.split(".")[0] for alias in node.names)
+            names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.add(node.module.split(".")[0])
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
     return names
 
 
-CORE = [p for p in sorted((ROOT / "lti_motion").rglob("*.py"))
-        if p.name not in APPLICATION and "experiments" not in p.parts]
+def _package_files(package: str) -> list[Path]:
+    return sorted((ROOT / package).rglob("*.py"))
+
+
+def _in_app(name: str) -> bool:
+    return name == "lti_motion.app" or name.startswith("lti_motion.app.")
+
+
+CORE = [p for p in _package_files("lti_motion") if not _in_app(_module_name(p))]
 
 
 @pytest.mark.parametrize("path", CORE, ids=lambda p: str(p.relative_to(ROOT)))
-def test_core_module_imports_only_numpy_scipy_and_itself(path):
-    assert not (_imports(path) & FORBIDDEN), f"{path.name} imports {_imports(path) & FORBIDDEN}"
+def test_core_imports_only_numpy_scipy_and_itself(path):
+    top = {name.split(".")[0] for name in _imports(path)}
+    assert not top & ADAPTERS, f"{path.name} imports {sorted(top & ADAPTERS)}"
 
 
 @pytest.mark.parametrize("outer", ["fusion", "drivers"])
 def test_fusion_and_drivers_do_not_import_each_other(outer):
     other = {"fusion": "drivers", "drivers": "fusion"}[outer]
-    for path in (ROOT / outer).rglob("*.py"):
-        assert other not in _imports(path), f"{path} imports {other}"
+    offenders = [str(p.relative_to(ROOT)) for p in _package_files(outer)
+                 if other in {name.split(".")[0] for name in _imports(p)}]
+    assert not offenders, f"{outer} modules import {other}: {offenders}"
+
+
+@pytest.mark.parametrize("where", PACKAGES)
+def test_nothing_outside_the_application_imports_it(where):
+    offenders = [str(p.relative_to(ROOT)) for p in sorted((ROOT / where).rglob("*.py"))
+                 if not _in_app(_module_name(p)) and any(map(_in_app, _imports(p)))]
+    assert not offenders, f"these import lti_motion.app: {offenders}"
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of a directed graph, or None (depth-first search)."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                return [*stack[stack.index(nxt):], nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)):
+            return found
+    return None
+
+
+def test_cycle_finder_finds_a_cycle_and_accepts_a_tree():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_import_cycle_between_modules(package):
+    """A package's ``__init__`` (its door) may import its modules; no module may import
+    its way back to itself through the others."""
+    modules = {_module_name(p): p for p in _package_files(package)}
+    doors = {name for name, p in modules.items() if p.name == "__init__.py"}
+    graph = {}
+    for name, path in modules.items():
+        if name in doors:
+            continue
+        targets = set()
+        for imported in _imports(path):
+            # a module imported through its door counts as the module itself
+            while imported and imported not in modules:
+                imported = imported.rpartition(".")[0]
+            if imported and imported != name and imported not in doors:
+                targets.add(imported)
+        graph[name] = targets
+    assert _cycle(graph) is None, f"import cycle: {' -> '.join(_cycle(graph))}"

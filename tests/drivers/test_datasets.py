@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from drivers.datasets import DatasetError, load_mrclam, resample_robot
+from drivers.datasets import load_mrclam, resample_robot
+from drivers.exceptions import DatasetError
 
 
 @pytest.fixture(scope="module")

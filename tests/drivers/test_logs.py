@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from drivers.logs import Recorder, replay
-from drivers.roomba import Roomba
-from drivers.sim import Simulator
-from drivers.sim_config import Fault
-from drivers.virtual_roomba import VirtualRoomba
+from drivers.roomba.driver import Roomba
+from drivers.roomba.virtual import VirtualRoomba
+from drivers.sim.config import Fault
+from drivers.sim.simulator import Simulator
+from lti_motion.exceptions import LogFileError
 from lti_motion.frames import SensorFrame
-from lti_motion.logfile import LogFileError, load_log
+from lti_motion.logfile import load_log
 
 
 def test_round_trip_through_save_and_load_keeps_every_field(tmp_path, rng):

@@ -8,8 +8,8 @@ seeds and what limits the fit).
 import numpy as np
 import pytest
 
-from drivers.sim import Simulator
-from drivers.sim_config import Room, get_preset
+from drivers.sim.config import Room, get_preset
+from drivers.sim.simulator import Simulator
 from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
 from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
 from lti_motion.excitation import random_held_normal, rotation_in_place

@@ -83,8 +83,8 @@ def test_body_speeds_from_ticks_straight_and_spin():
 def test_unfold_commanded_direction_restores_the_wheels_direction():
     """Spec section 6.2: counts follow the command, so a reversing wheel counts backwards
     while it is still rolling the old way; the true speed is continuous through zero."""
-    from drivers.sim import Simulator
-    from drivers.sim_config import Room, get_preset
+    from drivers.sim.config import Room, get_preset
+    from drivers.sim.simulator import Simulator
     from lti_motion.odometry import unfold_commanded_direction
 
     p = get_preset("create2")

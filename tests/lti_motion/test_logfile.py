@@ -5,8 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from drivers.sim import Simulator
-from lti_motion.logfile import LOG_VERSION, LogFileError, load_log, save_log
+from drivers.sim.simulator import Simulator
+from lti_motion.exceptions import LogFileError
+from lti_motion.logfile import LOG_VERSION, load_log, save_log
 
 
 @pytest.fixture

@@ -1,0 +1,14 @@
+"""The EKF wing: the calibrated model inside a filterpy Extended Kalman Filter.
+
+- :class:`ModelEKF` (:mod:`fusion.ekf.model_ekf`): the filterpy subclass;
+- :mod:`fusion.ekf.functions`: the same maths as plain functions, for a user's own
+  filterpy EKF or UKF (:class:`FilterModel` lays a model out for a filter);
+- :class:`VelocityModelEKF` (:mod:`fusion.ekf.velocity_ekf`): the textbook
+  velocity-model EKF, the baseline.
+"""
+
+from fusion.ekf.functions import FilterModel
+from fusion.ekf.model_ekf import FilterStats, ModelEKF, UpdateRecord
+from fusion.ekf.velocity_ekf import VelocityModelEKF
+
+__all__ = ["FilterModel", "FilterStats", "ModelEKF", "UpdateRecord", "VelocityModelEKF"]

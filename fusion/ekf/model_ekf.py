@@ -1,0 +1,676 @@
+"""The calibrated motion model inside a filterpy Extended Kalman Filter.
+
+:class:`ModelEKF` subclasses :class:`filterpy.kalman.ExtendedKalmanFilter`
+(filterpy 2.0 or later: 1.4.5's ``update`` never set ``SI``). Its state is
+the pose stacked on the model's state and the period's body speeds; the maths
+and the treatment of the correlated model noise are in
+:mod:`fusion.ekf.functions`, which this class only calls.
+
+One sensor period ``k`` (frame ``k`` closes period ``k``, whose command
+``u[k]`` went out at its start)::
+
+    ekf.predict(u_k)                   # model + kinematics: pose at frame k
+    ekf.update_encoders(ticks_k)       # raw 16-bit counts of frame k
+    ekf.update_landmark(id, (r, b))    # any landmarks seen at frame k
+    ekf.update_pose(pose, cov)         # optional absolute fix
+
+Every update returns an :class:`UpdateRecord` (innovation, its covariance,
+NIS, accepted flag, kind, time, reason) and appends it to :attr:`ModelEKF.records`.
+A reading is fused only if its NIS is inside the chi-square gate; otherwise it
+is counted and the state is left alone. A reading with NaN is skipped and
+counted, never fused. Encoder counts are cumulative: after a gated, NaN or lost
+reading the next counts are compared with the last fused ones, so the motion
+of the skipped periods is recovered (:mod:`fusion.ekf.functions`, *Gated
+readings*). Shapes that are wrong raise
+:class:`~fusion.exceptions.MeasurementShapeError`; unknown landmark ids are
+counted rejections (``unknown_landmarks="count"``, the default, with the ids
+kept in :attr:`ModelEKF.stats`) or raise
+:class:`~fusion.exceptions.UnknownLandmarkError` (``"raise"``).
+
+filterpy's attributes stay meaningful: ``x`` (n,), ``P``, ``F``, ``Q`` of
+the last prediction, ``R`` (the encoder reading's noise), ``y``, ``S``,
+``SI``, ``K``, ``z`` of the last update, ``x_prior``/``P_prior`` and
+``x_post``/``P_post``. filterpy's generic ``update(z, HJacobian, Hx, ...)``
+still works (no gate, no record); ``predict_update`` is disabled.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter, deque
+from collections.abc import Hashable, Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Literal
+
+import filterpy
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from fusion.ekf.functions import (
+    SCALES,
+    FilterModel,
+    encoder_speeds,
+    initial_covariance,
+    initial_state,
+    joseph_covariance,
+    landmark_jacobian,
+    landmark_measurement,
+    landmark_residual,
+    pose_jacobian,
+    pose_residual,
+    predict_terms,
+    propagate_covariance,
+    span_verdict,
+    state_transition,
+)
+from fusion.exceptions import (
+    FilterOptionError,
+    MeasurementShapeError,
+    UnknownLandmarkError,
+)
+from fusion.landmark_map import LandmarkMap
+from fusion.noise import (
+    LandmarkNoise,
+    ScaleErrors,
+    SlipNoise,
+    gate_threshold,
+    inverse_covariance,
+    nis,
+)
+from fusion.range_bearing import MIN_RANGE_M
+from lti_motion.model import MotionModel
+from lti_motion.odometry import tick_deltas
+
+__all__ = ["FilterStats", "ModelEKF", "UpdateKind", "UpdateReason", "UpdateRecord"]
+
+_log = logging.getLogger(__name__)
+
+if int(filterpy.__version__.split(".")[0]) < 2:     # 1.4.5's EKF.update never set SI
+    raise ImportError(f"fusion.ekf.model_ekf needs filterpy >= 2.0, found {filterpy.__version__}; "
+                      "upgrade it (pip install 'filterpy>=2.0')")
+
+UpdateKind = Literal["encoders", "landmark", "pose"]
+UpdateReason = Literal["fused", "forced", "gated", "non_finite", "unknown_landmark", "anchor",
+                       "gap", "degenerate"]
+
+
+@dataclass(frozen=True, slots=True)
+class UpdateRecord:
+    """What one update did: the figures a residual monitor reads.
+
+    Attributes
+    ----------
+    kind : {"encoders", "landmark", "pose"}
+        The measurement.
+    t_s : float
+        Filter time of the update [s].
+    innovation : ndarray, shape (m,)
+        Measurement minus prediction (angles wrapped); NaN when the reading
+        was not compared (``reason`` in non_finite, unknown_landmark, anchor,
+        gap, degenerate). Read-only.
+    innovation_cov : ndarray, shape (m, m)
+        ``S = H P H^T + R`` (NaN when not compared). Read-only.
+    nis : float
+        ``nu^T S^-1 nu`` (NaN when not compared).
+    accepted : bool
+        Whether the reading was fused.
+    reason : str
+        ``"fused"``, ``"forced"`` (encoder counts outside the gate fused
+        anyway: after ``reanchor_periods`` gated periods both wheels count
+        steadily, so the model is what misses, e.g. a start from rest),
+        ``"gated"`` (NIS outside the gate), ``"non_finite"``
+        (NaN or inf in the reading), ``"unknown_landmark"``, ``"anchor"``
+        (first encoder counts: a reference only), ``"gap"`` (counts right
+        after others with no :meth:`ModelEKF.predict` between, or more than
+        ``max_periods`` periods after the last fused ones: the reference is
+        renewed), or ``"degenerate"`` (robot on the landmark). An encoder
+        reading after gated, NaN or lost ones spans all the periods since the
+        last fused counts (its innovation is the summed speed residual).
+    landmark_id : hashable or None
+        The landmark, for ``kind="landmark"``.
+    """
+
+    kind: UpdateKind
+    t_s: float
+    innovation: np.ndarray
+    innovation_cov: np.ndarray
+    nis: float
+    accepted: bool
+    reason: UpdateReason
+    landmark_id: Hashable | None = None
+
+
+@dataclass(frozen=True)
+class FilterStats:
+    """Counts of updates by kind and reason (a snapshot).
+
+    Attributes
+    ----------
+    counts : mapping of (kind, reason) to int
+        How many updates of each kind ended each way.
+    unknown_landmark_ids : tuple
+        Ids seen that the map does not hold, in order of first sight.
+    """
+
+    counts: Mapping[tuple[str, str], int]
+    unknown_landmark_ids: tuple[Hashable, ...]
+
+    def count(self, kind: UpdateKind, reason: UpdateReason) -> int:
+        """Updates of ``kind`` that ended with ``reason``."""
+        return self.counts.get((kind, reason), 0)
+
+    def rejected(self, kind: UpdateKind) -> int:
+        """Readings of ``kind`` not fused, for any reason but ``"anchor"``."""
+        return sum(c for (k, r), c in self.counts.items()
+                   if k == kind and r not in ("fused", "anchor"))
+
+
+_NAN2 = np.full(2, np.nan)
+_NAN2.flags.writeable = False
+_NAN22 = np.full((2, 2), np.nan)
+_NAN22.flags.writeable = False
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.flags.writeable = False
+    return arr
+
+
+class ModelEKF(ExtendedKalmanFilter):
+    """filterpy EKF with a calibrated :class:`~lti_motion.model.MotionModel` inside.
+
+    Parameters
+    ----------
+    model : MotionModel
+        The calibrated model (its ``m_per_tick`` scales the encoders).
+    initial_pose : array_like, shape (3,)
+        Start pose ``(x [m], y [m], theta [rad])``.
+    pose_std : tuple of 3 float
+        Its standard deviations [m, m, rad].
+    z0 : ndarray, shape (nz,), optional
+        Start model state (default zeros: at rest; from a moving start use
+        :meth:`MotionModel.state_from_data`).
+    z_cov : ndarray, optional
+        Covariance of ``z0`` (default the model's ``Q``).
+    slip : SlipNoise, optional
+        White ground-versus-encoder speed noise (:mod:`fusion.ekf.functions`).
+    scales : ScaleErrors, optional
+        Prior and drift of the scale-error states ``(k_v, k_w)``.
+    encoder_std : tuple of 2 float
+        Floor of the encoder reading noise ``(v [m/s], w [rad/s])``.
+    m_per_tick : float, optional
+        Encoder scale, if the model has none.
+    gate_probability : float or None
+        Chi-square gate of every update (0.999: a good reading is rejected
+        once in a thousand); ``None`` fuses everything.
+    landmarks : LandmarkMap or mapping, optional
+        Known landmark positions, for :meth:`update_landmark`.
+    landmark_noise : LandmarkNoise, optional
+        Range-bearing noise (default 2% of range, 1 degree).
+    unknown_landmarks : {"count", "raise"}
+        What an observation of an id not in the map does.
+    initial_ticks : array_like, shape (2,), optional
+        Raw encoder counts at the start; otherwise the first
+        :meth:`update_encoders` call only sets the reference.
+    t0_s : float
+        Filter time at the start [s]; each :meth:`predict` adds ``dt_s``.
+    history : int
+        How many update records :attr:`records` keeps (0: none).
+    reanchor_periods : int
+        When an encoder reading is still outside the gate after spanning
+        this many periods, the span is judged
+        (:func:`~fusion.ekf.functions.span_verdict`): a wheel flat while
+        predicted to turn (stuck) renews the count reference and gives up the
+        motion since; both wheels counting steadily means the model misses a
+        transient (a start from rest), and the counts are fused anyway
+        (``"forced"``); a frame whose increment jumps (a spike) waits for the
+        next frame; a jump earlier in the span (a spike, a frozen wheel that
+        resumed) also renews the reference. Fewer periods than this, and the
+        next reading still sums from the last fused counts, which recovers
+        single-frame spikes.
+    max_jump_ticks : float
+        Largest change of a frame's tick increment from the last frame's that
+        still counts as steady, for the judgement above [ticks].
+    max_periods : int
+        Most periods one encoder reading may span after gated or lost ones
+        (500 periods of 15 ms at 0.5 m/s stay far from the 16-bit counter's
+        half range).
+
+    Raises
+    ------
+    FilterOptionError, MeasurementShapeError
+        For invalid options.
+
+    Examples
+    --------
+    >>> from lti_motion.fir import FirFit
+    >>> model = MotionModel.from_fir(
+    ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
+    ...            residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps"),
+    ...     dt_s=0.015, wheel_base_m=0.25, m_per_tick=5e-4,
+    ...     calibrated_at="2026-01-01T00:00:00+00:00")
+    >>> ekf = ModelEKF(model, initial_ticks=(65530, 100))
+    >>> u = np.array([0.2, 0.2])
+    >>> ekf.predict(u)                      # one period of delay: no motion yet
+    >>> ekf.update_encoders(np.array([65530, 100])).accepted
+    True
+    >>> ekf.predict(u)
+    >>> rec = ekf.update_encoders(np.array([0, 106]))      # 6 ticks each, left wrapped
+    >>> rec.kind, rec.accepted, ekf.speeds.round(3).tolist(), ekf.pose.round(4).tolist()
+    ('encoders', True, [0.2, 0.0], [0.003, 0.0, 0.0])
+    >>> ekf.predict(u)
+    >>> ekf.update_encoders(np.array([400, 500])).reason   # a spike: rejected, counted
+    'gated'
+    >>> ekf.update_encoders(np.array([np.nan, 110.0])).reason
+    'non_finite'
+    """
+
+    def __init__(
+        self,
+        model: MotionModel,
+        *,
+        initial_pose: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
+        pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
+        z0: np.ndarray | None = None,
+        z_cov: np.ndarray | None = None,
+        slip: SlipNoise | None = None,
+        scales: ScaleErrors | None = None,
+        encoder_std: tuple[float, float] = (1e-5, 1e-4),
+        m_per_tick: float | None = None,
+        gate_probability: float | None = 0.999,
+        landmarks: LandmarkMap | Mapping[Hashable, tuple[float, float]] | None = None,
+        landmark_noise: LandmarkNoise | None = None,
+        unknown_landmarks: Literal["count", "raise"] = "count",
+        initial_ticks: np.ndarray | tuple[int, int] | None = None,
+        t0_s: float = 0.0,
+        history: int = 10_000,
+        reanchor_periods: int = 16,
+        max_periods: int = 500,
+        max_jump_ticks: float = 10.0,
+    ) -> None:
+        fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
+                         encoder_std=encoder_std, m_per_tick=m_per_tick)
+        super().__init__(dim_x=fm.n, dim_z=2, dim_u=2)
+        if unknown_landmarks not in ("count", "raise"):
+            raise FilterOptionError(f"unknown_landmarks must be 'count' or 'raise', got "
+                                    f"{unknown_landmarks!r}")
+        if gate_probability is None:
+            self._gates = {2: math.inf, 3: math.inf}
+        else:
+            self._gates = {d: gate_threshold(gate_probability, d) for d in (2, 3)}
+        self.fm = fm
+        self.gate_probability = gate_probability
+        self.landmarks = (landmarks if isinstance(landmarks, LandmarkMap) or landmarks is None
+                          else LandmarkMap(landmarks))
+        self.landmark_noise = landmark_noise or LandmarkNoise()
+        self.unknown_landmarks = unknown_landmarks
+        for name, value in (("reanchor_periods", reanchor_periods), ("max_periods", max_periods)):
+            if not (isinstance(value, int) and value >= 1):
+                raise FilterOptionError(f"{name} must be a positive int, got {value!r}")
+        self.reanchor_periods = reanchor_periods
+        self.max_periods = max_periods
+        if not max_jump_ticks > 0:
+            raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
+        self.max_jump_ticks = float(max_jump_ticks)
+        self.x = initial_state(fm, initial_pose, z=z0)
+        self.P = initial_covariance(fm, pose_std=pose_std, z_cov=z_cov)
+        self.F = np.array(fm.F_template)
+        self.Q = np.array(fm.Q_const)
+        self.R = np.array(fm.encoder_cov)
+        self.K = np.zeros((fm.n, 2))
+        self.y = np.zeros(2)
+        self.z = np.full(2, np.nan)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+        self.x_post, self.P_post = self.x.copy(), self.P.copy()
+        self._I = np.eye(fm.n)
+        self.t_s = float(t0_s)
+        self._dt_s = fm.dt_s
+        self._speed_at = fm.n - 2
+        self.records: deque[UpdateRecord] = deque(maxlen=max(0, int(history)))
+        self._counts: Counter[tuple[str, str]] = Counter()
+        self._unknown: dict[Hashable, None] = {}
+        # rows: counts of the last fused (or anchoring) frame, counts of the current frame
+        self._tick_pair = np.zeros((2, 2), dtype=np.int64)
+        self._have_ref = False
+        self._periods_since_ref = 0
+        # the previous frame's counts and increment, for the single-frame jump test
+        self._last_frame = (0, 0)
+        self._last_delta = (0, 0)
+        self._have_last = self._have_last_delta = False
+        self._span_jump = 0.0       # largest frame jump since the last fused counts [ticks]
+        if initial_ticks is not None:
+            first = self._check_ticks(initial_ticks)
+            if not np.all(np.isfinite(first)):
+                raise FilterOptionError(f"initial_ticks must be finite, got {initial_ticks}")
+            self._tick_pair[0] = first
+            self._have_ref = True
+            self._last_frame = (int(first[0]), int(first[1]))
+            self._have_last = True
+        # F buffers must hold the constant blocks (predict_terms writes only the pose rows)
+        self._buffers = (np.array(fm.F_template), np.empty((fm.n, fm.n)))
+
+    # -- views ---------------------------------------------------------------------------------
+    @property
+    def pose(self) -> np.ndarray:
+        """Estimated pose ``(x [m], y [m], theta [rad])`` (heading continuous), (3,)."""
+        return self.x[:3].copy()
+
+    @property
+    def pose_cov(self) -> np.ndarray:
+        """Covariance of :attr:`pose`, (3, 3)."""
+        return self.P[:3, :3].copy()
+
+    @property
+    def speeds(self) -> np.ndarray:
+        """Estimated body speeds ``(v [m/s], w [rad/s])`` of the last period, (2,).
+
+        Summed over the periods since the last fused encoder counts while
+        readings are gated or missing.
+        """
+        return self.x[self.fm.n - 2:].copy()
+
+    @property
+    def model_state(self) -> np.ndarray:
+        """Estimated model state ``z`` for the next period, (nz,)."""
+        return self.x[self.fm.model_slice].copy()
+
+    @property
+    def scale_errors(self) -> np.ndarray:
+        """Estimated relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, (2,)."""
+        return self.x[SCALES].copy()
+
+    @property
+    def stats(self) -> FilterStats:
+        """Counts of fused and rejected readings so far."""
+        return FilterStats(counts=MappingProxyType(dict(self._counts)),
+                           unknown_landmark_ids=tuple(self._unknown))
+
+    # -- predict ---------------------------------------------------------------------------------
+    def predict_x(self, u: np.ndarray = 0) -> None:
+        """filterpy's hook: ``x = f(x, u)`` (:func:`~fusion.ekf.functions.state_transition`)."""
+        self.x = state_transition(self.x, u, self.fm)
+
+    def predict(self, u: np.ndarray) -> None:
+        """Advance one sensor period with wheel commands ``u = (L, R)`` [m/s], shape (2,).
+
+        Sets ``x``, ``P``, ``F``, ``Q``, ``x_prior``, ``P_prior`` and adds
+        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_terms`,
+        :func:`~fusion.ekf.functions.propagate_covariance`).
+
+        Raises
+        ------
+        MeasurementShapeError, NonFiniteInputError
+            If ``u`` is not two finite numbers.
+        """
+        f_buf, q_buf = self._buffers
+        # after a gated or missing encoder reading the speed state sums the periods since the
+        # last fused counts (fusion.ekf.functions, "Gated readings")
+        accumulate = self._have_ref and self._periods_since_ref > 0
+        x, F, Q = predict_terms(self.x, u, self.fm, accumulate=accumulate, out_F=f_buf,
+                                out_Q=q_buf)
+        P = propagate_covariance(self.P, F, Q)
+        # swap buffers so self.F / self.Q keep this step's matrices
+        self._buffers = (self.F, self.Q)
+        self.F, self.Q = F, Q
+        # the filter never modifies x or P in place: prior/post alias them (no copies)
+        self.x = self.x_prior = x
+        self.P = self.P_prior = P
+        self.t_s += self._dt_s
+        self._periods_since_ref += 1
+
+    def predict_update(self, *args: object, **kwargs: object) -> None:
+        """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
+        raise NotImplementedError("ModelEKF.predict_update is not supported; call predict(u) "
+                                  "and then the update methods")
+
+    # -- updates ---------------------------------------------------------------------------------
+    @staticmethod
+    def _check_ticks(ticks: np.ndarray) -> np.ndarray:
+        arr = np.asarray(ticks)
+        if arr.shape != (2,):
+            raise MeasurementShapeError(f"expected raw encoder counts of shape (2,) (left, "
+                                        f"right), got {arr.shape}")
+        return arr
+
+    def update_encoders(self, ticks: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
+        """Fuse the encoder counts of the frame that closes the period just predicted.
+
+        Parameters
+        ----------
+        ticks : array_like, shape (2,)
+            Raw (16-bit, wrapping) counts ``(left, right)``; floats with NaN
+            mark a missing reading.
+        t_s : float, optional
+            Time for the record (default the filter time).
+
+        Returns
+        -------
+        UpdateRecord
+            ``kind="encoders"``. The first counts only set the reference
+            (``"anchor"``). Counts are taken against those of the last fused
+            frame: after a gated reading, a NaN reading (``"non_finite"``,
+            skipped) or lost frames, the next reading measures the speeds
+            summed over all the periods since, so no motion is lost. A
+            reading rejected while spanning :attr:`reanchor_periods` periods
+            or more renews the reference (a stuck encoder's lost ticks are
+            gone), as do a second reading without a :meth:`predict` between
+            and more than :attr:`max_periods` periods without a fused one
+            (``"gap"``).
+
+        Raises
+        ------
+        MeasurementShapeError
+            If ``ticks`` is not (2,).
+        FilterOptionError
+            If there is no encoder scale.
+        """
+        ticks = self._check_ticks(ticks)
+        t = self.t_s if t_s is None else float(t_s)
+        if ticks.dtype.kind not in "iu":
+            if not (math.isfinite(ticks[0]) and math.isfinite(ticks[1])):
+                return self._skip("encoders", t, "non_finite", 2)
+        pair = self._tick_pair
+        periods = self._periods_since_ref
+        if not self._have_ref or periods == 0 or periods > self.max_periods:
+            reason: UpdateReason = "gap" if self._have_ref else "anchor"
+            self._frame_jump(ticks)
+            self._span_jump = 0.0
+            pair[0] = ticks
+            self._have_ref, self._periods_since_ref = True, 0
+            return self._skip("encoders", t, reason, 2)
+        pair[1] = ticks
+        jump = self._frame_jump(ticks)
+        speeds = self.x[self._speed_at:]
+        y = encoder_speeds(pair, self.fm)           # summed over `periods` periods
+        verdict = "young"
+        if periods >= self.reanchor_periods:
+            verdict = span_verdict(tick_deltas(pair, axis=0)[0],
+                                   np.linalg.solve(self.fm.ticks_to_speeds, speeds),
+                                   jump, self._span_jump, periods=periods,
+                                   max_jump_ticks=self.max_jump_ticks)
+        record = self._gated("encoders", t, y, y - speeds, self.fm.H_encoders, self.R, None,
+                             PHt=self.P[:, self._speed_at:], force=verdict == "consistent")
+        if record.accepted or verdict == "broken":
+            pair[0] = ticks
+            self._periods_since_ref = 0
+            self._span_jump = 0.0
+        else:
+            self._span_jump = max(self._span_jump, jump)
+        return record
+
+    def _frame_jump(self, ticks: np.ndarray) -> float:
+        """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
+        increment differs from the last frame's (a wheel's speed changes by about a tick per
+        period). Scalar arithmetic: it runs at every reading."""
+        left, right = int(ticks[0]), int(ticks[1])
+        # 16-bit rollover-safe increments, as lti_motion.odometry.tick_deltas
+        dl = abs((left - self._last_frame[0] + 32768) % 65536 - 32768)
+        dr = abs((right - self._last_frame[1] + 32768) % 65536 - 32768)
+        jump = 0.0
+        if self._have_last_delta:
+            jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))
+        self._have_last_delta = self._have_last
+        self._have_last = True
+        self._last_frame = (left, right)
+        self._last_delta = (dl, dr)
+        return jump
+
+    def update_speeds(self, y_m_s: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
+        """Fuse measured body speeds ``(v [m/s], w [rad/s])`` of the period just predicted.
+
+        The linear measurement ``y = s = C z + D u + e`` (gated; NaN skipped),
+        one period at a time: a gated reading's motion is lost (counts, with
+        :meth:`update_encoders`, recover it).
+
+        Raises
+        ------
+        MeasurementShapeError
+            If ``y_m_s`` is not (2,).
+        FilterOptionError
+            If the filter already fuses encoder counts.
+        """
+        if self._have_ref:
+            raise FilterOptionError("this filter fuses encoder counts (update_encoders); "
+                                    "use one of update_encoders and update_speeds, not both")
+        y = np.array(y_m_s, dtype=float)
+        if y.shape != (2,):
+            raise MeasurementShapeError(f"expected body speeds of shape (2,) (v, w), got "
+                                        f"{y.shape}")
+        t = self.t_s if t_s is None else float(t_s)
+        y0, y1 = y.tolist()
+        if not (math.isfinite(y0) and math.isfinite(y1)):
+            return self._skip("encoders", t, "non_finite", 2)
+        # H = [0 0 I] selects the speed state: P H^T is a slice, no product
+        return self._gated("encoders", t, y, y - self.x[self._speed_at:], self.fm.H_encoders,
+                           self.R, None, PHt=self.P[:, self._speed_at:])
+
+    def update_landmark(self, landmark_id: Hashable, range_bearing: np.ndarray, *,
+                        t_s: float | None = None, noise: LandmarkNoise | None = None
+                        ) -> UpdateRecord:
+        """Fuse a range-bearing observation of a landmark at a known position.
+
+        Parameters
+        ----------
+        landmark_id : hashable
+            Id in the filter's :class:`LandmarkMap`.
+        range_bearing : array_like, shape (2,)
+            ``(r [m], b [rad])`` in the robot frame; the bearing residual is
+            wrapped to ``(-pi, pi]``.
+        t_s : float, optional
+            Time for the record.
+        noise : LandmarkNoise, optional
+            Noise of this observation (default the filter's).
+
+        Returns
+        -------
+        UpdateRecord
+            ``kind="landmark"``.
+
+        Raises
+        ------
+        MeasurementShapeError
+            If the observation is not (2,).
+        FilterOptionError
+            If the filter has no landmark map.
+        UnknownLandmarkError
+            For an id not in the map, with ``unknown_landmarks="raise"``.
+        """
+        zmeas = np.asarray(range_bearing, dtype=float)
+        if zmeas.shape != (2,):
+            raise MeasurementShapeError(f"expected a range-bearing observation of shape (2,), "
+                                        f"got {zmeas.shape}")
+        if self.landmarks is None:
+            raise FilterOptionError("this filter has no landmark map; pass landmarks=...")
+        t = self.t_s if t_s is None else float(t_s)
+        if landmark_id not in self.landmarks:
+            self._unknown.setdefault(landmark_id, None)
+            if self.unknown_landmarks == "raise":
+                self._counts["landmark", "unknown_landmark"] += 1
+                self.landmarks.position(landmark_id)        # raises UnknownLandmarkError
+                raise UnknownLandmarkError(landmark_id)     # pragma: no cover
+            return self._skip("landmark", t, "unknown_landmark", 2, landmark_id)
+        if not (math.isfinite(zmeas[0]) and math.isfinite(zmeas[1])):
+            return self._skip("landmark", t, "non_finite", 2, landmark_id)
+        lxy = self.landmarks.position(landmark_id)
+        predicted = landmark_measurement(self.x, lxy)
+        if predicted[0] < MIN_RANGE_M:
+            return self._skip("landmark", t, "degenerate", 2, landmark_id)
+        H = landmark_jacobian(self.x, lxy)
+        R = (noise or self.landmark_noise).cov(predicted[0])
+        return self._gated("landmark", t, zmeas, landmark_residual(zmeas, predicted), H, R,
+                           landmark_id)
+
+    def update_pose(self, pose: np.ndarray, cov: np.ndarray, *, t_s: float | None = None
+                    ) -> UpdateRecord:
+        """Fuse an absolute pose fix ``(x [m], y [m], theta [rad])`` with covariance ``cov``.
+
+        The heading residual is wrapped; gated with 3 degrees of freedom.
+
+        Raises
+        ------
+        MeasurementShapeError
+            If ``pose`` is not (3,) or ``cov`` not (3, 3).
+        FilterOptionError
+            If ``cov`` is not symmetric positive definite.
+        """
+        zmeas = np.asarray(pose, dtype=float)
+        R = np.asarray(cov, dtype=float)
+        if zmeas.shape != (3,) or R.shape != (3, 3):
+            raise MeasurementShapeError(f"expected a pose (3,) and covariance (3, 3), got "
+                                        f"{zmeas.shape} and {R.shape}")
+        t = self.t_s if t_s is None else float(t_s)
+        if not (np.all(np.isfinite(zmeas)) and np.all(np.isfinite(R))):
+            return self._skip("pose", t, "non_finite", 3)
+        if not np.allclose(R, R.T) or np.linalg.eigvalsh(0.5 * (R + R.T)).min() <= 0:
+            raise FilterOptionError("the pose fix covariance must be symmetric positive definite")
+        return self._gated("pose", t, zmeas, pose_residual(zmeas, self.x[:3]),
+                           pose_jacobian(self.x), R, None)
+
+    # -- shared ----------------------------------------------------------------------------------
+    def _gated(self, kind: UpdateKind, t: float, zmeas: np.ndarray, innovation: np.ndarray,
+               H: np.ndarray, R: np.ndarray, landmark_id: Hashable | None, *,
+               PHt: np.ndarray | None = None, force: bool = False) -> UpdateRecord:
+        """Gate on the NIS, then a Joseph-form update (Bar-Shalom et al. 2001, eq. 5.2.3-18);
+        ``force`` fuses a reading outside the gate (reason ``"forced"``)."""
+        P = self.P
+        m = innovation.shape[0]
+        if PHt is None:
+            PHt = P @ H.T
+            S = H @ PHt + R
+        else:
+            S = PHt[-m:] + R                     # H P H^T for a selector H on the last rows
+        SI = inverse_covariance(S)
+        value = nis(innovation, SI)
+        inside = value <= self._gates[m]
+        accepted = inside or force
+        innovation.flags.writeable = False
+        S.flags.writeable = False
+        self.y, self.S, self.SI, self.z = innovation, S, SI, zmeas
+        if accepted:
+            K = PHt @ SI
+            self.K = K
+            self.x = self.x_post = self.x + K @ innovation
+            self.P = self.P_post = joseph_covariance(P, K, H, R, PHt)
+            self._log_likelihood = self._likelihood = self._mahalanobis = None
+            reason: UpdateReason = "fused" if inside else "forced"
+        else:
+            self.K = np.zeros((self.fm.n, m))
+            self.x_post, self.P_post = self.x, P
+            reason = "gated"
+        record = UpdateRecord(kind, t, innovation, S, value, accepted, reason, landmark_id)
+        self._counts[kind, reason] += 1
+        self.records.append(record)
+        return record
+
+    def _skip(self, kind: UpdateKind, t: float, reason: UpdateReason, m: int,
+              landmark_id: Hashable | None = None) -> UpdateRecord:
+        nan_v = _NAN2 if m == 2 else _frozen(np.full(m, np.nan))
+        nan_m = _NAN22 if m == 2 else _frozen(np.full((m, m), np.nan))
+        record = UpdateRecord(kind, t, nan_v, nan_m, math.nan, False, reason, landmark_id)
+        self._counts[kind, reason] += 1
+        self.records.append(record)
+        if reason not in ("anchor",):
+            _log.debug("%s reading at t=%.3f s not fused: %s", kind, t, reason)
+        return record

@@ -1,0 +1,28 @@
+"""The monitoring wing: residual tests on the filter's innovations, alarms, recalibration.
+
+- :mod:`fusion.monitoring.residual`: :class:`ResidualMonitor`, the hub (per-sample
+  gate, glitch bursts, windowed NIS, CUSUM, stuck encoder) and the alarm type;
+- :mod:`fusion.monitoring.cusum`: CUSUM run lengths and thresholds;
+- :mod:`fusion.monitoring.dynamics` (with ``dynamics_null`` and ``dynamics_start``):
+  dynamics-change tests on integrated encoder residuals;
+- :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test;
+- :mod:`fusion.monitoring.recalibration`, :mod:`fusion.monitoring.rescale`: the
+  policy that answers alarms.
+"""
+
+from fusion.monitoring.dynamics import DynamicsMonitor, DynamicsNull, fit_dynamics_null
+from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.monitoring.scale import ScaleMonitor, ScaleOptions
+
+__all__ = [
+    "AlarmEvent",
+    "DynamicsMonitor",
+    "DynamicsNull",
+    "MonitorOptions",
+    "Recalibrator",
+    "ResidualMonitor",
+    "ScaleMonitor",
+    "ScaleOptions",
+    "fit_dynamics_null",
+]

@@ -1,0 +1,438 @@
+"""Recalibration policy: what to do with a monitor alarm (:mod:`fusion.monitoring.residual`).
+
+:class:`Recalibrator` buffers commands and measured body speeds and answers
+each :class:`~fusion.monitoring.AlarmEvent`:
+
+- ``"dynamics_changed"``: refit an ARX model (:func:`lti_motion.model.fit_arx`)
+  on the data since the alarm's estimated onset, when there is enough of it
+  and it excites the model enough (``fit_arx`` raises
+  :class:`~lti_motion.exceptions.NotExcitedError` or
+  :class:`~lti_motion.exceptions.CalibrationError` otherwise). Normal driving
+  rarely excites an ARX model enough (a route of starts, stops and turns
+  repeats a few manoeuvres), so while the policy waits it calls the
+  application's ``request_excitation(alarm)`` once: the application decides
+  when and where a random-excitation manoeuvre (the calibration's) is safe
+  and drives it. Every :meth:`Recalibrator.add` while waiting retries the
+  refit once ``retry_samples`` more samples have come (also
+  :meth:`Recalibrator.retry`). Samples more than 1.5 periods apart start a
+  new segment (a refit never runs across a gap). The newest
+  ``validation_fraction`` of the data since the onset is held out; the new
+  model replaces the old only if its free-run fit there (mean of the two
+  channels, :meth:`MotionModel.fit_percent`) beats the old model's by at
+  least ``min_gain_pp`` percentage points. An adopted model is saved
+  atomically (:meth:`MotionModel.save`) when a path is given.
+- ``"scale_changed"``: re-estimate the scale from landmarks, else ask for a
+  rotation. The scale test's alarm (:class:`~fusion.monitoring.scale.ScaleAlarm`
+  in :attr:`AlarmEvent.scale`) carries the ground travel and turn per encoder
+  travel and turn since the onset, ``scale_ratio`` and ``yaw_ratio``, with
+  standard deviations. Rule: a ratio is *precise enough* when its standard
+  deviation is at most ``max_scale_std`` (default 0.4%, the size of the
+  rotation calibration's own error on the simulator's hard floor, true ratio
+  1.004). When ``scale_ratio`` is, the policy adopts at once a copy of the
+  model with ``m_per_tick' = m_ref scale_ratio`` and, when ``yaw_ratio`` is
+  precise too, the effective wheel base ``b' = b_ref scale_ratio /
+  yaw_ratio`` (else ``b' = b_ref``: turns are taken to scale as travel),
+  ``(m_ref, b_ref)`` being the scale the monitor's ratios refer to
+  (``scale_reference``); its outputs are rescaled so that it predicts the
+  same counts (:func:`fusion.monitoring.rescale.rescaled_model`). Otherwise it
+  waits: the application feeds the monitor's running estimate
+  (:meth:`Recalibrator.update_scale` with :attr:`ScaleMonitor.scale_ratio`
+  and its standard deviation, which keep improving after the alarm) and the
+  policy adopts as soon as the rule holds. If it has not held
+  ``scale_settle_s`` after the alarm (few landmarks in view), or the alarm
+  carries no estimate (the landmark NIS/CUSUM tests), the application's
+  ``request_rotation(alarm)`` is called (the robot decides when a rotation
+  manoeuvre is safe). The old scale is kept until then: the scale test's
+  alarm is itself the evidence that the new scale explains the landmarks
+  better. The encoder-speed fit [%] of a rescaled model is the old one's
+  (both measured and predicted speeds scale), so the record holds the scale
+  and wheel base before and after instead.
+- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``): no recalibration;
+  recorded as ``"ignored"``.
+
+Every decision is a frozen :class:`RecalibrationRecord` in
+:attr:`Recalibrator.history`: what, when, the fits before and after.
+
+Measured on the simulator with the monitor's own alarms and an excitation
+manoeuvre on request (``benchmarks/bench_monitor.py``, ``recalibration``;
+``docs/monitor.md``); the landmark scale re-estimate on carpet runs of the
+route (``benchmarks/bench_scale_recalibration.py``). Not done: a
+recursive-least-squares model in use while waiting
+(:class:`lti_motion.arx.RecursiveARX` exists).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from fusion.exceptions import FilterOptionError, MeasurementShapeError, TimeOrderError
+from fusion.monitoring.rescale import output_scaling, rescaled_model
+from fusion.monitoring.residual import AlarmEvent
+from lti_motion.exceptions import CalibrationError
+from lti_motion.model import MotionModel, fit_arx
+
+__all__ = ["RecalibrationAction", "RecalibrationRecord", "Recalibrator"]
+
+_log = logging.getLogger(__name__)
+
+RecalibrationAction = Literal["adopted", "kept_old", "waiting", "rotation_requested", "ignored"]
+
+
+@dataclass(frozen=True)
+class RecalibrationRecord:
+    """One answer of the policy to an alarm.
+
+    Attributes
+    ----------
+    t_s : float
+        Time of the decision [s]: the alarm's, or that of the sample or
+        scale estimate that ended a wait.
+    alarm : AlarmEvent
+        The alarm answered.
+    action : {"adopted", "kept_old", "waiting", "rotation_requested", "ignored"}
+        What was done.
+    n_samples : int
+        Buffered samples since the onset used for the refit (0 if none).
+    fit_before, fit_after : tuple of 2 float or None
+        Held-out free-run fit [%] ``(v, w)`` of the old and the new model.
+    reason : str
+        Why (the calibration error's message when waiting).
+    saved_to : str or None
+        Where the adopted model was written.
+    m_per_tick, wheel_base_m : tuple of 2 float or None
+        For a scale decision: the encoder scale [m/tick] and wheel base [m]
+        before and after.
+    """
+
+    t_s: float
+    alarm: AlarmEvent
+    action: RecalibrationAction
+    n_samples: int = 0
+    fit_before: tuple[float, float] | None = None
+    fit_after: tuple[float, float] | None = None
+    reason: str = ""
+    saved_to: str | None = None
+    m_per_tick: tuple[float, float] | None = None
+    wheel_base_m: tuple[float, float] | None = None
+
+
+class Recalibrator:
+    """Keeps the current model; refits it after a dynamics alarm, rescales it after a scale alarm.
+
+    Parameters
+    ----------
+    model : MotionModel
+        The model in use.
+    buffer_s : float
+        Seconds of ``(t, u, y)`` kept [s].
+    min_samples : int
+        Fewest samples since the onset for a refit attempt.
+    validation_fraction : float
+        Newest share of the data since the onset held out for validation.
+    min_gain_pp : float
+        Percentage points the new model's held-out fit must gain to replace the old.
+    orders, delays : sequence of int
+        Selection grid of the refit (default: around the current model's order).
+    save_path : path-like, optional
+        Where an adopted model is saved (atomically).
+    request_rotation : callable, optional
+        Called with a ``"scale_changed"`` alarm whose scale could not be
+        re-estimated from landmarks (module notes).
+    request_excitation : callable, optional
+        Called with the alarm, once, when a dynamics refit has to wait for
+        data that excites the model.
+    retry_samples : int, optional
+        New samples between automatic retries while waiting (default
+        ``min_samples // 4``).
+    dc_gain : {"wheel_servo", "free"}, optional
+        Steady-state gain of the refit (:func:`lti_motion.model.fit_arx`);
+        default: as the model in use was fitted (``"wheel_servo"`` when its
+        diagnostics hold ``dc_gain_scale``).
+    max_scale_std : float, optional
+        Largest standard deviation of a landmark scale (or yaw) ratio that is
+        adopted (module notes).
+    scale_settle_s : float, optional
+        Longest wait [s] after a scale alarm for a precise running estimate
+        before the rotation is requested (0: request it at once).
+    scale_reference : tuple of 2 float, optional
+        ``(m_per_tick [m/tick], wheel_base_m [m])`` the scale monitor's ratios
+        refer to (the values its :class:`~fusion.monitoring.ScaleMonitor`
+        was built with); default the model's at construction.
+
+    Attributes
+    ----------
+    model : MotionModel
+        The model in use.
+    history : list of RecalibrationRecord
+        Every decision.
+
+    Examples
+    --------
+    A scale alarm whose ratio is precise enough (0.3% against 0.4%) is adopted
+    at once:
+
+    >>> from fusion.monitoring.scale import ScaleAlarm
+    >>> m = MotionModel(kind="arx", A=0.5 * np.eye(2), B=np.eye(2), C=np.eye(2),
+    ...                 D=np.zeros((2, 2)), K=0.5 * np.eye(2), Q=np.eye(2), R=np.eye(2),
+    ...                 dt_s=0.015, wheel_base_m=0.235, m_per_tick=5e-4,
+    ...                 coefficients={}, orders={}, calibrated_at="2026-01-01T00:00:00")
+    >>> rc = Recalibrator(m)
+    >>> scale = ScaleAlarm(0, 30.0, 10.2, 9.8, 24.0, 0.965, 0.003, 0.95, 0.003)
+    >>> r = rc.on_alarm(AlarmEvent(30.0, "scale_changed", "scale_glr", 10.2, 9.8, 24.0,
+    ...                            scale=scale))
+    >>> r.action, round(r.m_per_tick[1] * 1e6, 2), round(r.wheel_base_m[1], 4)
+    ('adopted', 482.5, 0.2387)
+    """
+
+    def __init__(self, model: MotionModel, *, buffer_s: float = 120.0, min_samples: int = 2000,
+                 validation_fraction: float = 0.3, min_gain_pp: float = 0.0,
+                 orders: tuple[int, ...] | None = None, delays: tuple[int, ...] | None = None,
+                 save_path: str | os.PathLike | None = None,
+                 request_rotation: Callable[[AlarmEvent], None] | None = None,
+                 request_excitation: Callable[[AlarmEvent], None] | None = None,
+                 retry_samples: int | None = None,
+                 dc_gain: Literal["wheel_servo", "free"] | None = None,
+                 max_scale_std: float = 0.004, scale_settle_s: float = 30.0,
+                 scale_reference: tuple[float, float] | None = None) -> None:
+        if not (0.0 < validation_fraction < 1.0 and buffer_s > 0 and min_samples > 0):
+            raise FilterOptionError(
+                f"need 0 < validation_fraction < 1, buffer_s > 0, min_samples > 0; got "
+                f"{validation_fraction}, {buffer_s}, {min_samples}")
+        if dc_gain not in (None, "wheel_servo", "free"):
+            raise FilterOptionError(f"dc_gain must be 'wheel_servo' or 'free', got {dc_gain!r}")
+        if not (0.0 < max_scale_std < 1.0 and scale_settle_s >= 0.0):
+            raise FilterOptionError(f"need 0 < max_scale_std < 1 and scale_settle_s >= 0; got "
+                                    f"{max_scale_std} and {scale_settle_s}")
+        reference = scale_reference or (model.m_per_tick, model.wheel_base_m)
+        if reference[0] is None or not all(math.isfinite(v) and v > 0 for v in reference):
+            raise FilterOptionError(f"scale_reference (m_per_tick, wheel_base_m) must be "
+                                    f"positive, got {reference}; the model needs m_per_tick")
+        self.model = model
+        self.min_samples = int(min_samples)
+        self.validation_fraction = float(validation_fraction)
+        self.min_gain_pp = float(min_gain_pp)
+        na = int(model.orders.get("na", 4))
+        self.orders = orders or tuple(range(max(1, na - 2), na + 3))
+        self.delays = delays or tuple(range(0, 9))
+        self.save_path = None if save_path is None else Path(save_path)
+        self.request_rotation = request_rotation
+        self.request_excitation = request_excitation
+        self.retry_samples = max(1, int(retry_samples if retry_samples is not None
+                                        else self.min_samples // 4))
+        self.dc_gain = dc_gain or ("wheel_servo" if "dc_gain_scale" in model.diagnostics
+                                   else "free")
+        self._n_added = 0                         # samples added so far
+        self._next_try = 0                        # _n_added at which a waiting refit retries
+        self._excitation_asked = False
+        self._buf: deque[tuple[float, np.ndarray, np.ndarray]] = deque(
+            maxlen=max(1, round(buffer_s / model.dt_s)))
+        self._pending: AlarmEvent | None = None
+        self.max_scale_std = float(max_scale_std)
+        self.scale_settle_s = float(scale_settle_s)
+        self.scale_reference = (float(reference[0]), float(reference[1]))
+        self._scale_pending: AlarmEvent | None = None
+        self.history: list[RecalibrationRecord] = []
+
+    def add(self, t_s: float, u: np.ndarray, y: np.ndarray) -> None:
+        """Buffer one period: commands ``u`` (2,) [m/s], measured speeds ``y`` (2,) [m/s, rad/s].
+
+        ``y`` are the encoder body speeds computed with the model in use's
+        ``m_per_tick`` and wheel base (:attr:`model`; after a scale
+        adoption the buffered ones are rescaled to the new values). Periods
+        with NaN in ``y`` are dropped (a refit needs contiguous data; the gap
+        is short next to the buffer). A scale alarm that has waited
+        ``scale_settle_s`` ends in a rotation request here too.
+        """
+        u_arr, y_arr = np.asarray(u, float), np.asarray(y, float)
+        if u_arr.shape != (2,) or y_arr.shape != (2,):
+            raise MeasurementShapeError(f"expected u (2,) and y (2,), got {u_arr.shape} and "
+                                        f"{y_arr.shape}")
+        if self._buf and t_s < self._buf[-1][0]:
+            raise TimeOrderError(f"sample at t={t_s} s after one at t={self._buf[-1][0]} s")
+        if np.all(np.isfinite(u_arr)) and np.all(np.isfinite(y_arr)):
+            self._buf.append((float(t_s), u_arr, y_arr))
+            self._n_added += 1
+        if self._pending is not None and self._n_added >= self._next_try:
+            self.retry()
+        if (self._scale_pending is not None
+                and t_s - self._scale_pending.t_s >= self.scale_settle_s):
+            self._record(self._rotation(float(t_s), "no precise landmark scale within "
+                                                    f"{self.scale_settle_s:g} s"))
+
+    @property
+    def waiting(self) -> bool:
+        """Whether a dynamics refit waits for data."""
+        return self._pending is not None
+
+    @property
+    def scale_waiting(self) -> bool:
+        """Whether a scale alarm waits for a precise landmark estimate (:meth:`update_scale`)."""
+        return self._scale_pending is not None
+
+    def _record(self, record: RecalibrationRecord) -> RecalibrationRecord:
+        self.history.append(record)
+        _log.info("recalibration at t=%.2f s: %s %s", record.t_s, record.action, record.reason)
+        return record
+
+    def on_alarm(self, event: AlarmEvent) -> RecalibrationRecord:
+        """Answer an alarm (usable as the monitor's ``on_alarm`` callback)."""
+        if event.kind == "dynamics_changed":
+            t_s = event.t_s
+            if self._pending is not None:          # still waiting: keep the earliest onset
+                event = min(event, self._pending, key=lambda e: e.onset_s)
+            record = self._refit(event, t_s)
+        elif event.kind == "scale_changed":
+            record = self._scale_alarm(event)
+        else:
+            record = RecalibrationRecord(event.t_s, event, "ignored",
+                                         reason="sensor fault: the model is not at fault")
+        return self._record(record)
+
+    def retry(self) -> RecalibrationRecord | None:
+        """Try the refit again for an alarm that was left waiting (more data since)."""
+        if self._pending is None:
+            return None
+        t_s = self._buf[-1][0] if self._buf else self._pending.t_s
+        return self._record(self._refit(self._pending, t_s))
+
+    # -- scale -----------------------------------------------------------------------------------
+    def update_scale(self, t_s: float, scale_ratio: float, scale_ratio_std: float,
+                     yaw_ratio: float = math.nan, yaw_ratio_std: float = math.inf
+                     ) -> RecalibrationRecord | None:
+        """Offer the scale monitor's running estimate to a waiting scale alarm.
+
+        Parameters
+        ----------
+        t_s : float
+            Time of the estimate [s].
+        scale_ratio, scale_ratio_std : float
+            Ground travel per encoder travel and its standard deviation
+            (:attr:`ScaleMonitor.scale_ratio`, :attr:`~ScaleMonitor.scale_ratio_std`),
+            relative to ``scale_reference``.
+        yaw_ratio, yaw_ratio_std : float, optional
+            The same for turns (NaN: not estimated).
+
+        Returns
+        -------
+        RecalibrationRecord or None
+            The decision (``"adopted"`` or ``"rotation_requested"``) if this
+            estimate ended the wait; None if nothing waits or it goes on.
+        """
+        if self._scale_pending is None:
+            return None
+        if math.isfinite(scale_ratio) and scale_ratio_std <= self.max_scale_std:
+            return self._record(self._adopt_scale(float(t_s), self._scale_pending, scale_ratio,
+                                                  scale_ratio_std, yaw_ratio, yaw_ratio_std))
+        if t_s - self._scale_pending.t_s >= self.scale_settle_s:
+            return self._record(self._rotation(float(t_s), "no precise landmark scale within "
+                                                           f"{self.scale_settle_s:g} s"))
+        return None
+
+    def _scale_alarm(self, event: AlarmEvent) -> RecalibrationRecord:
+        self._scale_pending = event            # a later alarm replaces one still waiting
+        a = event.scale
+        if a is None:
+            return self._rotation(event.t_s, "the alarm carries no scale estimate")
+        if math.isfinite(a.scale_ratio) and a.scale_ratio_std <= self.max_scale_std:
+            return self._adopt_scale(event.t_s, event, a.scale_ratio, a.scale_ratio_std,
+                                     a.yaw_ratio, a.yaw_ratio_std)
+        if self.scale_settle_s <= 0.0:
+            return self._rotation(event.t_s, f"scale std {a.scale_ratio_std:.4f} > "
+                                             f"{self.max_scale_std:g}")
+        return RecalibrationRecord(
+            event.t_s, event, "waiting",
+            reason=f"scale {a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f} (need std <= "
+                   f"{self.max_scale_std:g}): waiting up to {self.scale_settle_s:g} s for the "
+                   "landmark estimate")
+
+    def _rotation(self, t_s: float, reason: str) -> RecalibrationRecord:
+        event, self._scale_pending = self._scale_pending, None
+        if self.request_rotation is None:
+            return RecalibrationRecord(t_s, event, "kept_old",
+                                       reason=reason + "; no request_rotation callback")
+        self.request_rotation(event)
+        return RecalibrationRecord(t_s, event, "rotation_requested", reason=reason)
+
+    def _adopt_scale(self, t_s: float, event: AlarmEvent, ratio: float, ratio_std: float,
+                     yaw: float, yaw_std: float) -> RecalibrationRecord:
+        m_ref, b_ref = self.scale_reference
+        with_yaw = math.isfinite(yaw) and yaw > 0 and yaw_std <= self.max_scale_std
+        m_new = m_ref * ratio
+        b_new = b_ref * ratio / yaw if with_yaw else b_ref     # fusion.monitoring.rescale eq. 1
+        old = self.model
+        s = output_scaling(old, m_per_tick=m_new, wheel_base_m=b_new)
+        self.model = rescaled_model(old, m_per_tick=m_new, wheel_base_m=b_new)
+        self._buf = deque(((t, u, y * s) for t, u, y in self._buf), maxlen=self._buf.maxlen)
+        self._scale_pending = None
+        saved = None if self.save_path is None else str(self.model.save(self.save_path))
+        yaw_note = (f", yaw {yaw:.4f} +- {yaw_std:.4f}" if with_yaw
+                    else ", yaw not precise: wheel base kept")
+        return RecalibrationRecord(
+            t_s, event, "adopted", reason=f"landmark scale {ratio:.4f} +- {ratio_std:.4f}"
+            + yaw_note, saved_to=saved, m_per_tick=(float(old.m_per_tick), m_new),
+            wheel_base_m=(old.wheel_base_m, b_new))
+
+    def _segments(self, onset_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Contiguous runs of buffered ``(u, y)`` since ``onset_s`` (split at time gaps)."""
+        rows = [(t, u, y) for t, u, y in self._buf if t >= onset_s]
+        runs: list[list[tuple[float, np.ndarray, np.ndarray]]] = []
+        for row in rows:
+            if not runs or row[0] - runs[-1][-1][0] > 1.5 * self.model.dt_s:
+                runs.append([])
+            runs[-1].append(row)
+        return [(np.stack([r[1] for r in run]), np.stack([r[2] for r in run])) for run in runs]
+
+    def _wait(self, event: AlarmEvent, t_s: float, n: int, reason: str) -> RecalibrationRecord:
+        self._pending = event
+        self._next_try = self._n_added + self.retry_samples
+        if self.request_excitation is not None and not self._excitation_asked:
+            self._excitation_asked = True
+            self.request_excitation(event)
+        return RecalibrationRecord(t_s, event, "waiting", n, reason=reason)
+
+    def _refit(self, event: AlarmEvent, t_s: float) -> RecalibrationRecord:
+        # the shortest run fit_arx can use: the longest regressor of the grid, and some more
+        shortest = 10 * (max(self.orders) + max(self.delays) + 1)
+        runs = [r for r in self._segments(event.onset_s) if len(r[0]) >= shortest]
+        n = sum(len(r[0]) for r in runs)
+        if n < self.min_samples:
+            return self._wait(event, t_s, n,
+                              f"{n} samples since the onset, need {self.min_samples}")
+        n_val = max(shortest, round(self.validation_fraction * n))
+        u_last, y_last = runs[-1]
+        if len(u_last) - n_val < shortest:            # the newest run is all validation
+            train, val = runs[:-1], [runs[-1]]
+        else:
+            train = [*runs[:-1], (u_last[:-n_val], y_last[:-n_val])]
+            val = [(u_last[-n_val:], y_last[-n_val:])]
+        if not train:
+            return self._wait(event, t_s, n, "one short run since the onset: nothing to train on")
+        try:
+            new = fit_arx(train, dt_s=self.model.dt_s, wheel_base_m=self.model.wheel_base_m,
+                          orders=self.orders, delays=self.delays,
+                          m_per_tick=self.model.m_per_tick, floor=self.model.floor,
+                          dc_gain=self.dc_gain)
+        except CalibrationError as exc:      # not excited enough, too short, unstable
+            return self._wait(event, t_s, n, str(exc))
+        self._pending = None
+        self._excitation_asked = False
+        before = self.model.fit_percent(val)
+        after = new.fit_percent(val)
+        fits = (float(before[0]), float(before[1])), (float(after[0]), float(after[1]))
+        gain = float(np.mean(after) - np.mean(before))
+        if not (math.isfinite(gain) and gain >= self.min_gain_pp):
+            return RecalibrationRecord(t_s, event, "kept_old", n, *fits,
+                                       reason=f"held-out fit gain {gain:.2f} pp")
+        self.model = new
+        saved = None if self.save_path is None else str(new.save(self.save_path))
+        return RecalibrationRecord(t_s, event, "adopted", n, *fits,
+                                   reason=f"held-out fit gain {gain:.2f} pp", saved_to=saved)

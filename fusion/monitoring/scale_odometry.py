@@ -1,0 +1,193 @@
+"""Landmark-aided encoder odometry with scale states, as pure functions batched over filters.
+
+The filter of :mod:`fusion.monitoring.scale`: per row ``i`` of a batch (robots,
+and alternative hypotheses of the same robot) an extended Kalman filter with
+state::
+
+    x = (x, y, theta, k_v, k_w)
+
+the pose (m, m, rad; heading continuous) and the relative scale errors of the
+ground travel and turn against the encoders' (odometry auto-calibration,
+Larsen et al. 1998; the scale states of :mod:`fusion.ekf.functions`). One
+period with count changes ``(d_l, d_r)`` [ticks]::
+
+    ds = m_per_tick (d_l + d_r) / 2,   dtheta = m_per_tick (d_r - d_l) / b
+    g = ((1 + k_v) ds, (1 + k_w) dtheta) + eta                             (eq. 1)
+    pose' = pose_step(pose, g)                                             (paper eq. 11)
+    k' = k + w,  w ~ N(0, diag(q_c))
+
+``eta`` is the slip noise (:class:`~fusion.ekf.functions.SlipNoise`, per
+period). With ``F_p``, ``F_s`` the Jacobians of the pose step with respect to
+the pose and to ``g`` (:func:`lti_motion.kinematics.pose_step_jacobians`)::
+
+    F = [[F_p, F_s diag(ds, dtheta)],     Q = [[F_s diag(sigma^2) F_s^T, 0],
+         [0,   I                   ]]          [0,                       diag(q_c)]]
+
+Landmark sightings ``(r, b)`` update the pose with the range-bearing model
+(Thrun, Burgard & Fox 2005, table 7.2; :mod:`fusion.landmark_map`), gated on
+the NIS, in Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18).
+
+References
+----------
+Larsen, T. D., Bak, M., Andersen, N. A., Ravn, O. (1998). Location
+estimation for an autonomously guided vehicle using an augmented Kalman
+filter to autocalibrate the odometry. FUSION 1998.
+Thrun, S., Burgard, W., Fox, D. (2005). Probabilistic Robotics, table 7.2.
+Bar-Shalom, Y., Li, X. R., Kirubarajan, T. (2001). Estimation with
+Applications to Tracking and Navigation, eq. 5.2.3-18.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusion.noise import LandmarkNoise, SlipNoise
+from fusion.range_bearing import MIN_RANGE_M
+from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
+
+__all__ = [
+    "KV",
+    "KW",
+    "landmark_update",
+    "odometry_predict",
+    "range_bearing_batch",
+]
+
+#: State indices of the scale errors ``k_v`` (travel) and ``k_w`` (turn).
+KV, KW = 3, 4
+
+
+def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
+                     m_per_tick: float, wheel_base_m: float, dt_s: float, slip: SlipNoise,
+                     walk_var: np.ndarray, missing_std: tuple[float, float]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """One period of encoder travel for every row (module eq. 1, paper eq. 11).
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, 5)
+        States.
+    P : ndarray, shape (n, 5, 5)
+        Covariances.
+    tick_deltas : ndarray, shape (n, 2)
+        Count changes of (left, right) [ticks]; a row with NaN is a period of
+        unknown travel: no motion, with speed noise ``missing_std``.
+    m_per_tick, wheel_base_m, dt_s : float
+        Encoder scale [m/tick], wheel base [m], period [s].
+    slip : SlipNoise
+        Ground-versus-encoder speed noise.
+    walk_var : ndarray, shape (2,)
+        Random-walk variances of ``(k_v, k_w)`` per period.
+    missing_std : tuple of 2 float
+        Speed and turn-rate standard deviations of a missing period [m/s, rad/s].
+
+    Returns
+    -------
+    x, P : ndarray
+        The predicted states and covariances (new arrays).
+    """
+    missing = ~np.all(np.isfinite(tick_deltas), axis=1)
+    d = np.where(missing[:, None], 0.0, tick_deltas)
+    ds = m_per_tick * 0.5 * (d[:, 0] + d[:, 1])                   # [m]
+    dth = m_per_tick * (d[:, 1] - d[:, 0]) / wheel_base_m         # [rad]
+    gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth
+    f_pose, f_speed = pose_step_jacobians(x[:, :3], gs, gth, 1.0)
+    x_new = x.copy()
+    x_new[:, :3] = pose_step(x[:, :3], gs, gth, 1.0)
+    F = np.zeros_like(P)
+    F[:, :3, :3] = f_pose
+    F[:, :3, KV] = f_speed[:, :, 0] * ds[:, None]                 # d pose / d k_v
+    F[:, :3, KW] = f_speed[:, :, 1] * dth[:, None]
+    F[:, KV, KV] = F[:, KW, KW] = 1.0
+    sv, sw = slip.stds(ds / dt_s, dth / dt_s)                     # [m/s], [rad/s]
+    sv = np.where(missing, missing_std[0], sv) * dt_s
+    sw = np.where(missing, missing_std[1], sw) * dt_s
+    f_noise = f_speed * np.stack([sv, sw], axis=1)[:, None, :]
+    P_new = F @ P @ F.transpose(0, 2, 1)
+    P_new[:, :3, :3] += f_noise @ f_noise.transpose(0, 2, 1)
+    P_new[:, KV, KV] += walk_var[0]
+    P_new[:, KW, KW] += walk_var[1]
+    return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
+
+
+def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~fusion.landmark_map.range_bearing` and its Jacobian, batched over rows.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n, >= 3)
+        States, the pose first.
+    landmark_xy : ndarray, shape (n, 2)
+        Landmark of each row [m].
+
+    Returns
+    -------
+    pred : ndarray, shape (n, 2)
+        ``(r [m], b [rad])``, ``b`` wrapped.
+    H : ndarray, shape (n, 2, 5)
+        Pose columns ``[[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]`` (Thrun et
+        al. 2005, table 7.2), zeros for the scales. Ranges are floored at
+        :data:`~fusion.landmark_map.MIN_RANGE_M`.
+
+    Examples
+    --------
+    >>> pred, H = range_bearing_batch(np.zeros((1, 5)), np.array([[2.0, 0.0]]))
+    >>> pred.tolist(), H[0, :, :3].tolist()
+    ([[2.0, 0.0]], [[-1.0, -0.0, 0.0], [0.0, -0.5, -1.0]])
+    """
+    dx, dy = landmark_xy[:, 0] - x[:, 0], landmark_xy[:, 1] - x[:, 1]
+    q = np.maximum(dx * dx + dy * dy, MIN_RANGE_M ** 2)
+    r = np.sqrt(q)
+    pred = np.stack([r, wrap_angle(np.arctan2(dy, dx) - x[:, 2])], axis=1)
+    H = np.zeros((len(x), 2, 5))
+    H[:, 0, 0], H[:, 0, 1] = -dx / r, -dy / r
+    H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = dy / q, -dx / q, -1.0
+    return pred, H
+
+
+def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
+                    range_bearing: np.ndarray, noise: LandmarkNoise, gate: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Range-bearing updates of every row, gated on the NIS, Joseph form.
+
+    Parameters
+    ----------
+    x, P : ndarray, shapes (n, 5) and (n, 5, 5)
+        States and covariances.
+    landmark_xy : ndarray, shape (n, 2)
+        The sighted landmark of each row [m].
+    range_bearing : ndarray, shape (n, 2)
+        Sightings ``(r [m], b [rad])``.
+    noise : LandmarkNoise
+        The sensor's noise.
+    gate : float
+        NIS gate: rows with ``nu^T S^-1 nu`` above it are not fused.
+
+    Returns
+    -------
+    x, P : ndarray
+        Updated states and covariances (new arrays; gated rows unchanged).
+    accepted : ndarray of bool, shape (n,)
+    log_likelihood : ndarray, shape (n,)
+        ``-0.5 (min(nis, gate) + ln det S)``: ``ln N(nu; 0, S)`` without the
+        ``2 pi`` constant, the NIS clipped at the gate.
+    """
+    pred, H = range_bearing_batch(x, landmark_xy)
+    nu = range_bearing - pred
+    nu[:, 1] = wrap_angle(nu[:, 1])
+    R = np.zeros((len(x), 2, 2))
+    R[:, 0, 0] = np.maximum(noise.range_std_m, noise.range_std_frac * pred[:, 0]) ** 2
+    R[:, 1, 1] = noise.bearing_std_rad ** 2                       # LandmarkNoise.cov
+    PHt = P @ H.transpose(0, 2, 1)
+    S = H @ PHt + R
+    Si = np.linalg.inv(S)
+    nis = np.einsum("ni,nij,nj->n", nu, Si, nu)
+    ok = nis <= gate
+    K = PHt @ Si
+    IKH = np.eye(5) - K @ H
+    P_post = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)  # eq. 5.2.3-18
+    x_new, P_new = x.copy(), P.copy()
+    x_new[ok] = x[ok] + np.einsum("nij,nj->ni", K[ok], nu[ok])
+    P_new[ok] = 0.5 * (P_post[ok] + P_post[ok].transpose(0, 2, 1))
+    return x_new, P_new, ok, -0.5 * (np.minimum(nis, gate) + np.linalg.slogdet(S)[1])

@@ -1,0 +1,197 @@
+"""Noise types and chi-square tests that every estimator wing shares.
+
+- :class:`SlipNoise`: white ground-versus-encoder speed noise (the EKF's and the
+  graph's slip model).
+- :class:`ScaleErrors`: prior and random walk of the relative scale errors
+  ``(k_v, k_w)`` of ground against encoder speeds.
+- :class:`LandmarkNoise`: standard deviations of a range-bearing sensor.
+- :func:`nis`, :func:`inverse_covariance`, :func:`gate_threshold`: the
+  normalised innovation squared and its chi-square gate (Bar-Shalom, Li &
+  Kirubarajan 2001, section 5.4.2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from fusion.exceptions import FilterOptionError
+
+__all__ = [
+    "LandmarkNoise",
+    "ScaleErrors",
+    "SlipNoise",
+    "gate_threshold",
+    "inverse_covariance",
+    "nis",
+]
+
+
+@dataclass(frozen=True)
+class SlipNoise:
+    """White noise between encoder speeds and ground speeds, per sensor period.
+
+    ``sigma_v = v_floor_m_s + v_frac |v|`` [m/s] and
+    ``sigma_w = w_floor_rad_s + w_frac |w| + w_per_v_rad_m |v|`` [rad/s].
+
+    Attributes
+    ----------
+    v_frac, w_frac : float
+        Relative slip of the linear speed and of the yaw rate.
+    w_per_v_rad_m : float
+        Yaw-rate noise per metre per second of travel [rad/m]: uneven floor
+        and traction. On the simulator's hard floor, ground minus encoder yaw
+        rate averaged over 1 s scatters by 0.0013 rad/s at 0.2 m/s, i.e.
+        0.011 rad/s per 15 ms period.
+    v_floor_m_s, w_floor_rad_s : float
+        Floors [m/s], [rad/s].
+
+    Raises
+    ------
+    FilterOptionError
+        If a value is negative or not finite.
+    """
+
+    v_frac: float = 0.01
+    w_frac: float = 0.01
+    w_per_v_rad_m: float = 0.05
+    v_floor_m_s: float = 1e-4
+    w_floor_rad_s: float = 1e-3
+
+    def __post_init__(self) -> None:
+        values = (self.v_frac, self.w_frac, self.w_per_v_rad_m, self.v_floor_m_s,
+                  self.w_floor_rad_s)
+        if not all(math.isfinite(v) and v >= 0 for v in values):
+            raise FilterOptionError(f"SlipNoise needs finite, non-negative values, got {self}")
+
+    def stds(self, v_m_s: float, w_rad_s: float) -> tuple[float, float]:
+        """``(sigma_v [m/s], sigma_w [rad/s])`` at body speeds ``(v, w)``."""
+        av = abs(v_m_s)
+        return (self.v_floor_m_s + self.v_frac * av,
+                self.w_floor_rad_s + self.w_frac * abs(w_rad_s) + self.w_per_v_rad_m * av)
+
+
+@dataclass(frozen=True)
+class ScaleErrors:
+    """Relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, as random walks.
+
+    Attributes
+    ----------
+    prior_std : tuple of 2 float
+        Start standard deviations of ``(k_v, k_w)``: the encoder scale from
+        three turns is within 1% (``docs/calibration.md``).
+    walk_per_sqrt_s : tuple of 2 float
+        Random-walk rates [1/sqrt(s)]: how fast the scales may wander
+        (floor, load, tyre wear); 1e-4 is 0.1% in 100 s.
+
+    Raises
+    ------
+    FilterOptionError
+        If a value is negative or not finite, or a prior is zero.
+    """
+
+    prior_std: tuple[float, float] = (0.01, 0.01)
+    walk_per_sqrt_s: tuple[float, float] = (1e-4, 1e-4)
+
+    def __post_init__(self) -> None:
+        values = (*self.prior_std, *self.walk_per_sqrt_s)
+        if len(values) != 4 or not all(math.isfinite(v) and v >= 0 for v in values) or \
+                min(self.prior_std) <= 0:
+            raise FilterOptionError(f"ScaleErrors needs positive priors and non-negative walk "
+                                    f"rates, two of each, got {self}")
+
+
+def nis(innovation: np.ndarray, SI: np.ndarray) -> float:
+    """Normalised innovation squared ``nu^T S^-1 nu`` (Bar-Shalom et al. 2001, section 5.4.2)."""
+    if len(innovation) == 2:
+        (a, b), (c, d) = SI.tolist()
+        n0, n1 = innovation.tolist()
+        return a * n0 * n0 + (b + c) * n0 * n1 + d * n1 * n1
+    return float(innovation @ SI @ innovation)
+
+
+def inverse_covariance(S: np.ndarray) -> np.ndarray:
+    """``S^-1`` of an innovation covariance (closed form for 2 x 2), shape (m, m).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If ``S`` is singular.
+
+    Examples
+    --------
+    >>> inverse_covariance(np.array([[4.0, 1.0], [1.0, 0.5]])).tolist()
+    [[0.5, -1.0], [-1.0, 4.0]]
+    """
+    if S.shape == (2, 2):
+        (a, b), (c, d) = S.tolist()
+        det = a * d - b * c
+        if det > 0.0 and math.isfinite(det):
+            f = 1.0 / det
+            return np.array(((d * f, -b * f), (-c * f, a * f)))
+    return np.linalg.inv(S)
+
+
+def gate_threshold(probability: float, dof: int) -> float:
+    """Chi-square gate: the ``probability`` quantile with ``dof`` degrees of freedom.
+
+    Raises
+    ------
+    FilterOptionError
+        If ``probability`` is not in (0, 1).
+
+    Examples
+    --------
+    >>> round(gate_threshold(0.999, 2), 3)
+    13.816
+    """
+    if not 0.0 < probability < 1.0:
+        raise FilterOptionError(f"gate probability must be in (0, 1), got {probability}")
+    return float(chi2.ppf(probability, dof))
+
+
+@dataclass(frozen=True)
+class LandmarkNoise:
+    """Standard deviations of a range-bearing sensor.
+
+    Attributes
+    ----------
+    range_std_frac : float
+        Range noise as a fraction of the range (0.02 = 2%).
+    range_std_m : float
+        Floor of the range noise [m]; the standard deviation is
+        ``max(range_std_m, range_std_frac * r)``.
+    bearing_std_rad : float
+        Bearing noise [rad].
+
+    Raises
+    ------
+    FilterOptionError
+        If a value is negative or not finite, or the range noise is zero.
+
+    Examples
+    --------
+    >>> LandmarkNoise(range_std_frac=0.02, bearing_std_rad=0.01).cov(2.0).round(8).tolist()
+    [[0.0016, 0.0], [0.0, 0.0001]]
+    """
+
+    range_std_frac: float = 0.02
+    range_std_m: float = 0.005
+    bearing_std_rad: float = math.radians(1.0)
+
+    def __post_init__(self) -> None:
+        values = (self.range_std_frac, self.range_std_m, self.bearing_std_rad)
+        if not all(math.isfinite(v) and v >= 0 for v in values):
+            raise FilterOptionError(f"LandmarkNoise needs finite, non-negative values, got {self}")
+        if self.range_std_m == 0 and self.range_std_frac == 0:
+            raise FilterOptionError("LandmarkNoise needs range_std_m > 0 or range_std_frac > 0")
+        if self.bearing_std_rad == 0:
+            raise FilterOptionError("LandmarkNoise needs bearing_std_rad > 0")
+
+    def cov(self, range_m: float) -> np.ndarray:
+        """Measurement covariance ``diag(sigma_r^2, sigma_b^2)`` at a range [m, rad]^2, (2, 2)."""
+        sr = max(self.range_std_m, self.range_std_frac * abs(range_m))
+        return np.array([[sr * sr, 0.0], [0.0, self.bearing_std_rad ** 2]])

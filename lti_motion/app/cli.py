@@ -1,0 +1,325 @@
+"""The ``lti-motion`` command line (the application layer: wires core, drivers and fusion).
+
+Sub-commands
+------------
+demo
+    Calibrate on the simulator as the paper does, then its route evaluation
+    (Table II) for every estimator; writes a report folder.
+calibrate
+    Run the calibration manoeuvres on the simulator or a real robot, fit the
+    encoder scale, FIR and ARX models, save them and their plots.
+replay
+    Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
+    there is ground truth, TUM trajectories for ``evo``, plots.
+monitor
+    Drive the simulator or a robot (or listen), run the EKF with the residual
+    monitor, print alarms as they happen and a summary.
+virtual-roomba
+    A simulated Roomba behind the Open Interface on a pseudo-terminal.
+
+This module and the experiment runners are the only part of ``lti_motion``
+allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from drivers.sim.calibration import (
+        calibrate_simulator,
+        print_progress,
+        summarize,
+    )
+    from lti_motion.app.plots import plot_calibration
+    from lti_motion.calibration import CalibrationPlan, calibrate
+
+    plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
+    out = Path(args.out)
+    if args.sim:
+        print(f"calibrating the simulated {args.sim} robot on {args.floor} floor "
+              f"(seed {args.seed})")
+        cal = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor, plan=plan,
+                                  progress=print_progress)
+    else:
+        from drivers.roomba.driver import Roomba
+
+        def before_stage(stage: str) -> None:
+            where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
+                     "steps": "on open floor, 2 m clear all round",
+                     "excitation": "on open floor, 2 m clear all round"}[stage]
+            print(f"next: {stage}. Put the robot {where}.")
+            if not args.yes:
+                input("press Enter when it is there (Ctrl-C stops the robot) ")
+
+        print(f"calibrating the robot on {args.port} at {args.baud} baud")
+        with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan, floor=args.floor,
+                            progress=print_progress, before_stage=before_stage)
+    from lti_motion.logfile import save_log
+
+    out.mkdir(parents=True, exist_ok=True)
+    cal.arx.save(out / "model_arx.json")
+    cal.fir.save(out / "model_fir.json")
+    logs = [save_log(out / f"log_{stage}.npz", log) for stage, log in cal.logs.items()]
+    plots = plot_calibration(cal, out)
+    for line in summarize(cal):
+        print(line)
+    print(f"wrote {out / 'model_arx.json'}, {out / 'model_fir.json'}, "
+          f"{', '.join(p.name for p in plots)} and the drives {', '.join(p.name for p in logs)}")
+    return 0
+
+
+def _load_model(path: str):
+    from lti_motion.model import MotionModel
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"no model file {path}; make one with 'lti-motion calibrate'")
+    return MotionModel.load(path)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from lti_motion.app.replay import fit_mrclam_model, run_replay
+
+    start_s = args.start_s
+    if args.model is not None:
+        model = _load_model(args.model)
+    elif args.fit_first_half:
+        if not Path(args.source).is_dir():
+            raise ValueError("--fit-first-half works on an MRCLAM data set folder; for a log "
+                             "give --model FILE")
+        robot = 1 if args.robot is None else args.robot
+        model, half_s = fit_mrclam_model(args.source, robot=robot)
+        start_s = max(start_s, half_s)
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        print(f"calibrated an ARX model of robot {robot} on the first half of its run: "
+              f"order {model.orders['na']}, delay {model.orders['delay']}; saved to "
+              f"{model.save(Path(args.out) / 'model_arx.json')}; replaying from "
+              f"{start_s:.1f} s (the second half)")
+    else:
+        raise ValueError("give --model FILE (from 'lti-motion calibrate'), or "
+                         "--fit-first-half for an MRCLAM data set")
+    run_replay(args.source, model, args.out, estimators=args.estimators, robot=args.robot,
+               start_s=start_s, duration_s=args.duration_s, initial_pose=args.initial_pose,
+               rpe_s=args.rpe_s)
+    return 0
+
+
+def _cmd_monitor(args: argparse.Namespace) -> int:
+    from lti_motion.app import monitor as live_monitor
+
+    if args.fault and not args.sim:
+        raise ValueError("--fault injects a simulator fault; it needs --sim")
+    if args.listen and args.sim:
+        raise ValueError("--listen reads a robot's stream; it needs --port")
+    if args.nominal and args.sim:
+        raise ValueError("--nominal reads logs of a robot's nominal drives; it needs --port "
+                         "(--sim drives --nominal-drives itself)")
+    if args.model is not None:
+        model = _load_model(args.model)
+    elif args.sim:
+        from drivers.sim.calibration import calibrate_simulator, print_progress
+        from lti_motion.calibration import CalibrationPlan
+
+        print(f"no --model: calibrating the simulated {args.sim} robot first "
+              f"({args.excitation_s:g} s of excitation, seed {args.seed})")
+        model = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor,
+                                    plan=CalibrationPlan(seed=args.seed,
+                                                         excitation_s=args.excitation_s),
+                                    progress=print_progress).arx
+    else:
+        raise ValueError("monitor --port needs --model FILE: calibrate the robot first with "
+                         f"'lti-motion calibrate --port {args.port}'")
+    if args.sim:
+        live_monitor.run_on_simulator(model, preset=args.sim, duration_s=args.duration,
+                                      seed=args.seed, floor=args.floor, fault=args.fault,
+                                      fault_at_s=args.fault_at, record=args.record,
+                                      nominal_drives=args.nominal_drives)
+    else:
+        from drivers.exceptions import PassiveModeError
+
+        try:
+            live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
+                                     clock_rate=args.clock_rate, listen=args.listen,
+                                     seed=args.seed, record=args.record,
+                                     nominal_logs=args.nominal or ())
+        except PassiveModeError as exc:
+            raise OSError(str(exc)) from exc
+    return 0
+
+
+def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
+    from drivers.roomba.virtual import serve
+
+    try:
+        serve(preset=args.preset, seed=args.seed, speed=args.speed, floor=args.floor,
+              duration_s=args.duration)
+    except KeyboardInterrupt:
+        print("\nvirtual Roomba stopped")
+    return 0
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from lti_motion.app.demo import run_demo
+
+    run_demo(Path(args.out), seed=args.seed, preset=args.preset, floor=args.floor,
+             runs=args.runs, excitation_s=args.excitation_s)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``lti-motion``."""
+    parser = argparse.ArgumentParser(
+        prog="lti-motion",
+        description="Self-calibrating LTI motion models for differential-drive robots.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = parser.add_subparsers(dest="command", required=True)
+    demo = sub.add_parser("demo", help="run the main job on the simulator",
+                          description="Calibrate the simulated robot as the paper does, "
+                                      "then drive the paper's closed route with every "
+                                      "estimator; writes report.md, metrics.json and plots.")
+    demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
+    demo.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
+    demo.add_argument("--preset", default="create2", choices=["create2", "paper"],
+                      help="robot preset (default: create2)")
+    demo.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"],
+                      help="floor (default: hard)")
+    demo.add_argument("--runs", type=int, default=30, help="route runs per estimator (30)")
+    demo.add_argument("--excitation-s", type=float, default=180.0,
+                      help="length of the calibration's random excitation [s] (180)")
+    demo.set_defaults(func=_cmd_demo)
+
+    cal = sub.add_parser(
+        "calibrate", help="calibrate the encoder scale, FIR and ARX models by driving",
+        description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
+                    "random excitation) on the simulator or a robot, fits the models, and "
+                    "writes model_arx.json, model_fir.json and plots.")
+    where = cal.add_mutually_exclusive_group(required=True)
+    where.add_argument("--sim", choices=["create2", "paper"], help="calibrate the simulator")
+    where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    cal.add_argument("--clock-rate", type=float, default=1.0,
+                     help="robot seconds per wall second: 1 for a real robot, the --speed "
+                          "of a faster virtual Roomba")
+    cal.add_argument("--wheel-base", type=float, default=0.235,
+                     help="nominal wheel base [m] (default 0.235, the Create 2)")
+    cal.add_argument("--floor", default="hard", help="floor name recorded in the model "
+                     "(and simulated with --sim: hard, tile, carpet)")
+    cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
+    cal.add_argument("--excitation-s", type=float, default=180.0,
+                     help="length of the random excitation [s] (default 180)")
+    cal.add_argument("--out", default="out/calibration", help="output folder")
+    cal.add_argument("--yes", action="store_true",
+                     help="do not wait for Enter between manoeuvres (robot already placed)")
+    cal.set_defaults(func=_cmd_calibrate)
+
+    rp = sub.add_parser(
+        "replay", help="run the estimators on a recorded log or an MRCLAM robot",
+        description="Runs the estimators (encoder odometry, commands, the model sensor-less, "
+                    "the model's EKF with encoders, and with landmarks where there are "
+                    "sightings) on an lti-motion log (.npz, docs/log_format.md) or an MRCLAM "
+                    "data set folder; prints ATE / RPE where there is ground truth; writes one "
+                    "TUM trajectory per estimator (and groundtruth.tum) for evo, "
+                    "metrics.json and plots. See docs/replay.md.")
+    rp.add_argument("source", metavar="LOG_OR_DATASET",
+                    help="an .npz log, or an MRCLAM_Dataset folder")
+    rp.add_argument("--model", help="model file from 'lti-motion calibrate' (model_arx.json)")
+    rp.add_argument("--fit-first-half", action="store_true",
+                    help="MRCLAM only, instead of --model: fit an ARX model on the first half "
+                         "of the robot's run and replay the second half")
+    rp.add_argument("--robot", type=int, default=None,
+                    help="MRCLAM robot number 1-5 (default 1), or robot index of a batch log "
+                         "(default 0)")
+    rp.add_argument("--out", default="out/replay", help="output folder (default out/replay)")
+    rp.add_argument("--estimators", nargs="+", metavar="NAME",
+                    choices=["odometry", "commands", "sensorless", "ekf", "ekf_landmarks"],
+                    help="which to run: odometry commands sensorless ekf ekf_landmarks "
+                         "(default: every one the recording can feed)")
+    rp.add_argument("--start-s", type=float, default=0.0,
+                    help="skip this much of the recording [s] (default 0)")
+    rp.add_argument("--duration-s", type=float, default=None,
+                    help="replay only this long [s] (default: to the end)")
+    rp.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"),
+                    help="start pose [m m rad] (default: the first ground-truth pose, else 0 0 0)")
+    rp.add_argument("--rpe-s", type=float, default=1.0, help="RPE step [s] (default 1)")
+    rp.set_defaults(func=_cmd_replay)
+
+    mo = sub.add_parser(
+        "monitor", help="drive (or listen), run the EKF and the residual monitor, print alarms",
+        description="Drives a rounded-rectangle route with speed changes (the simulator or a "
+                    "robot; --listen only reads a robot), runs the model's EKF on the encoders "
+                    "with the residual monitor (gate and glitch bursts, stuck encoder, dynamics "
+                    "tests after a Phase-I fit on nominal drives, and on --sim the landmark "
+                    "scale test), and prints each alarm as it is raised (time, "
+                    "kind, test, statistic > threshold, onset) and a summary. Without --model, "
+                    "--sim calibrates the simulated robot first; --port needs --model. See "
+                    "docs/guide_alarms.md.")
+    mwhere = mo.add_mutually_exclusive_group(required=True)
+    mwhere.add_argument("--sim", choices=["create2", "paper"], help="monitor the simulator")
+    mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
+    mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
+    mo.add_argument("--duration", type=float, default=30.0,
+                    help="robot seconds to drive or listen (default 30)")
+    mo.add_argument("--fault", choices=["stuck-encoder", "spikes", "payload", "motor", "delay",
+                                        "carpet"],
+                    help="--sim only: inject this simulator fault")
+    mo.add_argument("--nominal-drives", type=int, default=20,
+                    help="--sim: nominal drives of the same length first, for the dynamics "
+                         "null and the encoder gate (default 20; 0: dynamics tests off)")
+    mo.add_argument("--nominal", nargs="+", metavar="LOG.npz",
+                    help="--port: logs of nominal drives (--record) for the dynamics null and "
+                         "the encoder gate (without: dynamics tests off)")
+    mo.add_argument("--fault-at", type=float, default=None,
+                    help="onset of --fault [s] (default: half the duration)")
+    mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")
+    mo.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"],
+                    help="simulated floor (default hard)")
+    mo.add_argument("--excitation-s", type=float, default=60.0,
+                    help="--sim without --model: calibration excitation [s] (default 60)")
+    mo.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    mo.add_argument("--clock-rate", type=float, default=1.0,
+                    help="robot seconds per wall second (the --speed of a virtual Roomba)")
+    mo.add_argument("--listen", action="store_true",
+                    help="--port only: send no wheel command, only read the stream")
+    mo.add_argument("--record", metavar="FILE.npz",
+                    help="also write the frames as a log that 'lti-motion replay' reads")
+    mo.set_defaults(func=_cmd_monitor)
+
+    vr = sub.add_parser(
+        "virtual-roomba", help="a simulated Roomba on a pseudo-terminal",
+        description="Starts the simulator behind the Roomba Open Interface on a "
+                    "pseudo-terminal and prints its device path; connect with "
+                    "'lti-motion calibrate --port PATH'. Ctrl-C stops it.")
+    vr.add_argument("--preset", default="create2", choices=["create2", "paper"])
+    vr.add_argument("--seed", type=int, default=0)
+    vr.add_argument("--speed", type=float, default=1.0,
+                    help="simulated seconds per wall-clock second (default 1: real time)")
+    vr.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"])
+    vr.add_argument("--duration", type=float, default=None,
+                    help="stop after this many wall-clock seconds (default: run until Ctrl-C)")
+    vr.set_defaults(func=_cmd_virtual_roomba)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``lti-motion`` console script."""
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except (ValueError, OSError) as exc:
+        print(f"lti-motion {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

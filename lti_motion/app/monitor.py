@@ -1,0 +1,438 @@
+"""``lti-motion monitor``: drive (or listen), run the EKF and the residual monitor, print alarms.
+
+Per frame, as ``docs/monitor.md`` shows: predict the period with the wheel
+command, give the stuck-encoder check the count changes and the predicted
+wheel speeds, fuse the encoder counts and give the monitor the update
+record (per-sample gate, glitch bursts); with a Phase-I fit
+(:class:`~lti_motion.app.monitor_setup.NominalFit`), give the
+dynamics tests (:class:`~fusion.monitoring.DynamicsMonitor`) the
+command and the count changes; with landmarks, give the scale test
+(:class:`~fusion.monitoring.ScaleMonitor`) the count changes and the
+frame's sightings. Alarms are printed as they are raised; a summary follows
+at the end.
+
+Phase I (:func:`~lti_motion.app.monitor_setup.fit_nominal`): the
+dynamics null and the encoder gate come from nominal drives of the same
+route. ``--sim`` drives them first (``nominal_drives`` simulated drives of the
+same length, other seeds, no fault); ``--port`` reads them from logs the
+command recorded on nominal drives (``--record``). Without them the dynamics
+tests are off and the windowed NIS and CUSUM on the encoder innovations run
+instead (they cry wolf, ``docs/guide_alarms.md``). The scale test runs on
+``--sim`` only, with a simulated landmark sensor
+(:data:`~lti_motion.app.monitor_setup.MONITOR_LANDMARKS`, 2 Hz).
+
+The drive (:func:`monitor_route`) is open loop: 1 s at rest, then a rounded
+rectangle (straights at changing speeds, 90 degree arcs of 0.4 m radius) with
+both wheel commands positive, so the encoders never count a reversal.
+On the simulator, scheduled faults (:data:`FAULTS`) can be injected. The
+filter and the monitor read only what a robot reports.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.landmark_map import LandmarkMap
+from fusion.monitoring.dynamics import DynamicsMonitor
+from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.monitoring.scale import ScaleMonitor
+from lti_motion.app.monitor_setup import (
+    MONITOR_LANDMARKS,
+    NominalFit,
+    monitor_route,
+    nominal_from_logs,
+    nominal_on_simulator,
+    sightings,
+)
+from lti_motion.frames import SensorFrame
+from lti_motion.model import MotionModel
+from lti_motion.odometry import tick_deltas
+
+__all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames",
+           "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
+           "run_on_simulator"]
+
+#: ``--fault`` choices -> (simulator fault kind, its parameters, the alarm expected).
+FAULTS: dict[str, tuple[str, dict, str | None]] = {
+    "stuck-encoder": ("stuck_encoder", {"wheel": "left"}, "stuck_encoder"),
+    "spikes": ("encoder_spikes", {"rate_hz": 20.0, "duration_s": 1.0}, "glitch_burst"),
+    "payload": ("payload", {"payload_kg": 1.8}, "dynamics_changed"),
+    "motor": ("motor", {"weakening": 0.2}, "dynamics_changed"),
+    "delay": ("delay", {"extra_periods": 3.0}, "dynamics_changed"),
+    "carpet": ("floor", {"floor": "carpet"}, "scale_changed"),
+}
+
+_WHEEL = {0: "left wheel", 1: "right wheel"}
+
+
+def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
+    """The simulator :class:`~drivers.sim.config.Fault` of a ``--fault`` choice at ``t_s`` [s],
+    and the alarm kind it should raise."""
+    from drivers.sim.config import Fault
+
+    kind, params, expected = FAULTS[choice]
+    return Fault(kind, t_s=t_s, **params), expected
+
+
+def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
+    """One line a person reads: time, kind, test, statistic / threshold, onset, channel.
+
+    A scale alarm adds its new scale (ground travel and turn per encoder travel
+    and turn, with standard deviations); ``detail`` is appended (the dynamics
+    sub-test and lag).
+    """
+    where = ""
+    if event.channel is not None:
+        where = (_WHEEL.get(event.channel, f"channel {event.channel}")
+                 if event.kind == "stuck_encoder" else f"channel {event.channel}")
+    if event.scale is not None:
+        a = event.scale
+        where = (f"travel x{a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f}, turn "
+                 f"x{a.yaw_ratio:.4f} +- {a.yaw_ratio_std:.4f}")
+    tail = " ".join(part for part in (where, detail) if part)
+    return (f"ALARM t={event.t_s:8.3f} s  {event.kind:16s} test {event.test:10s} "
+            f"statistic {event.statistic:9.3g} (threshold {event.threshold:.3g})  "
+            f"onset {event.onset_s:.3f} s  {tail}").rstrip()
+
+
+@dataclass
+class MonitorRun:
+    """What a monitored drive gave.
+
+    Attributes
+    ----------
+    frames : int
+        Frames processed.
+    duration_s : float
+        Filter time covered [s].
+    events : list of AlarmEvent
+        The alarms, in time order.
+    counts : dict
+        The monitor's counts (samples, glitches, missing, skipped).
+    encoders_gated : int
+        Encoder readings the EKF's gate rejected.
+    final_pose : ndarray, shape (3,)
+        The EKF's last pose (x [m], y [m], theta [rad]) from the origin.
+    tests : list of str
+        What ran, one line each (gate, dynamics, scale).
+    """
+
+    frames: int = 0
+    duration_s: float = 0.0
+    events: list[AlarmEvent] = field(default_factory=list)
+    counts: dict = field(default_factory=dict)
+    encoders_gated: int = 0
+    final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tests: list[str] = field(default_factory=list)
+
+    def summary(self) -> list[str]:
+        """Lines for the end of the command's output."""
+        by_kind = Counter(e.kind for e in self.events)
+        kinds = ", ".join(f"{k} {n}" for k, n in sorted(by_kind.items())) or "none"
+        x, y, th = self.final_pose
+        return [
+            *self.tests,
+            f"monitored {self.frames} frames ({self.duration_s:.1f} s): "
+            f"{self.counts.get('samples', 0)} encoder innovations tested, "
+            f"{self.counts.get('glitches', 0)} glitches, {self.counts.get('missing', 0)} "
+            f"missing, {self.encoders_gated} readings gated by the EKF",
+            f"alarms: {len(self.events)} ({kinds})",
+            f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {math.degrees(th):.1f} deg "
+            "(from the start)",
+        ]
+
+
+def monitor_frames(model: MotionModel,
+                   frames: Iterator[SensorFrame | tuple[SensorFrame, Sequence]], *,
+                   options: MonitorOptions | None = None, nominal: NominalFit | None = None,
+                   landmarks: LandmarkMap | None = None,
+                   on_alarm: Callable[[AlarmEvent], None] | None = None,
+                   on_alarm_line: Callable[[str], object] | None = None,
+                   on_frame: Callable[[SensorFrame], None] | None = None) -> MonitorRun:
+    """Run :class:`~fusion.ekf.ModelEKF` and :class:`~fusion.monitoring.ResidualMonitor` on frames.
+
+    Parameters
+    ----------
+    model : MotionModel
+        The calibrated model; needs ``m_per_tick``.
+    frames : iterator of SensorFrame or (SensorFrame, sightings)
+        One robot's frames in order (a driver's, a simulator's); each frame's
+        ``cmd_m_s`` is the command of the period it closes. Frames whose
+        ``valid`` is false only advance the filter. With ``landmarks``, each
+        item is a pair: the frame and its sightings ``[(id, (r [m], b [rad]))]``.
+    options : MonitorOptions, optional
+        Monitor settings (default: the model's period and, with ``nominal``,
+        its encoder gate; everything else default).
+    nominal : NominalFit, optional
+        Phase I (:func:`~lti_motion.app.monitor_setup.fit_nominal`):
+        runs the dynamics tests with its null and the gate it set. Without it
+        the encoder innovations' windowed NIS and CUSUM run instead.
+    landmarks : LandmarkMap, optional
+        Runs the scale test (the robot starts at the origin, heading 0).
+    on_alarm : callable, optional
+        Called with each alarm as it is raised.
+    on_alarm_line : callable, optional
+        Called with each alarm's line (:func:`format_alarm`, with the
+        dynamics sub-test and lag).
+    on_frame : callable, optional
+        Called with each frame (to record it, to show progress).
+
+    Returns
+    -------
+    MonitorRun
+
+    Raises
+    ------
+    ValueError
+        If the model has no encoder scale.
+    """
+    if model.m_per_tick is None:
+        raise ValueError("the model has no encoder scale (m_per_tick); the monitor needs "
+                         "one: calibrate with the rotation manoeuvre")
+    run = MonitorRun()
+    if options is None:
+        options = (nominal.options(model.dt_s) if nominal is not None
+                   else MonitorOptions(dt_s=model.dt_s))
+    dynamics = None if nominal is None else DynamicsMonitor(model, nominal.null)
+    scale = None
+    if landmarks is not None:
+        scale = ScaleMonitor(model.m_per_tick, model.wheel_base_m, landmarks,
+                             initial_pose=(0.0, 0.0, 0.0), pose_std=(0.005, 0.005, 0.005))
+
+    def relay(event: AlarmEvent) -> None:
+        if on_alarm_line is not None:
+            detail = ""
+            if event.test == "integrated" and dynamics is not None and dynamics.alarms:
+                a = dynamics.alarms[-1]
+                detail = f"({a.test} test, lag {a.lag_periods:.1f} periods)"
+            on_alarm_line(format_alarm(event, detail=detail))
+        if on_alarm is not None:
+            on_alarm(event)
+
+    mon = ResidualMonitor(options, m_per_tick=model.m_per_tick, on_alarm=relay,
+                          dynamics=dynamics, scale=scale)
+    run.tests = _test_lines(mon, nominal, landmarks)
+    half_b = 0.5 * model.wheel_base_m
+    ekf = last_ticks = None
+    for item in frames:
+        frame, seen = item if isinstance(item, tuple) else (item, ())
+        if on_frame is not None:
+            on_frame(frame)
+        run.frames += 1
+        ticks = np.asarray(frame.ticks, np.int64)
+        if ekf is None:                          # the first frame anchors the counts
+            ekf = ModelEKF(model, initial_ticks=ticks, history=0)
+            last_ticks = ticks
+            continue
+        cmd = np.asarray(frame.cmd_m_s, float)
+        ekf.predict(cmd)
+        if not bool(np.all(frame.valid)):
+            continue
+        v, w = ekf.speeds                        # predicted speeds of the period
+        deltas = tick_deltas(np.stack([last_ticks, ticks]), axis=0)[0]
+        mon.update_counts(ekf.t_s, deltas, np.array([v - w * half_b, v + w * half_b]),
+                          cmd_m_s=cmd)
+        mon.update_record(ekf.update_encoders(ticks))
+        if dynamics is not None:
+            mon.update_commands(ekf.t_s, cmd, deltas)
+        if scale is not None:
+            mon.update_landmarks(ekf.t_s, deltas, seen)
+        last_ticks = ticks
+    if ekf is not None:
+        run.duration_s = ekf.t_s
+        run.encoders_gated = ekf.stats.count("encoders", "gated")
+        run.final_pose = ekf.pose
+    run.events = list(mon.events)
+    run.counts = dict(mon.counts)
+    return run
+
+
+def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
+                landmarks: LandmarkMap | None) -> list[str]:
+    """What runs, for the summary."""
+    gate = mon.thresholds().gate
+    lines = []
+    if nominal is None:
+        lines.append(f"tests: encoder gate NIS {gate:.1f} (chi-square) with glitch bursts, "
+                     "stuck encoder, windowed NIS and CUSUM on the encoder innovations "
+                     "(no nominal drives: dynamics tests off)")
+    else:
+        lines.append(f"tests: encoder gate NIS {gate:.0f} (nominal maximum "
+                     f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
+                     f"dynamics lag and covariance CUSUMs and start test (thresholds "
+                     f"{mon.dynamics.lag_threshold:.2f}, {mon.dynamics.covariance_threshold:.1f}"
+                     f", start {mon.dynamics.start_threshold:.2f};"
+                     f" null from {nominal.n_drives} nominal drives, "
+                     f"{nominal.duration_s / 60.0:.1f} min)")
+    if landmarks is not None:
+        lines.append(f"       scale test on {len(landmarks.ids)} landmarks at 2 Hz (threshold "
+                     f"{mon.scale.threshold:.1f})")
+    return lines
+
+
+def _report(run: MonitorRun, print_fn: Callable[[str], object], *, fault: str | None,
+            fault_at_s: float | None, expected: str | None) -> None:
+    for line in run.summary():
+        print_fn(line)
+    if fault is None:
+        return
+    after = [e for e in run.events if e.t_s >= fault_at_s]
+    right = [e for e in after if e.kind == expected]
+    if right:
+        print_fn(f"injected {fault} at {fault_at_s:.2f} s: first {expected} alarm at "
+                 f"{right[0].t_s:.3f} s ({right[0].t_s - fault_at_s:.3f} s after the onset)")
+    else:
+        print_fn(f"injected {fault} at {fault_at_s:.2f} s: no {expected} alarm followed")
+
+
+def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s: float = 30.0,
+                     seed: int = 0, floor: str = "hard", fault: str | None = None,
+                     fault_at_s: float | None = None, record: str | None = None,
+                     nominal_drives: int = 20, landmarks: bool = True,
+                     print_fn: Callable[[str], object] = print) -> MonitorRun:
+    """Drive :func:`monitor_route` on the simulator, monitor it, print alarms and a summary.
+
+    Parameters
+    ----------
+    model : MotionModel
+        Calibrated model of the robot.
+    preset, floor, seed
+        Simulator settings (an empty room).
+    duration_s : float
+        Simulated drive [s].
+    fault : str, optional
+        A key of :data:`FAULTS`, scheduled at ``fault_at_s`` (default half the drive).
+    record : str, optional
+        Write the frames (with the simulator's truth) as an ``lti-motion-log`` file.
+    nominal_drives : int
+        Phase I: nominal drives of the same length first (:func:`nominal_on_simulator`);
+        0 leaves the dynamics tests off.
+    landmarks : bool
+        Simulate the landmark sensor and run the scale test.
+    print_fn : callable
+        Where the lines go.
+    """
+    from drivers.logs import Recorder
+    from drivers.sim.config import Room
+    from drivers.sim.simulator import Simulator
+
+    faults, expected = [], None
+    if fault is not None:
+        fault_at_s = 0.5 * duration_s if fault_at_s is None else fault_at_s
+        sim_fault, expected = fault_for(fault, fault_at_s)
+        faults.append(sim_fault)
+    nominal = None
+    if nominal_drives > 0:
+        print_fn(f"phase I: fitting the dynamics null and the encoder gate on {nominal_drives} "
+                 f"nominal drives of {duration_s:g} s (seeds {seed + 1000}-"
+                 f"{seed + 999 + nominal_drives}, no fault) ...")
+        nominal = nominal_on_simulator(model, preset=preset, n_drives=nominal_drives,
+                                       duration_s=duration_s, seed=seed, floor=floor)
+    sim = Simulator(preset, seed=seed, floor=floor, room=Room.empty(),
+                    initial_pose=(0.0, 0.0, 0.0), faults=faults)
+    commands = monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
+                             rng=np.random.default_rng(seed))
+    rec = Recorder(dt_s=sim.dt_s, meta={"source": "lti-motion monitor --sim", "preset": preset,
+                                        "seed": seed, "floor": floor, "fault": fault,
+                                        "fault_at_s": fault_at_s})
+    print_fn(f"driving the simulated {preset} robot for {duration_s:g} s (seed {seed}, "
+             f"{floor} floor)" + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
+    sensor_rng = np.random.default_rng([seed, 0x5E45])
+
+    def frames() -> Iterator[tuple[SensorFrame, list]]:
+        block = max(1, round(1.0 / sim.dt_s))
+        n = 0
+        for k0 in range(0, len(commands), block):
+            log = sim.run(commands[k0:k0 + block])
+            for k in range(len(log)):
+                full = SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
+                                   light_bump=log.light_bump[k], bumps=log.bumps[k],
+                                   cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
+                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k])
+                if record:
+                    rec.add(full)
+                # the landmark sensor sees the world (the true pose); the monitor sees its output
+                seen = (sightings(full.true_pose, n, sensor_rng, dt_s=sim.dt_s)
+                        if landmarks else [])
+                n += 1
+                # the filter and the monitor get what a robot reports: no truth
+                yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,
+                                   full.cmd_m_s, valid=full.valid), seen)
+
+    run = monitor_frames(model, frames(), nominal=nominal,
+                         landmarks=MONITOR_LANDMARKS if landmarks else None,
+                         on_alarm_line=print_fn)
+    _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
+    if record:
+        print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
+    return run
+
+
+def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud: int = 115200,
+                clock_rate: float = 1.0, listen: bool = False, seed: int = 0,
+                record: str | None = None, nominal_logs: Sequence[str] = (),
+                print_fn: Callable[[str], object] = print) -> MonitorRun:
+    """Drive :func:`monitor_route` on a Roomba / Create 2 (or only listen), monitor it.
+
+    Parameters
+    ----------
+    model : MotionModel
+        Calibrated model of this robot.
+    port : str
+        Serial device.
+    duration_s : float
+        Robot time to drive or listen [s].
+    baud, clock_rate
+        As for :class:`drivers.roomba.Roomba`.
+    listen : bool
+        Send no wheel command: read the stream only (the robot stays where it is
+        unless something else moves it).
+    record : str, optional
+        Write the frames as an ``lti-motion-log`` file.
+    nominal_logs : sequence of str
+        Logs of nominal drives of this robot on this route (``--record``):
+        Phase I (:func:`nominal_from_logs`); none leaves the dynamics tests off.
+
+    Raises
+    ------
+    PortError, StreamStalledError, PassiveModeError
+        From the driver; the wheels are stopped first.
+    """
+    from drivers.logs import Recorder
+    from drivers.roomba.driver import Roomba
+
+    nominal = None
+    if nominal_logs:
+        print_fn(f"phase I: fitting the dynamics null and the encoder gate on "
+                 f"{len(nominal_logs)} nominal drive log(s) ...")
+        nominal = nominal_from_logs(model, nominal_logs)
+    commands = monitor_route(duration_s, dt_s=model.dt_s, wheel_base_m=model.wheel_base_m,
+                             rng=np.random.default_rng(seed))
+    rec = Recorder(meta={"source": "lti-motion monitor --port", "port": port, "listen": listen})
+    what = "listening to" if listen else "driving"
+    print_fn(f"{what} the robot on {port} for {duration_s:g} s"
+             + ("" if listen else " (needs 2 m x 2 m of clear floor; Ctrl-C stops it)"))
+    with Roomba(port, baud=baud, clock_rate=clock_rate, open_timeout_s=3.0,
+                stall_periods=max(5, math.ceil(0.3 * clock_rate / model.dt_s))) as robot:
+
+        def frames() -> Iterator[SensorFrame]:
+            try:
+                for cmd in commands:
+                    frame = robot.read_frame() if listen else robot.step(cmd)
+                    if record:
+                        rec.add(frame)
+                    yield frame
+            except KeyboardInterrupt:           # end the drive; closing stops the wheels
+                print_fn("stopped by Ctrl-C")
+
+        run = monitor_frames(model, frames(), nominal=nominal, on_alarm_line=print_fn)
+    _report(run, print_fn, fault=None, fault_at_s=None, expected=None)
+    if record and len(rec):
+        print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
+    return run

@@ -1,0 +1,351 @@
+"""``lti-motion replay``: the estimators on a recorded log or a data set robot.
+
+A *source* is what a robot reported, frame by frame: the wheel commands of
+each sensor period, the raw encoder counts (logs only), landmark sightings
+where there are any, and ground truth where it exists (the simulator's pose
+in a simulated log, Vicon in MRCLAM). Two kinds are read:
+
+- an ``lti-motion-log`` NPZ file (:mod:`lti_motion.logfile`, ``docs/log_format.md``),
+  written by :class:`drivers.logs.Recorder`, ``lti-motion monitor --record`` or
+  ``lti-motion calibrate``; landmark sightings, if any, in its ``meta``
+  (``"landmarks"``: ``[[id, x, y], ...]``, ``"observations"``:
+  ``[[frame, id, range, bearing], ...]``);
+- an MRCLAM data set folder (:func:`drivers.datasets.load_mrclam`), one robot,
+  put on the model's sample grid (commands held, ground truth interpolated and
+  blanked across Vicon gaps longer than 0.25 s).
+
+Estimators (:data:`ESTIMATORS`) read the commands, counts and sightings only.
+They start at ``initial_pose``: by default the first ground-truth pose when
+there is one (the only thing of the truth they see), else the origin. Metrics
+(:mod:`lti_motion.metrics`) compare them with the truth afterwards.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fusion.ekf.model_ekf import ModelEKF
+from lti_motion.app.replay_sources import (
+    ESTIMATORS,
+    MRCLAM_LANDMARK_NOISE,
+    ReplaySource,
+    fit_mrclam_model,
+    load_source,
+    source_from_log,
+    source_from_mrclam,
+)
+from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.metrics import ate_stats, rpe
+from lti_motion.model import MotionModel
+from lti_motion.odometry import tick_deltas
+from lti_motion.tum import write_tum
+
+__all__ = [
+    "ESTIMATORS",
+    "MRCLAM_LANDMARK_NOISE",
+    "ReplayResult",
+    "ReplaySource",
+    "estimate",
+    "evaluate",
+    "fit_mrclam_model",
+    "load_source",
+    "run_replay",
+    "source_from_log",
+    "source_from_mrclam",
+]
+
+
+# -- estimators -----------------------------------------------------------------------------
+def _expand(src: ReplaySource) -> tuple[np.ndarray, np.ndarray]:
+    """Commands of every sensor period (n_periods, 2), and the period index of each frame."""
+    u = np.repeat(src.cmd_m_s[1:], src.periods[1:], axis=0)
+    return u, np.cumsum(src.periods)
+
+
+def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
+    if model.m_per_tick is None:
+        raise ValueError("the model file has no encoder scale (m_per_tick); odometry and the "
+                         "EKF with encoders need one: calibrate with the rotation manoeuvre")
+    rows = np.flatnonzero(src.valid)
+    d = tick_deltas(src.ticks[rows], axis=0) * model.m_per_tick      # wheel travel [m]
+    # displacement and turn over each interval, integrated with unit steps (paper eq. 11)
+    moves = body_from_wheel(d, wheel_base_m=model.wheel_base_m)
+    at_valid = integrate_poses(moves, 1.0, initial_pose=pose0)
+    # frames whose readings were lost keep the last pose
+    return at_valid[np.maximum(np.searchsorted(rows, np.arange(len(src)), side="right") - 1, 0)]
+
+
+def _commands(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
+    u, at = _expand(src)
+    speeds = body_from_wheel(u, wheel_base_m=model.wheel_base_m)
+    return integrate_poses(speeds, src.dt_s, initial_pose=pose0)[at]
+
+
+def _sensorless(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
+    u, at = _expand(src)
+    return model.predict_poses(u, initial_pose=pose0)[at]
+
+
+def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
+         landmarks: bool) -> tuple[np.ndarray, dict]:
+    encoders = src.ticks is not None
+    first = int(np.argmax(src.valid)) if encoders else 0
+    ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
+                   initial_ticks=src.ticks[first] if encoders else None,
+                   landmarks=src.landmarks if landmarks else None,
+                   landmark_noise=src.landmark_noise, history=0)
+    poses = np.empty((len(src), 3))
+    poses[0] = ekf.pose
+    for k in range(1, len(src)):
+        for _ in range(int(src.periods[k])):
+            ekf.predict(src.cmd_m_s[k])
+        if encoders and src.valid[k] and k > first:
+            ekf.update_encoders(src.ticks[k])
+        if landmarks:
+            for key, rb in src.sightings.get(k, ()):
+                ekf.update_landmark(key, rb)
+        poses[k] = ekf.x[:3]
+    stats = ekf.stats
+    return poses, {"encoders_gated": stats.count("encoders", "gated"),
+                   "landmarks_fused": stats.count("landmark", "fused"),
+                   "landmarks_gated": stats.count("landmark", "gated")}
+
+
+def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
+             initial_pose: Sequence[float] | None = None
+             ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+    """Run the estimators ``names`` over a source.
+
+    Parameters
+    ----------
+    src : ReplaySource
+    model : MotionModel
+        The calibrated model (its ``m_per_tick`` scales the encoders).
+    names : sequence of str
+        Keys of :data:`ESTIMATORS`, each in ``src.available()``.
+    initial_pose : sequence of 3 float, optional
+        Start pose (x [m], y [m], theta [rad]); default the first ground-truth
+        pose if the first frame has one, else the origin.
+
+    Returns
+    -------
+    poses : dict of str to ndarray, shape (n, 3)
+        Each estimator's pose at every frame.
+    extra : dict of str to dict
+        Filter counts (gated readings, landmarks fused) per EKF estimator.
+
+    Raises
+    ------
+    ValueError
+        For an unknown estimator or one the source cannot feed.
+    """
+    if not math.isclose(model.dt_s, src.dt_s, rel_tol=1e-6):
+        raise ValueError(f"the model was calibrated at {model.dt_s:g} s but {src.name} has a "
+                         f"{src.dt_s:g} s sensor period; use a model of this robot")
+    for name in names:
+        if name not in ESTIMATORS:
+            raise ValueError(f"unknown estimator {name!r}; known: {', '.join(ESTIMATORS)}")
+        if name not in src.available():
+            why = ("encoder counts" if name in ("odometry", "ekf")
+                   else "landmark sightings")
+            raise ValueError(f"estimator {name!r} needs {why}, which {src.name} does not have; "
+                             f"available: {', '.join(src.available())}")
+    if initial_pose is not None:
+        pose0 = np.asarray(initial_pose, float)
+    elif src.truth is not None and np.all(np.isfinite(src.truth[0])):
+        pose0 = src.truth[0].copy()
+    else:
+        pose0 = np.zeros(3)
+    out: dict[str, np.ndarray] = {}
+    extra: dict[str, dict] = {}
+    for name in names:
+        if name == "odometry":
+            out[name] = _odometry(src, model, pose0)
+        elif name == "commands":
+            out[name] = _commands(src, model, pose0)
+        elif name == "sensorless":
+            out[name] = _sensorless(src, model, pose0)
+        else:
+            out[name], extra[name] = _ekf(src, model, pose0, landmarks=name == "ekf_landmarks")
+    return out, extra
+
+
+# -- metrics --------------------------------------------------------------------------------
+def _runs(mask: np.ndarray) -> list[slice]:
+    """Contiguous stretches of ``True``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [slice(a, b) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def evaluate(src: ReplaySource, poses: np.ndarray, *, rpe_s: float = 1.0) -> dict[str, float]:
+    """Figures of one estimate: path length, and ATE / RPE where there is ground truth.
+
+    Parameters
+    ----------
+    src : ReplaySource
+    poses : ndarray, shape (n, 3)
+        The estimate at every frame.
+    rpe_s : float
+        RPE step [s] (rounded to whole frames).
+
+    Returns
+    -------
+    dict
+        ``path_m`` and ``closure_m`` (distance from the first to the last
+        estimated position) always; with truth also ``ate_rmse_m``,
+        ``ate_max_m`` (Sturm et al. 2012, eq. 5, no alignment: both start at
+        the same pose), ``rpe_m``, ``rpe_deg`` (eq. 1-2, over ``rpe_s``,
+        within stretches of truth only), ``final_error_m`` (at the last frame
+        with truth) and ``n_truth``.
+    """
+    steps = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    out = {"path_m": float(steps.sum()),
+           "closure_m": float(np.hypot(*(poses[-1, :2] - poses[0, :2])))}
+    if not src.has_truth:
+        return out
+    ok = np.all(np.isfinite(src.truth), axis=1)
+    err = ate_stats(src.truth[ok], poses[ok])
+    frame_s = float(np.median(np.diff(src.t_s)))
+    delta = max(1, round(rpe_s / frame_s))
+    sq_t = sq_r = n = 0.0
+    for run in _runs(ok):
+        if run.stop - run.start > delta:
+            r = rpe(src.truth[run], poses[run], delta=delta)
+            sq_t += r.trans_rmse_m ** 2 * r.n_pairs
+            sq_r += r.rot_rmse_rad ** 2 * r.n_pairs
+            n += r.n_pairs
+    last = int(np.flatnonzero(ok)[-1])
+    out.update(ate_rmse_m=float(err.rmse_m), ate_max_m=float(err.max_m),
+               rpe_m=math.sqrt(sq_t / n) if n else math.nan,
+               rpe_deg=math.degrees(math.sqrt(sq_r / n)) if n else math.nan,
+               final_error_m=float(np.hypot(*(poses[last, :2] - src.truth[last, :2]))),
+               n_truth=int(ok.sum()))
+    return out
+
+
+# -- the command ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ReplayResult:
+    """What :func:`run_replay` computed and wrote.
+
+    Attributes
+    ----------
+    source : ReplaySource
+    poses : dict of str to ndarray, shape (n, 3)
+    metrics : dict of str to dict
+        :func:`evaluate` per estimator, plus the filter counts.
+    files : list of Path
+        TUM trajectories, ``metrics.json`` and plots, in the order written.
+    """
+
+    source: ReplaySource
+    poses: dict[str, np.ndarray]
+    metrics: dict[str, dict]
+    files: list[Path]
+
+
+def _table(src: ReplaySource, metrics: dict[str, dict]) -> list[str]:
+    if src.has_truth:
+        head = ("estimator", "ATE rmse [m]", "ATE max [m]", "RPE [m]", "RPE [deg]",
+                "final err [m]", "path [m]")
+        keys = ("ate_rmse_m", "ate_max_m", "rpe_m", "rpe_deg", "final_error_m", "path_m")
+    else:
+        head = ("estimator", "path [m]", "start-to-end [m]")
+        keys = ("path_m", "closure_m")
+    rows = [[src.label(name)] + [f"{m[k]:.3f}" for k in keys] for name, m in metrics.items()]
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
+    fmt = "  ".join(f"{{:<{w}}}" if i == 0 else f"{{:>{w}}}" for i, w in enumerate(widths))
+    return [fmt.format(*head), fmt.format(*("-" * w for w in widths))] + [
+        fmt.format(*r) for r in rows]
+
+
+def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str | os.PathLike,
+               *, estimators: Sequence[str] | None = None, robot: int | None = None,
+               start_s: float = 0.0, duration_s: float | None = None,
+               initial_pose: Sequence[float] | None = None, rpe_s: float = 1.0,
+               print_fn: Callable[[str], object] = print) -> ReplayResult:
+    """Replay a log or data set robot: estimate, print the table, write TUM files and plots.
+
+    Writes ``OUT/<estimator>.tum`` per estimator, ``OUT/groundtruth.tum``
+    (frames with truth only) when there is truth, ``OUT/metrics.json``,
+    ``OUT/trajectories.png`` and, with truth, ``OUT/errors.png``.
+
+    Parameters
+    ----------
+    source_path : str or path-like
+        An ``.npz`` log or an MRCLAM folder (:func:`load_source`).
+    model : MotionModel
+        The calibrated model.
+    out_dir : str or path-like
+        Output folder (created).
+    estimators : sequence of str, optional
+        Default: every estimator the source can feed.
+    robot, start_s, duration_s
+        As for :func:`load_source`.
+    initial_pose, rpe_s
+        As for :func:`estimate` and :func:`evaluate`.
+    print_fn : callable
+        Where the lines a person reads go.
+    """
+    from lti_motion.app.replay_plots import plot_errors, plot_trajectories
+
+    src = load_source(source_path, model, robot=robot, start_s=start_s, duration_s=duration_s)
+    names = list(estimators) if estimators else src.available()
+    n_sight = sum(len(v) for v in src.sightings.values())
+    print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
+             f"{'encoder counts' if src.ticks is not None else 'no encoders'}, "
+             f"{n_sight} landmark sightings, "
+             f"{'ground truth' if src.has_truth else 'no ground truth'}")
+    started = ("the first ground-truth pose" if initial_pose is None and src.has_truth
+               and np.all(np.isfinite(src.truth[0])) else "the given pose" if initial_pose
+               is not None else "the origin")
+    print_fn(f"estimators start at {started}; they never read the truth after that")
+    poses, extra = estimate(src, model, names, initial_pose=initial_pose)
+    metrics = {name: {**evaluate(src, p, rpe_s=rpe_s), **extra.get(name, {})}
+               for name, p in poses.items()}
+    for line in _table(src, metrics):
+        print_fn("  " + line)
+    if src.has_truth:
+        print_fn(f"  (ATE without alignment; RPE over {rpe_s:g} s; Sturm et al. 2012)")
+    else:
+        print_fn("  no ground truth in this recording: no ATE or RPE. Start-to-end distance "
+                 "is the closure offset if the drive ended where it began")
+    for name, counts in extra.items():
+        enc = (f"{counts['encoders_gated']} encoder readings gated, "
+               if src.ticks is not None else "")
+        print_fn(f"  {src.label(name)}: {enc}{counts['landmarks_fused']} sightings fused, "
+                 f"{counts['landmarks_gated']} gated")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = [write_tum(out / f"{name}.tum", src.t_s, p) for name, p in poses.items()]
+    if src.has_truth:
+        ok = np.all(np.isfinite(src.truth), axis=1)
+        files.append(write_tum(out / "groundtruth.tum", src.t_s[ok], src.truth[ok]))
+    doc = {"source": src.name, "frames": len(src), "dt_s": src.dt_s,
+           "has_truth": src.has_truth, "metrics": metrics}
+    (out / "metrics.json").write_text(json.dumps(_plain(doc), indent=2) + "\n")
+    files.append(out / "metrics.json")
+    files.append(plot_trajectories(out / "trajectories.png", src, poses))
+    if src.has_truth:
+        files.append(plot_errors(out / "errors.png", src, poses))
+    print_fn(f"wrote {len(files)} files to {out}/: " + ", ".join(f.name for f in files))
+    if files and src.has_truth:
+        print_fn(f"compare with evo: evo_ape tum {out / 'groundtruth.tum'} "
+                 f"{out / names[-1]}.tum --plot")
+    return ReplayResult(source=src, poses=poses, metrics=metrics, files=files)
+
+
+def _plain(value: object) -> object:
+    """JSON without NaN: undefined figures become ``null``."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

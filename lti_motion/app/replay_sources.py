@@ -1,0 +1,318 @@
+"""Recorded drives for ``lti-motion replay``: NPZ logs and MRCLAM robots as one source type.
+
+See :mod:`lti_motion.app.replay` for what is read from each kind of
+recording, and ``docs/replay.md``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Hashable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drivers.datasets import MrclamDataset, MrclamRobot, load_mrclam
+from drivers.exceptions import DatasetError
+from fusion.landmark_map import LandmarkMap
+from fusion.noise import LandmarkNoise
+from lti_motion.kinematics import wheel_from_body
+from lti_motion.logfile import load_log
+from lti_motion.model import MotionModel
+from lti_motion.odometry import stream_clock
+
+__all__ = [
+    "ESTIMATORS",
+    "MRCLAM_LANDMARK_NOISE",
+    "ReplaySource",
+    "fit_mrclam_model",
+    "load_source",
+    "source_from_log",
+    "source_from_mrclam",
+]
+
+_log = logging.getLogger(__name__)
+
+ESTIMATORS = {
+    "odometry": "encoder odometry",
+    "commands": "commands at face value",
+    "sensorless": "model, sensor-less",
+    "ekf": "EKF, model and encoders",
+    "ekf_landmarks": "EKF, model, encoders (if any), landmarks",
+}
+
+#: Sighting noise for MRCLAM: the spread of set 6's sightings against Vicon
+#: (median range error 7-13 cm at 3.7 m, bearing 0.4-1.4 degrees; 90% within
+#: 0.3 m and 2 degrees); the filter's chi-square gate rejects the outliers.
+MRCLAM_LANDMARK_NOISE = LandmarkNoise(range_std_frac=0.05, range_std_m=0.05,
+                                      bearing_std_rad=0.02)
+
+Sightings = dict[int, list[tuple[Hashable, np.ndarray]]]
+
+
+@dataclass(frozen=True)
+class ReplaySource:
+    """One robot's recorded drive, as the estimators see it (plus the truth for metrics).
+
+    Attributes
+    ----------
+    name : str
+        What it is, for people (file name, or data set and robot).
+    t_s : ndarray, shape (n,)
+        Frame times [s].
+    periods : ndarray of int, shape (n,)
+        Sensor periods each frame closes (frame 0: 0; more than 1 after lost frames).
+    cmd_m_s : ndarray, shape (n, 2)
+        Wheel commands (left, right) of the periods each frame closes [m/s].
+    valid : ndarray of bool, shape (n,)
+        Frames whose sensor readings arrived.
+    dt_s : float
+        Sensor period [s].
+    ticks : ndarray of int64, shape (n, 2), or None
+        Raw 16-bit encoder counts; ``None`` for a data set without encoders.
+    truth : ndarray, shape (n, 3), or None
+        Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
+    sightings : dict of int to list of (id, (range m, bearing rad))
+        Landmark observations by frame index.
+    landmarks : LandmarkMap or None
+        Landmark positions, when the source has sightings.
+    landmark_noise : LandmarkNoise or None
+        Sighting noise for the filter (``None``: the filter's default).
+    """
+
+    name: str
+    t_s: np.ndarray
+    periods: np.ndarray
+    cmd_m_s: np.ndarray
+    valid: np.ndarray
+    dt_s: float
+    ticks: np.ndarray | None = None
+    truth: np.ndarray | None = None
+    sightings: Sightings = field(default_factory=dict)
+    landmarks: LandmarkMap | None = None
+    landmark_noise: LandmarkNoise | None = None
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def has_truth(self) -> bool:
+        """Whether some frames have ground truth."""
+        return self.truth is not None and bool(np.any(np.isfinite(self.truth[:, 0])))
+
+    def label(self, name: str) -> str:
+        """What estimator ``name`` is on this source, for tables and plots."""
+        if name == "ekf_landmarks":
+            return ("EKF, model, encoders, landmarks" if self.ticks is not None
+                    else "EKF, model and landmarks")
+        return ESTIMATORS[name]
+
+    def available(self) -> list[str]:
+        """The estimators this source can feed."""
+        names = ["commands", "sensorless"]
+        if self.ticks is not None:
+            names = ["odometry", *names, "ekf"]
+        if self.landmarks is not None and self.sightings:
+            names.append("ekf_landmarks")
+        return names
+
+
+def _window(t_s: np.ndarray, start_s: float, duration_s: float | None) -> np.ndarray:
+    rel = t_s - t_s[0]
+    keep = rel >= start_s
+    if duration_s is not None:
+        keep &= rel <= start_s + duration_s
+    if keep.sum() < 2:
+        raise ValueError(f"--start-s {start_s:g} / --duration-s {duration_s} leave fewer than 2 "
+                         f"frames of a {rel[-1]:.1f} s recording")
+    return np.flatnonzero(keep)
+
+
+def _periods(t_s: np.ndarray, dt_s: float) -> np.ndarray:
+    try:
+        k = np.rint((stream_clock(t_s, dt_s) - t_s[0]) / dt_s).astype(np.int64)
+    except ValueError as exc:                 # host clock bursts: one period a frame
+        _log.warning("frame times do not follow the %.3f s period (%s); one period per frame",
+                     dt_s, exc)
+        k = np.arange(len(t_s))
+    return np.concatenate([[0], np.diff(k)])
+
+
+def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_s: float = 0.0,
+                    duration_s: float | None = None) -> ReplaySource:
+    """Read an ``lti-motion-log`` file as a :class:`ReplaySource`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ``.npz`` log.
+    robot : int, optional
+        Robot index of a batch log (default 0); ignored for a single robot.
+    start_s, duration_s : float
+        The stretch to replay, from the first frame [s].
+
+    Raises
+    ------
+    FileNotFoundError, LogFileError
+        From :func:`lti_motion.logfile.load_log`.
+    ValueError
+        For a robot index out of range or an empty stretch.
+    """
+    log = load_log(path)
+    name = Path(path).name
+    if log.n_robots is not None:
+        i = 0 if robot is None else robot
+        if not 0 <= i < log.n_robots:
+            raise ValueError(f"{name} holds robots 0-{log.n_robots - 1}; there is no robot {i}")
+        log, name = log.robot(i), f"{name} robot {i}"
+    keep = _window(log.t_s, start_s, duration_s)
+    meta = log.meta
+    landmarks = sightings = None
+    if meta.get("landmarks") and meta.get("observations"):
+        landmarks = LandmarkMap({_key(row[0]): (row[1], row[2]) for row in meta["landmarks"]})
+        sightings = {}
+        first = int(keep[0])
+        for frame, key, r, b in meta["observations"]:
+            k = int(frame) - first
+            if 1 <= k < len(keep):
+                sightings.setdefault(k, []).append((_key(key), np.array([r, b], float)))
+    periods = _periods(log.t_s[keep], log.dt_s)
+    return ReplaySource(name=name, t_s=log.t_s[keep], periods=periods,
+                        cmd_m_s=log.cmd_m_s[keep], valid=log.valid[keep], dt_s=log.dt_s,
+                        ticks=log.ticks[keep].astype(np.int64),
+                        truth=None if log.true_pose is None else log.true_pose[keep],
+                        sightings=sightings or {}, landmarks=landmarks)
+
+
+def _key(value: object) -> Hashable:
+    """Landmark ids come back from JSON as numbers or strings; whole numbers become int."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value if isinstance(value, Hashable) else str(value)
+
+
+def _mrclam_robot(path: str | os.PathLike, robot: int) -> tuple[MrclamDataset, MrclamRobot]:
+    """The data set and one of its robots; :class:`DatasetError` naming the robots it holds."""
+    dataset = load_mrclam(path)
+    if robot not in dataset.robots:
+        raise DatasetError(f"{Path(path).name} holds robots {sorted(dataset.robots)}; there is "
+                           f"no robot {robot}")
+    return dataset, dataset.robots[robot]
+
+
+def source_from_mrclam(path: str | os.PathLike, *, robot: int, dt_s: float,
+                       wheel_base_m: float, start_s: float = 0.0,
+                       duration_s: float | None = None, max_gap_s: float = 0.25
+                       ) -> ReplaySource:
+    """One MRCLAM robot on a uniform grid of ``dt_s``, as a :class:`ReplaySource`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The data set folder (e.g. ``MRCLAM_Dataset6``).
+    robot : int
+        Robot number (1-5).
+    dt_s : float
+        Grid step [s]: the model's sample period.
+    wheel_base_m : float
+        Turns MRCLAM's body-speed commands (v, w) into wheel commands [m]:
+        the model's wheel base, so it reads them as it was calibrated.
+    start_s, duration_s : float
+        The stretch to replay, from the start of the overlap of commands and truth [s].
+    max_gap_s : float
+        Ground truth is blank (NaN) across Vicon gaps longer than this [s].
+
+    Raises
+    ------
+    DatasetError
+        For a missing or malformed file, or a robot the data set does not hold.
+    """
+    dataset, rec = _mrclam_robot(path, robot)
+    cmd, gt = rec.commands, rec.groundtruth
+    t0, t1 = max(cmd[0, 0], gt[0, 0]), min(cmd[-1, 0], gt[-1, 0])
+    grid = np.arange(t0, t1, dt_s)
+    keep = _window(grid, start_s, duration_s)
+    t = grid[keep]
+    idx = np.clip(np.searchsorted(cmd[:, 0], t, side="right") - 1, 0, len(cmd) - 1)
+    wheels = wheel_from_body(cmd[idx, 1:], wheel_base_m=wheel_base_m)
+    truth = np.column_stack([np.interp(t, gt[:, 0], gt[:, 1]), np.interp(t, gt[:, 0], gt[:, 2]),
+                             np.interp(t, gt[:, 0], np.unwrap(gt[:, 3]))])
+    j = np.clip(np.searchsorted(gt[:, 0], t), 1, len(gt) - 1)
+    truth[gt[j, 0] - gt[j - 1, 0] > max_gap_s] = np.nan          # inside a Vicon gap
+    frame = np.rint((rec.sightings[:, 0] - t[0]) / dt_s).astype(np.int64)
+    sightings: Sightings = {}
+    for k, subject, r, b in zip(frame, rec.sightings[:, 1], rec.sightings[:, 2],
+                                rec.sightings[:, 3], strict=True):
+        if 1 <= k < len(t):
+            sightings.setdefault(int(k), []).append((int(subject), np.array([r, b])))
+    landmarks = LandmarkMap({k: v[:2] for k, v in dataset.landmarks.items()})
+    return ReplaySource(name=f"{Path(path).name} robot {robot}", t_s=t,
+                        periods=np.concatenate([[0], np.ones(len(t) - 1, np.int64)]),
+                        cmd_m_s=wheels, valid=np.ones(len(t), bool), dt_s=dt_s, truth=truth,
+                        sightings=sightings, landmarks=landmarks,
+                        landmark_noise=MRCLAM_LANDMARK_NOISE)
+
+
+def fit_mrclam_model(path: str | os.PathLike, *, robot: int, dt_s: float = 0.1
+                     ) -> tuple[MotionModel, float]:
+    """Calibrate an ARX model of an MRCLAM robot on the first half of its run only.
+
+    As the MRCLAM experiment does (:mod:`lti_motion.app.mrclam`):
+    commands to the body speeds differentiated from Vicon, wheel base 0.258 m.
+    Replay from the returned time on, so no figure is measured on data the
+    model was fitted to.
+
+    Returns
+    -------
+    model : MotionModel
+        The ARX model (``m_per_tick`` None: MRCLAM has no encoders).
+    second_half_s : float
+        Start of the second half from the start of the replay grid
+        (:func:`source_from_mrclam`'s ``start_s``) [s].
+
+    Raises
+    ------
+    DatasetError
+        For a missing or malformed file, or a robot the data set does not hold.
+    """
+    from drivers.datasets import CREATE1_WHEEL_BASE_M, resample_robot
+    from lti_motion.app.mrclam import split_halves
+    from lti_motion.model import fit_arx
+
+    _, rec = _mrclam_robot(path, robot)
+    segments = resample_robot(rec, dt_s=dt_s)
+    train, _ = split_halves(segments, min_samples=round(2.0 / dt_s))
+    runs = [(wheel_from_body(s.commands_vw, wheel_base_m=CREATE1_WHEEL_BASE_M), s.speeds_vw)
+            for s in train]
+    model = fit_arx(runs, dt_s=dt_s, wheel_base_m=CREATE1_WHEEL_BASE_M)
+    t0 = max(rec.commands[0, 0], rec.groundtruth[0, 0])
+    t_mid = 0.5 * (segments[0].t_s[0] + segments[-1].t_s[-1])
+    return model, float(t_mid - t0)
+
+
+def load_source(path: str | os.PathLike, model: MotionModel, *, robot: int | None = None,
+                start_s: float = 0.0, duration_s: float | None = None) -> ReplaySource:
+    """A log file or an MRCLAM folder (``robot`` 1-5, default 1), whichever ``path`` is.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If it is neither a log nor an MRCLAM folder (the message says what was expected).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such log file or data set folder: {path}")
+    if path.is_dir():
+        if not (path / "Barcodes.dat").is_file():
+            raise DatasetError(f"{path} is a folder but not an MRCLAM data set (no "
+                               "Barcodes.dat); give an .npz log or an MRCLAM_Dataset folder")
+        return source_from_mrclam(path, robot=1 if robot is None else robot, dt_s=model.dt_s,
+                                  wheel_base_m=model.wheel_base_m, start_s=start_s,
+                                  duration_s=duration_s)
+    return source_from_log(path, robot=robot, start_s=start_s, duration_s=duration_s)
+
+

@@ -1,1 +1,0 @@
-"""Experiment runners (application layer: they may import ``drivers`` and ``fusion``)."""

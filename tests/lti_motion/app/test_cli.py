@@ -1,0 +1,174 @@
+"""The command line, run as a user runs it (short horizons)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from lti_motion.app.cli import build_parser, main
+
+
+def test_demo_writes_report_metrics_and_plots(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--runs", "4", "--excitation-s", "60"]) == 0
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    closure = metrics["closure_offset_m"]
+    assert {"odometry", "fir_sensorless", "arx_sensorless", "arx_hybrid", "ekf",
+            "ekf_landmarks"} <= set(closure)
+    for row in closure.values():
+        assert row["n"] == 4 and row["mean"] > 0 and row["std"] >= 0
+    for name in ("report.md", "closure.png", "trajectories.png", "order_selection.png"):
+        assert (tmp_path / name).stat().st_size > 500, name
+    out = capsys.readouterr().out
+    assert "Table II" in out and "0.068" in out          # the paper's odometry row beside ours
+
+
+def test_help_and_bad_choices(capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["demo", "--floor", "ice"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'ice'" in capsys.readouterr().err
+
+
+def test_calibrate_on_a_missing_port_names_it(capsys):
+    assert main(["calibrate", "--port", "/dev/does-not-exist", "--yes"]) == 2
+    assert "/dev/does-not-exist" in capsys.readouterr().err
+
+
+def test_calibrate_sim_writes_models_and_plots(tmp_path, capsys):
+    assert main(["calibrate", "--sim", "create2", "--excitation-s", "40",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "encoder scale" in out and "ARX" in out
+    for name in ("model_arx.json", "model_fir.json", "order_selection.png"):
+        assert (tmp_path / name).is_file()
+    from lti_motion.logfile import load_log
+
+    for stage in ("rotation", "steps", "excitation"):          # the drives, replayable
+        assert load_log(tmp_path / f"log_{stage}.npz").has_truth
+
+
+def test_virtual_roomba_prints_its_device_path(capsys):
+    assert main(["virtual-roomba", "--duration", "0.3"]) == 0
+    out = capsys.readouterr().out
+    assert "listening on /dev/pts/" in out and "stopped" in out
+
+
+# -- replay and monitor ---------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    from drivers.sim.calibration import calibrate_simulator
+    from lti_motion.calibration import CalibrationPlan
+
+    cal = calibrate_simulator("create2", seed=2, plan=CalibrationPlan(seed=2, excitation_s=40.0))
+    return str(cal.arx.save(tmp_path_factory.mktemp("model") / "model_arx.json"))
+
+
+def test_monitor_sim_prints_the_stuck_encoder_alarm_and_records_a_log(model_file, tmp_path,
+                                                                      capsys):
+    log = tmp_path / "drive.npz"
+    assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "12",
+                 "--fault", "stuck-encoder", "--fault-at", "8", "--record", str(log)]) == 0
+    out = capsys.readouterr().out
+    alarms = [line for line in out.splitlines() if line.startswith("ALARM")]
+    stuck = [line for line in alarms if "stuck_encoder" in line]
+    assert stuck and "left wheel" in stuck[0] and "onset" in stuck[0]
+    t_first = float(stuck[0].split("t=")[1].split()[0])
+    assert 8.0 <= t_first <= 8.3
+    assert "first stuck_encoder alarm at" in out and "alarms:" in out
+    # the recorded drive replays, with the simulator's truth for the metrics
+    assert main(["replay", str(log), "--model", model_file, "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "ATE rmse [m]" in out and "encoder odometry" in out and "evo_ape tum" in out
+    rows = (tmp_path / "r" / "ekf.tum").read_text().splitlines()
+    assert len(rows) == 1 + round(12 / 0.015)            # header + one pose per frame
+
+
+def test_monitor_sim_runs_the_dynamics_and_scale_tests_after_phase_one(model_file, capsys):
+    assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "40",
+                 "--fault", "carpet", "--fault-at", "15", "--nominal-drives", "8"]) == 0
+    out = capsys.readouterr().out
+    assert "phase I: fitting the dynamics null and the encoder gate on 8 nominal drives" in out
+    assert "dynamics lag and covariance CUSUMs" in out and "scale test on 4 landmarks" in out
+    gate = float(out.split("encoder gate NIS ")[1].split()[0])
+    assert gate > 55.3                                  # set from the nominal drives
+    scale = [line for line in out.splitlines()
+             if line.startswith("ALARM") and "scale_changed" in line]
+    assert scale and "travel x" in scale[0], out
+    t_first = float(scale[0].split("t=")[1].split()[0])
+    assert 15.0 < t_first < 30.0, scale[0]
+    assert "first scale_changed alarm at" in out
+
+
+def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
+    from drivers.roomba.virtual import VirtualRoomba
+
+    with VirtualRoomba(seed=5, speed=10.0) as vr:
+        assert main(["monitor", "--port", vr.device_path, "--clock-rate", "10",
+                     "--model", model_file, "--duration", "4"]) == 0
+        driven = len(vr.applied_commands_m_s)
+    out = capsys.readouterr().out
+    assert f"driving the robot on {vr.device_path}" in out and "monitored" in out
+    assert driven > 200                      # 4 s at 15 ms, robot time
+
+
+def test_monitor_port_fits_phase_one_on_recorded_nominal_drives(model_file, tmp_path, capsys):
+    from drivers.roomba.virtual import VirtualRoomba
+
+    log = tmp_path / "nominal.npz"                # a nominal drive, recorded as on a robot
+    assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "60",
+                 "--nominal-drives", "0", "--record", str(log), "--seed", "3"]) == 0
+    assert "dynamics tests off" in capsys.readouterr().out
+    with VirtualRoomba(seed=5, speed=10.0) as vr:
+        assert main(["monitor", "--port", vr.device_path, "--clock-rate", "10",
+                     "--model", model_file, "--duration", "4", "--nominal", str(log)]) == 0
+    out = capsys.readouterr().out
+    assert "phase I: fitting the dynamics null and the encoder gate on 1 nominal drive" in out
+    assert "null from 1 nominal drives, 1.0 min" in out and "monitored" in out
+
+
+def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path, tmp_path,
+                                                                     capsys):
+    assert main(["replay", str(mrclam_path), "--robot", "3", "--fit-first-half",
+                 "--duration-s", "60", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "first half" in out and "EKF, model and landmarks" in out
+    for name in ("model_arx.json", "commands.tum", "sensorless.tum", "ekf_landmarks.tum",
+                 "groundtruth.tum", "trajectories.png", "errors.png", "metrics.json"):
+        assert (tmp_path / name).is_file(), name
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["replay", "missing.npz", "--model", "{model}"], "no such log file"),
+    (["replay", "{log}", "--model", "missing.json"], "no model file missing.json"),
+    (["replay", "{log}", "--model", "{log}"], "damaged"),
+    (["replay", "{log}"], "give --model FILE"),
+    (["replay", "{log}", "--model", "{model}", "--estimators", "ekf_landmarks"],
+     "needs landmark sightings"),
+    (["monitor", "--port", "/dev/nope"], "needs --model FILE"),
+    (["monitor", "--port", "/dev/does-not-exist", "--model", "{model}"], "/dev/does-not-exist"),
+    (["monitor", "--port", "/dev/nope", "--fault", "spikes"], "needs --sim"),
+    (["monitor", "--sim", "create2", "--nominal", "{log}"], "needs --port"),
+])
+def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model_file, tmp_path,
+                                                            capsys):
+    from drivers.sim.simulator import Simulator
+    from lti_motion.logfile import save_log
+
+    log = save_log(tmp_path / "short.npz", Simulator("create2", seed=0).run(np.full((50, 2), 0.1)))
+    argv = [a.format(model=model_file, log=log) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_replay_mrclam_robot_that_does_not_exist(mrclam_path, model_file, capsys):
+    assert main(["replay", str(mrclam_path), "--robot", "7", "--fit-first-half"]) == 2
+    assert "there is no robot 7" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["replay", "monitor"])
+def test_sub_command_help(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    assert "docs/" in capsys.readouterr().out

@@ -1,0 +1,70 @@
+"""Phase I of the monitor (``lti_motion.app.monitor_setup``) and its encoder gate."""
+
+import numpy as np
+import pytest
+
+from fusion.exceptions import FilterOptionError
+from fusion.monitoring.residual import MonitorOptions, ResidualMonitor, design_thresholds
+from lti_motion.app import monitor_setup as ms
+
+
+@pytest.fixture(scope="module")
+def model():
+    from drivers.sim.calibration import calibrate_simulator
+    from lti_motion.calibration import CalibrationPlan
+
+    return calibrate_simulator("create2", seed=2,
+                               plan=CalibrationPlan(seed=2, excitation_s=40.0)).arx
+
+
+def test_encoder_gate_applies_to_the_encoder_stream_only():
+    opt = MonitorOptions(encoder_gate_nis=5000.0)
+    assert design_thresholds(opt).gate == 5000.0
+    assert design_thresholds(opt).burst_rate_per_hour < 1e-300     # chi-square tail of 5000
+    assert round(design_thresholds(opt, stream="landmark").gate, 1) == 55.3
+    mon = ResidualMonitor(opt)
+    assert mon.thresholds("encoders").gate == 5000.0
+    assert round(mon.thresholds("landmark").gate, 1) == 55.3
+    with pytest.raises(FilterOptionError, match="encoder_gate_nis"):
+        MonitorOptions(encoder_gate_nis=-1.0)
+
+
+def test_gate_sits_between_a_start_from_rest_and_a_spike(model):
+    fit = ms.nominal_on_simulator(model, n_drives=3, duration_s=20.0, seed=4)
+    assert fit.n_drives == 3
+    assert fit.duration_s == pytest.approx(3 * (round(20.0 / model.dt_s) - 1) * model.dt_s)
+    # the model misses the start from rest beyond the chi-square gate; the rule is 10 x that
+    assert fit.max_nominal_nis > 55.3
+    assert fit.encoder_gate_nis == pytest.approx(10.0 * fit.max_nominal_nis)
+    assert fit.options(model.dt_s).encoder_gate_nis == fit.encoder_gate_nis
+    # a 150-tick spike on a fresh drive is far above it
+    from drivers.sim.config import Fault, Room
+    from drivers.sim.simulator import Simulator
+
+    sim = Simulator("create2", seed=9, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0),
+                    faults=[Fault("encoder_spikes", t_s=10.0, duration_s=1.0, rate_hz=20.0)])
+    log = sim.run(ms.monitor_route(15.0, dt_s=model.dt_s, wheel_base_m=model.wheel_base_m,
+                                   rng=np.random.default_rng(9)))
+    nis = ms.encoder_nis(model, log.cmd_m_s[1:], log.ticks)
+    k = round(10.0 / model.dt_s) - 5                    # a few frames before the onset
+    assert np.nanmax(nis[:k]) < fit.encoder_gate_nis < np.nanmax(nis[k:])
+
+
+def test_fit_nominal_rejects_bad_input(model):
+    with pytest.raises(ValueError, match="at least one"):
+        ms.fit_nominal(model, [])
+    with pytest.raises(ValueError, match=r"ticks \(n \+ 1, 2\)"):
+        ms.fit_nominal(model, [(np.zeros((10, 2)), np.zeros((10, 2)))])
+    with pytest.raises(ValueError, match="gate_factor"):
+        ms.fit_nominal(model, [(np.zeros((10, 2)), np.zeros((11, 2)))], gate_factor=0.5)
+
+
+def test_simulated_sensor_sees_each_landmark_at_2_hz():
+    rng = np.random.default_rng(1)
+    seen = [ms.sightings(np.array([0.5, 1.0, 0.3]), k, rng) for k in range(round(2.0 / 0.015))]
+    ids = [lid for frame in seen for lid, _ in frame]
+    assert sorted(set(ids)) == [1, 2, 3, 4]
+    assert all(ids.count(i) in (4, 5) for i in range(1, 5))          # 2 Hz over 2 s
+    r = np.hypot(-1.5 - 0.5, -1.0 - 1.0)
+    ranges = [rb[0] for frame in seen for lid, rb in frame if lid == 1]
+    assert np.allclose(ranges, r, rtol=0.1)
