@@ -35,11 +35,11 @@ from benchmarks.harness import Figure, benchmark
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
+from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.app.monitor import FAULTS, fault_for, monitor_frames
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
-    NominalFit,
     monitor_route,
     nominal_on_simulator,
     sightings,

@@ -111,7 +111,8 @@ def alarm_times(model: MotionModel, null: DynamicsNull, cmd: np.ndarray, deltas:
     mon = DynamicsMonitor(model, null, n_robots=len(cmd))
     out: list[list[float]] = [[] for _ in range(len(cmd))]
     for k in range(cmd.shape[1]):
-        for robot, *_ in mon.update((k + 1) * model.dt_s, cmd[:, k], deltas[:, k]):
+        for robot in (a.robot for a in mon.update((k + 1) * model.dt_s, cmd[:, k],
+                                                   deltas[:, k])):
             out[robot].append((k + 1) * model.dt_s)
     return out
 

@@ -5,7 +5,7 @@ calibration); per run a :class:`~fusion.ekf.ModelEKF` on the encoders and a
 :class:`~fusion.monitoring.ResidualMonitor` with the gate, glitch bursts and the
 stuck check (no dynamics or scale test). Two gates: the chi-square default
 (NIS 55.3) and the Phase-I gate
-(:func:`lti_motion.app.monitor_setup.fit_nominal`, 10 times the
+(:func:`fusion.monitoring.phase_one.fit_nominal`, 10 times the
 largest encoder NIS of 30 nominal runs, seeds 1000-1029: the runs that fit
 the dynamics null).
 
@@ -32,9 +32,9 @@ import numpy as np
 from benchmarks.bench_monitor import calibrated_model, route_drives
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.config import Fault
-from fusion.ekf.model_ekf import ModelEKF
-from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
-from lti_motion.app.monitor_setup import fit_nominal
+from fusion.monitoring.monitored_filter import MonitoredFilter
+from fusion.monitoring.phase_one import fit_nominal
+from fusion.monitoring.residual import AlarmEvent, MonitorOptions
 from lti_motion.model import MotionModel
 from lti_motion.odometry import TICK_MODULUS
 
@@ -54,16 +54,10 @@ def sensor_alarms(model: MotionModel, cmd: np.ndarray, deltas: np.ndarray,
     moving = np.flatnonzero(np.any(cmd != 0.0, axis=1))
     last = moving[-1] + 1 if moving.size else 0
     ticks = _ticks(deltas)
-    ekf = ModelEKF(model, initial_ticks=ticks[0], t0_s=model.dt_s, history=0)
-    mon = ResidualMonitor(options, m_per_tick=model.m_per_tick)
-    half_b = 0.5 * model.wheel_base_m
+    mf = MonitoredFilter(model, options=options, initial_ticks=ticks[0], t0_s=model.dt_s)
     for k in range(last):
-        ekf.predict(cmd[k])
-        v, w = ekf.speeds
-        mon.update_counts(ekf.t_s, deltas[k], np.array([v - w * half_b, v + w * half_b]),
-                          cmd_m_s=cmd[k])
-        mon.update_record(ekf.update_encoders(ticks[k + 1]))
-    return mon.events
+        mf.step(ticks[k + 1], cmd[k])
+    return mf.events
 
 
 def phase_one_gate(model: MotionModel, *, seeds: range = range(1000, 1030)) -> float:

@@ -5,8 +5,8 @@ drive at 0.25 m/s, slow down at each checkpoint; steering on its encoder
 odometry) with four landmarks seen at 2 Hz. On the way its left encoder
 spikes for a second (20 Hz of 150-tick spikes), the floor turns to carpet
 (3.5% less ground per tick, invisible to the encoders) and it takes on a
-+1.8 kg payload (+50%). One :class:`~fusion.monitoring.ResidualMonitor` watches
-everything, fed per period with what a robot reports (commands, counts,
++1.8 kg payload (+50%). One :class:`~fusion.monitoring.MonitoredFilter` watches
+everything, fed one frame at a time with what a robot reports (commands, counts,
 sightings; never the simulator's truth):
 
 - the per-sample gate and glitch bursts on the innovations of the model's
@@ -52,13 +52,11 @@ from matplotlib.figure import Figure
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF
-from fusion.monitoring.dynamics import DynamicsMonitor
+from fusion.monitoring.monitored_filter import MonitoredFilter
+from fusion.monitoring.phase_one import NominalFit, fit_nominal
 from fusion.monitoring.recalibration import RecalibrationRecord, Recalibrator
 from fusion.monitoring.rescale import output_scaling
-from fusion.monitoring.residual import AlarmEvent, ResidualMonitor
-from fusion.monitoring.scale import ScaleMonitor
-from lti_motion.app.monitor_setup import NominalFit, fit_nominal
+from fusion.monitoring.residual import AlarmEvent
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
     ROUTE_M,
@@ -70,7 +68,6 @@ from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",
@@ -88,7 +85,7 @@ def calibrated_model(*, seed: int = 1, excitation_s: float = 180.0) -> MotionMod
 def phase_one(model: MotionModel, *, runs: int, seed0: int = 1000) -> NominalFit:
     """The dynamics null and the encoder gate from ``runs`` nominal route drives.
 
-    Commands and counts only (:func:`~lti_motion.app.monitor_setup.fit_nominal`);
+    Commands and counts only (:func:`~fusion.monitoring.phase_one.fit_nominal`);
     the null leaves out each drive's first 3 s, as the benchmark's
     (``benchmarks/bench_monitor.py``, whose false-alarm rate it measured).
     """
@@ -131,37 +128,23 @@ class MonitoredDrive(Odometry):
         self.recal = Recalibrator(model, min_samples=3000, save_path=save_path,
                                   request_excitation=self.excitation_requests.append,
                                   request_rotation=lambda event: None)
-        self.scale = ScaleMonitor(model.m_per_tick, model.wheel_base_m, ROUTE_LANDMARKS,
-                                  initial_pose=(*ROUTE_M[0], 0.0), pose_std=(0.005,) * 3)
-        self.dynamics = DynamicsMonitor(model, nominal.null)
-        self.monitor = ResidualMonitor(nominal.options(model.dt_s),
-                                       m_per_tick=model.m_per_tick, dynamics=self.dynamics,
-                                       scale=self.scale, on_alarm=self.recal.on_alarm)
+        # the model EKF, the sensor tests, the dynamics tests (Phase I) and the scale test
+        # (landmarks), one call per frame; the landmarks feed the scale test only
+        self.filter = MonitoredFilter(model, nominal=nominal, landmarks=ROUTE_LANDMARKS,
+                                      fuse_landmarks=False, initial_pose=(*ROUTE_M[0], 0.0),
+                                      pose_std=(0.005,) * 3, t0_s=model.dt_s,
+                                      on_alarm=self.recal.on_alarm)
+        self.dynamics, self.scale = self.filter.dynamics, self.filter.scale
         self.trace = Trace()
-        self.ekf: ModelEKF | None = None
-        self._prev: np.ndarray | None = None
 
     def step(self, frame, cmd_m_s, observations=None):
         pose = super().step(frame, cmd_m_s, observations)       # steering odometry
-        ticks = np.asarray(frame.ticks, np.int64)[0]
-        if self.ekf is None:                                     # the first frame anchors
-            self.ekf = ModelEKF(self.model, initial_ticks=ticks, t0_s=self.model.dt_s,
-                                history=0)
-            self._prev = ticks
-            return pose
         cmd = np.asarray(cmd_m_s, float)[0]
-        d = tick_deltas(np.stack([self._prev, ticks])).astype(float)[0]
-        self._prev = ticks
-        ekf, mon, m = self.ekf, self.monitor, self.model
-        ekf.predict(cmd)
-        t = ekf.t_s
-        v, w = ekf.speeds
-        half_b = 0.5 * m.wheel_base_m
-        mon.update_counts(t, d, np.array([v - w * half_b, v + w * half_b]), cmd_m_s=cmd)
-        record = ekf.update_encoders(ticks)
-        mon.update_record(record)
-        mon.update_commands(t, cmd, d)
-        mon.update_landmarks(t, d, [] if observations is None else observations[0])
+        res = self.filter.step(np.asarray(frame.ticks)[0], cmd,
+                               sightings=[] if observations is None else observations[0])
+        if res.encoders is None:                                 # the first frame anchors
+            return pose
+        t, d, record = res.t_s, res.tick_deltas, res.encoders
         # the policy's data: commands and encoder speeds in the model in use's scale
         rm = self.recal.model
         wheel = d * rm.m_per_tick / rm.dt_s
@@ -214,7 +197,6 @@ class Result:
     fits: dict[str, float]
     validation: dict[str, np.ndarray]
     route_s: float
-    dynamics_tests: dict[tuple[float, float], str]    # (statistic, onset_s) -> sub-test
     thresholds: dict[str, float]
 
 
@@ -263,7 +245,7 @@ def run(*, seed: int = 0, spikes_at_s: float = 8.0, carpet_at_s: float = 18.0,
                  f"{carpet_at_s:g} s, payload at {payload_at_s:g} s ...")
         res = drive_route(p, app, seeds=[seed], faults=faults, landmarks=ROUTE_LANDMARKS,
                           max_s=max_s)
-        route_s = app.ekf.t_s if app.ekf is not None else 0.0
+        route_s = app.filter.ekf.t_s if app.filter.ekf is not None else 0.0
         if app.excitation_requests and app.recal.waiting:
             # the application drives the excitation once the route is done (its choice of a
             # safe time and place): the same robot, on the carpet with the payload
@@ -289,7 +271,7 @@ def run(*, seed: int = 0, spikes_at_s: float = 8.0, carpet_at_s: float = 18.0,
             "original model, carpet + payload": float(np.mean(model.fit_percent([(u_fit, y_old)]))),
             "model in use, carpet + payload": float(np.mean(in_use.fit_percent([(u_fit, y_new)])))}
     result = Result(
-        events=list(app.monitor.events), records=list(app.recal.history), onsets=onsets,
+        events=list(app.filter.events), records=list(app.recal.history), onsets=onsets,
         trace=app.trace.arrays(),
         true_ratio=_true_ratio(model, res.true_poses[0], np.asarray(app.trace.deltas),
                                carpet_at_s),
@@ -300,8 +282,7 @@ def run(*, seed: int = 0, spikes_at_s: float = 8.0, carpet_at_s: float = 18.0,
                     "s": output_scaling(model, m_per_tick=in_use.m_per_tick,
                                         wheel_base_m=in_use.wheel_base_m)},
         route_s=route_s,
-        dynamics_tests={(a.statistic, a.onset_s): a.test for a in app.dynamics.alarms},
-        thresholds={"gate": app.monitor.thresholds().gate, "lag": app.dynamics.lag_threshold,
+        thresholds={"gate": app.filter.monitor.thresholds().gate, "lag": app.dynamics.lag_threshold,
                     "covariance": app.dynamics.covariance_threshold,
                     "scale": app.scale.threshold})
     print_fn(f"done in {time.perf_counter() - t_wall:.0f} s")
@@ -319,8 +300,8 @@ def alarm_rows(result: Result) -> list[str]:
             "| --- | --- | --- | --- | --- | --- | --- |"]
     for e in result.events:
         test = e.test
-        if e.test == "integrated":     # the dynamics sub-test (held-off alarms are not events)
-            test = f"integrated ({result.dynamics_tests.get((e.statistic, e.onset_s), '?')})"
+        if e.dynamics is not None:     # the dynamics sub-test
+            test = f"integrated ({e.dynamics.test})"
         fault = FAULT_OF_KIND.get(e.kind, "")
         true_onset = result.onsets.get(fault, float("nan"))
         end = true_onset + 2.0 if fault == "encoder_spikes" else float("inf")

@@ -7,10 +7,16 @@
   dynamics-change tests on integrated encoder residuals;
 - :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test;
 - :mod:`fusion.monitoring.recalibration`, :mod:`fusion.monitoring.rescale`: the
-  policy that answers alarms.
+  policy that answers alarms;
+- :mod:`fusion.monitoring.phase_one`: the dynamics null and the encoder gate fitted
+  on nominal drives;
+- :mod:`fusion.monitoring.monitored_filter`: :class:`MonitoredFilter`, the model EKF
+  and the monitor as one object with one call per frame.
 """
 
 from fusion.monitoring.dynamics import DynamicsMonitor, DynamicsNull, fit_dynamics_null
+from fusion.monitoring.monitored_filter import FrameResult, MonitoredFilter
+from fusion.monitoring.phase_one import NominalFit, fit_nominal
 from fusion.monitoring.recalibration import Recalibrator
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor, ScaleOptions
@@ -19,10 +25,14 @@ __all__ = [
     "AlarmEvent",
     "DynamicsMonitor",
     "DynamicsNull",
+    "FrameResult",
     "MonitorOptions",
+    "MonitoredFilter",
+    "NominalFit",
     "Recalibrator",
     "ResidualMonitor",
     "ScaleMonitor",
     "ScaleOptions",
     "fit_dynamics_null",
+    "fit_nominal",
 ]

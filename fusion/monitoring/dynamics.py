@@ -265,11 +265,9 @@ class DynamicsMonitor:
         return np.concatenate([llr, start[:, None]], axis=1)
 
     def update(self, t_s: float, cmd_m_s: np.ndarray, tick_deltas: np.ndarray
-               ) -> list[tuple[int, float, float, float]]:
-        """Feed one period of every robot; returns alarms as ``(robot, g, h, onset_s)``.
-
-        The details of each alarm (test, lag estimate) are appended to
-        :attr:`alarms`.
+               ) -> list[DynamicsAlarm]:
+        """Feed one period of every robot; returns the alarms it raised (also appended to
+        :attr:`alarms`).
 
         Parameters
         ----------
@@ -317,7 +315,7 @@ class DynamicsMonitor:
             alarm = DynamicsAlarm(int(i), ("lag", "covariance", "start")[j], float(g_new[i, j]),
                                   float(thresholds[j]), float(self._left[i, j]), float(lag))
             self.alarms.append(alarm)
-            out.append((alarm.robot, alarm.statistic, alarm.threshold, alarm.onset_s))
+            out.append(alarm)
             self._g[i] = 0.0
             self._ab[i] = 0.0
         return out

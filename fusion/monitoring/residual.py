@@ -98,7 +98,7 @@ from fusion.exceptions import (
     TimeOrderError,
 )
 from fusion.monitoring.cusum import cusum_threshold
-from fusion.monitoring.dynamics import DynamicsMonitor
+from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
 from lti_motion.model import MotionModel
 
@@ -147,6 +147,9 @@ class AlarmEvent:
         For ``"scale_glr"``: the scale test's alarm, with the new scale
         estimated from the landmarks since the onset (``scale.scale_ratio``:
         ground travel per encoder travel, with its standard deviation).
+    dynamics : DynamicsAlarm or None
+        For ``"integrated"``: the dynamics test's alarm, with its sub-test
+        (lag, covariance or start) and lag estimate.
     """
 
     t_s: float
@@ -157,6 +160,7 @@ class AlarmEvent:
     onset_s: float
     channel: int | None = None
     scale: ScaleAlarm | None = None
+    dynamics: DynamicsAlarm | None = None
 
 
 @dataclass(frozen=True)
@@ -546,11 +550,12 @@ class ResidualMonitor:
         hits = self.dynamics.update(t, cmd_m_s, tick_deltas)
         st = self._streams["encoders"]
         raised = []
-        for _, g, h, onset in hits:
+        for a in hits:
             if self._sensor_alarm_recent(t) or not self._allowed(st, "dynamics_changed", t):
                 continue
             st.last_alarm["dynamics_changed"] = t
-            raised.append(AlarmEvent(t, "dynamics_changed", "integrated", g, h, onset))
+            raised.append(AlarmEvent(t, "dynamics_changed", "integrated", a.statistic,
+                                     a.threshold, a.onset_s, dynamics=a))
         return self._emit(raised)
 
     def _sensor_alarm_recent(self, t: float) -> bool:

@@ -1,17 +1,11 @@
 """``lti-motion monitor``: drive (or listen), run the EKF and the residual monitor, print alarms.
 
-Per frame, as ``docs/monitor.md`` shows: predict the period with the wheel
-command, give the stuck-encoder check the count changes and the predicted
-wheel speeds, fuse the encoder counts and give the monitor the update
-record (per-sample gate, glitch bursts); with a Phase-I fit
-(:class:`~lti_motion.app.monitor_setup.NominalFit`), give the
-dynamics tests (:class:`~fusion.monitoring.DynamicsMonitor`) the
-command and the count changes; with landmarks, give the scale test
-(:class:`~fusion.monitoring.ScaleMonitor`) the count changes and the
-frame's sightings. Alarms are printed as they are raised; a summary follows
-at the end.
+Each frame goes through :class:`~fusion.monitoring.MonitoredFilter`, which owns
+the order of the steps (predict, the stuck-encoder check, the encoder update and
+its gate, the dynamics tests with a Phase-I fit, the scale test with landmarks).
+Alarms are printed as they are raised; a summary follows at the end.
 
-Phase I (:func:`~lti_motion.app.monitor_setup.fit_nominal`): the
+Phase I (:func:`~fusion.monitoring.phase_one.fit_nominal`): the
 dynamics null and the encoder gate come from nominal drives of the same
 route. ``--sim`` drives them first (``nominal_drives`` simulated drives of the
 same length, other seeds, no fault); ``--port`` reads them from logs the
@@ -37,14 +31,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
-from fusion.monitoring.dynamics import DynamicsMonitor
+from fusion.monitoring.monitored_filter import MonitoredFilter
+from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
-from fusion.monitoring.scale import ScaleMonitor
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
-    NominalFit,
     monitor_route,
     nominal_from_logs,
     nominal_on_simulator,
@@ -52,7 +44,6 @@ from lti_motion.app.monitor_setup import (
 )
 from lti_motion.frames import SensorFrame
 from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
 
 __all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames",
            "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
@@ -155,7 +146,7 @@ def monitor_frames(model: MotionModel,
                    on_alarm: Callable[[AlarmEvent], None] | None = None,
                    on_alarm_line: Callable[[str], object] | None = None,
                    on_frame: Callable[[SensorFrame], None] | None = None) -> MonitorRun:
-    """Run :class:`~fusion.ekf.ModelEKF` and :class:`~fusion.monitoring.ResidualMonitor` on frames.
+    """Run a :class:`~fusion.monitoring.MonitoredFilter` over frames.
 
     Parameters
     ----------
@@ -170,11 +161,13 @@ def monitor_frames(model: MotionModel,
         Monitor settings (default: the model's period and, with ``nominal``,
         its encoder gate; everything else default).
     nominal : NominalFit, optional
-        Phase I (:func:`~lti_motion.app.monitor_setup.fit_nominal`):
-        runs the dynamics tests with its null and the gate it set. Without it
-        the encoder innovations' windowed NIS and CUSUM run instead.
+        Phase I (:func:`~fusion.monitoring.phase_one.fit_nominal`): runs the
+        dynamics tests with its null and the gate it set. Without it the
+        encoder innovations' windowed NIS and CUSUM run instead.
     landmarks : LandmarkMap, optional
-        Runs the scale test (the robot starts at the origin, heading 0).
+        Runs the scale test (the robot starts at the origin, heading 0). The
+        sightings are not fused: the pose printed at the end is the model's
+        and the encoders' alone.
     on_alarm : callable, optional
         Called with each alarm as it is raised.
     on_alarm_line : callable, optional
@@ -186,70 +179,31 @@ def monitor_frames(model: MotionModel,
     Returns
     -------
     MonitorRun
-
-    Raises
-    ------
-    ValueError
-        If the model has no encoder scale.
     """
-    if model.m_per_tick is None:
-        raise ValueError("the model has no encoder scale (m_per_tick); the monitor needs "
-                         "one: calibrate with the rotation manoeuvre")
-    run = MonitorRun()
-    if options is None:
-        options = (nominal.options(model.dt_s) if nominal is not None
-                   else MonitorOptions(dt_s=model.dt_s))
-    dynamics = None if nominal is None else DynamicsMonitor(model, nominal.null)
-    scale = None
-    if landmarks is not None:
-        scale = ScaleMonitor(model.m_per_tick, model.wheel_base_m, landmarks,
-                             initial_pose=(0.0, 0.0, 0.0), pose_std=(0.005, 0.005, 0.005))
 
     def relay(event: AlarmEvent) -> None:
         if on_alarm_line is not None:
-            detail = ""
-            if event.test == "integrated" and dynamics is not None and dynamics.alarms:
-                a = dynamics.alarms[-1]
-                detail = f"({a.test} test, lag {a.lag_periods:.1f} periods)"
+            a = event.dynamics
+            detail = "" if a is None else f"({a.test} test, lag {a.lag_periods:.1f} periods)"
             on_alarm_line(format_alarm(event, detail=detail))
         if on_alarm is not None:
             on_alarm(event)
 
-    mon = ResidualMonitor(options, m_per_tick=model.m_per_tick, on_alarm=relay,
-                          dynamics=dynamics, scale=scale)
-    run.tests = _test_lines(mon, nominal, landmarks)
-    half_b = 0.5 * model.wheel_base_m
-    ekf = last_ticks = None
+    mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
+                         fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
+    run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks))
     for item in frames:
         frame, seen = item if isinstance(item, tuple) else (item, ())
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
-        ticks = np.asarray(frame.ticks, np.int64)
-        if ekf is None:                          # the first frame anchors the counts
-            ekf = ModelEKF(model, initial_ticks=ticks, history=0)
-            last_ticks = ticks
-            continue
-        cmd = np.asarray(frame.cmd_m_s, float)
-        ekf.predict(cmd)
-        if not bool(np.all(frame.valid)):
-            continue
-        v, w = ekf.speeds                        # predicted speeds of the period
-        deltas = tick_deltas(np.stack([last_ticks, ticks]), axis=0)[0]
-        mon.update_counts(ekf.t_s, deltas, np.array([v - w * half_b, v + w * half_b]),
-                          cmd_m_s=cmd)
-        mon.update_record(ekf.update_encoders(ticks))
-        if dynamics is not None:
-            mon.update_commands(ekf.t_s, cmd, deltas)
-        if scale is not None:
-            mon.update_landmarks(ekf.t_s, deltas, seen)
-        last_ticks = ticks
-    if ekf is not None:
-        run.duration_s = ekf.t_s
-        run.encoders_gated = ekf.stats.count("encoders", "gated")
-        run.final_pose = ekf.pose
-    run.events = list(mon.events)
-    run.counts = dict(mon.counts)
+        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen)
+    if mf.ekf is not None:
+        run.duration_s = mf.ekf.t_s
+        run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
+        run.final_pose = mf.ekf.pose
+    run.events = list(mf.events)
+    run.counts = dict(mf.monitor.counts)
     return run
 
 

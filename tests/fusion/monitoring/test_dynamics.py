@@ -289,6 +289,9 @@ def test_residual_monitor_raises_dynamics_changed_and_skips_innovation_tests(mod
     first = next(a for a in dyn.alarms if a.onset_s >= onset - 1.0)
     assert first.test == "lag" and 1.5 < first.lag_periods < 4.5, first
     assert seen == mon.events
+    # each event carries the dynamics test's alarm: its sub-test and lag estimate
+    assert all(e.dynamics in dyn.alarms for e in mon.events)
+    assert next(e.dynamics for e in mon.events if e.onset_s >= onset - 1.0) is first
     with pytest.raises(FilterOptionError, match="DynamicsMonitor"):
         ResidualMonitor().update_commands(0.0, np.zeros(2), np.zeros(2))
 

@@ -15,9 +15,10 @@ from scipy.stats import chi2
 
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF, UpdateRecord
+from fusion.ekf.model_ekf import UpdateRecord
 from fusion.exceptions import CovarianceNotPositiveDefiniteError, TimeOrderError
 from fusion.monitoring.cusum import cusum_arl, cusum_threshold
+from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.residual import (
     AlarmEvent,
     MonitorOptions,
@@ -26,7 +27,6 @@ from fusion.monitoring.residual import (
     one_step_innovations,
     whiten,
 )
-from lti_motion.odometry import tick_deltas
 
 DT = 0.015
 N_RUNS, FAULT_AT_S, DURATION_S = 20, 20.0, 30.0
@@ -275,20 +275,12 @@ def model(example):
 
 
 def _monitor_run(model, log, start_pose):
-    """EKF over one robot's frames, its encoder records and counts into a fresh monitor."""
-    ekf = ModelEKF(model, initial_pose=start_pose, pose_std=(0.005,) * 3,
-                   initial_ticks=log.ticks[0], history=0)
-    mon = ResidualMonitor(MonitorOptions(dt_s=model.dt_s), m_per_tick=model.m_per_tick)
-    deltas = tick_deltas(log.ticks.astype(np.int64), axis=0)
-    half_b = 0.5 * model.wheel_base_m
+    """The model EKF and a fresh monitor over one robot's frames (no Phase I, no landmarks)."""
+    mf = MonitoredFilter(model, initial_pose=start_pose, pose_std=(0.005,) * 3,
+                         initial_ticks=log.ticks[0])
     for k in range(1, len(log.t_s)):
-        ekf.predict(log.cmd_m_s[k])
-        v, w = ekf.speeds                     # predicted speeds of the period
-        t = ekf.t_s
-        mon.update_counts(t, deltas[k - 1], np.array([v - w * half_b, v + w * half_b]),
-                          cmd_m_s=log.cmd_m_s[k])
-        mon.update_record(ekf.update_encoders(log.ticks[k]))
-    return mon
+        mf.step(log.ticks[k], log.cmd_m_s[k])
+    return mf.monitor
 
 
 def _runs(example, model, faults, *, n, duration_s, seed):

@@ -1,10 +1,10 @@
-"""Phase I of the monitor (``lti_motion.app.monitor_setup``) and its encoder gate."""
+"""The monitor's drive, its Phase I on the simulator and its simulated landmark sensor
+(``lti_motion.app.monitor_setup``)."""
 
 import numpy as np
 import pytest
 
-from fusion.exceptions import FilterOptionError
-from fusion.monitoring.residual import MonitorOptions, ResidualMonitor, design_thresholds
+from fusion.monitoring.phase_one import encoder_nis
 from lti_motion.app import monitor_setup as ms
 
 
@@ -15,18 +15,6 @@ def model():
 
     return calibrate_simulator("create2", seed=2,
                                plan=CalibrationPlan(seed=2, excitation_s=40.0)).arx
-
-
-def test_encoder_gate_applies_to_the_encoder_stream_only():
-    opt = MonitorOptions(encoder_gate_nis=5000.0)
-    assert design_thresholds(opt).gate == 5000.0
-    assert design_thresholds(opt).burst_rate_per_hour < 1e-300     # chi-square tail of 5000
-    assert round(design_thresholds(opt, stream="landmark").gate, 1) == 55.3
-    mon = ResidualMonitor(opt)
-    assert mon.thresholds("encoders").gate == 5000.0
-    assert round(mon.thresholds("landmark").gate, 1) == 55.3
-    with pytest.raises(FilterOptionError, match="encoder_gate_nis"):
-        MonitorOptions(encoder_gate_nis=-1.0)
 
 
 def test_gate_sits_between_a_start_from_rest_and_a_spike(model):
@@ -45,18 +33,9 @@ def test_gate_sits_between_a_start_from_rest_and_a_spike(model):
                     faults=[Fault("encoder_spikes", t_s=10.0, duration_s=1.0, rate_hz=20.0)])
     log = sim.run(ms.monitor_route(15.0, dt_s=model.dt_s, wheel_base_m=model.wheel_base_m,
                                    rng=np.random.default_rng(9)))
-    nis = ms.encoder_nis(model, log.cmd_m_s[1:], log.ticks)
+    nis = encoder_nis(model, log.cmd_m_s[1:], log.ticks)
     k = round(10.0 / model.dt_s) - 5                    # a few frames before the onset
     assert np.nanmax(nis[:k]) < fit.encoder_gate_nis < np.nanmax(nis[k:])
-
-
-def test_fit_nominal_rejects_bad_input(model):
-    with pytest.raises(ValueError, match="at least one"):
-        ms.fit_nominal(model, [])
-    with pytest.raises(ValueError, match=r"ticks \(n \+ 1, 2\)"):
-        ms.fit_nominal(model, [(np.zeros((10, 2)), np.zeros((10, 2)))])
-    with pytest.raises(ValueError, match="gate_factor"):
-        ms.fit_nominal(model, [(np.zeros((10, 2)), np.zeros((11, 2)))], gate_factor=0.5)
 
 
 def test_simulated_sensor_sees_each_landmark_at_2_hz():
