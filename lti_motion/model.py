@@ -372,7 +372,7 @@ class MotionModel:
         ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
         ...            residual_cov=np.eye(2) * 1e-6, n_samples=100, source="steps"),
         ...     dt_s=0.015, wheel_base_m=0.25, calibrated_at="2026-01-01T00:00:00+00:00")
-        >>> model.simulate(np.tile([0.2, 0.2], (3, 1))).tolist()
+        >>> (model.simulate(np.tile([0.2, 0.2], (3, 1))).round(12) + 0.0).tolist()
         [[0.0, 0.0], [0.2, 0.0], [0.2, 0.0]]
         """
         return self.propagate(u, z0=z0)[0]
