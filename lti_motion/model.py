@@ -549,11 +549,12 @@ class MotionModel:
         doc = read_document(path, fmt=FORMAT, versions=(VERSION,))
         keys = ("kind", "dt_s", "wheel_base_m", "m_per_tick", "floor", "calibrated_at",
                 "q_scale", "orders", "diagnostics", "coefficients", "matrices")
+        matrices = doc.get("matrices") if isinstance(doc.get("matrices"), dict) else {}
         missing = [k for k in keys if k not in doc]
-        missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in doc.get("matrices", {})]
+        missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in matrices]
         if missing:
-            raise ModelFileError(f"{path} lacks the keys {missing}; it was not written by "
-                                 "MotionModel.save")
+            raise ModelFileError(f"{path} lacks the keys {missing}; it is not a model file "
+                                 "that lti-motion wrote")
         try:
             return cls(
                 kind=doc["kind"], dt_s=doc["dt_s"], wheel_base_m=doc["wheel_base_m"],

@@ -153,6 +153,9 @@ def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path} is damaged or truncated: not valid JSON ({exc}); "
                              "restore it from a backup or calibrate again") from None
+    except RecursionError:
+        raise ModelFileError(f"{path} is damaged: not a model file (JSON nested too deeply)"
+                             ) from None
     if not isinstance(doc, dict) or doc.get("format") != fmt:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise ModelFileError(f"{path} is not a {fmt!r} file (format {found!r})")
