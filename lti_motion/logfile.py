@@ -99,10 +99,11 @@ def load_log(path: str | os.PathLike) -> FrameLog:
         ``.npy`` array), is damaged or truncated, is of another format or an
         unknown version, has a header that is not a JSON object with a
         positive ``dt_s``, lacks an array or holds one of the wrong shape or
-        type, holds no frames, or has landmark sightings in ``meta`` that
-        are not the documented rows (``docs/log_format.md``). The message
-        names the file and the problem; it never suggests loading pickled
-        data.
+        type, holds no frames, has a frame time that is not finite or that
+        goes backwards (the message gives the frame index and both times), or
+        has landmark sightings in ``meta`` that are not the documented rows
+        (``docs/log_format.md``). The message names the file and the problem;
+        it never suggests loading pickled data.
     """
     path = Path(path)
     _check_npz(path)
@@ -120,6 +121,7 @@ def load_log(path: str | os.PathLike) -> FrameLog:
     except _READ_ERRORS as exc:                     # the zip directory itself is damaged
         raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
     _check_arrays(path, arrays)
+    _check_times(path, arrays["t_s"])
     meta = header.get("meta", {})
     _check_sightings(path, meta)
     return FrameLog(dt_s=float(header["dt_s"]), meta=meta, **arrays)
@@ -230,6 +232,25 @@ def _check_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
                                "expected numbers")
     if lead[-1] == 0:
         raise LogFileError(f"{path} holds no frames")
+
+
+def _check_times(path: Path, t_s: np.ndarray) -> None:
+    """Every frame time finite, and none earlier than the one before it."""
+    for i, t in enumerate(np.atleast_2d(t_s)):
+        robot = f"robot {i}'s " if t_s.ndim == 2 else ""
+        bad = np.flatnonzero(~np.isfinite(t))
+        if bad.size:
+            k = int(bad[0])
+            more = f"; {bad.size} frames have none" if bad.size > 1 else ""
+            raise LogFileError(f"{path} is damaged: {robot}frame {k} has no valid time "
+                               f"(t_s = {t[k]}){more}")
+        back = np.flatnonzero(np.diff(t) < 0)
+        if back.size:
+            k = int(back[0]) + 1
+            more = f"; it goes back {back.size} times" if back.size > 1 else ""
+            raise LogFileError(f"{path} is damaged: time goes backwards at {robot}frame {k}, "
+                               f"t_s = {t[k]:.6f} s after {t[k - 1]:.6f} s at frame {k - 1}"
+                               f"{more}")
 
 
 def _check_sightings(path: Path, meta: dict) -> None:

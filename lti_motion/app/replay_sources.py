@@ -158,7 +158,8 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
     FileNotFoundError, LogFileError
         From :func:`lti_motion.logfile.load_log`.
     ValueError
-        For a robot index out of range or an empty stretch.
+        For a robot index out of range, an empty stretch, or two frames with
+        the same time (the TUM files need increasing times).
     """
     log = load_log(path)
     name = Path(path).name
@@ -168,6 +169,11 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
             raise ValueError(f"{name} holds robots 0-{log.n_robots - 1}; there is no robot {i}")
         log, name = log.robot(i), f"{name} robot {i}"
     keep = _window(log.t_s, start_s, duration_s)
+    repeat = np.flatnonzero(np.diff(log.t_s[keep]) <= 0)      # load_log refused earlier times
+    if repeat.size:
+        k = int(keep[repeat[0] + 1])
+        raise ValueError(f"{name}: frame {k} has the time of frame {k - 1} (t_s = "
+                         f"{log.t_s[k]:.6f} s); replay needs increasing frame times")
     meta = log.meta
     landmarks = sightings = None
     if meta.get("landmarks") and meta.get("observations"):

@@ -111,6 +111,14 @@ BAD_FILES = [
      r"cmd_m_s holds <U\d+ values; expected numbers"),
     ("valid flags as floats", lambda p, log: _write(p, log, valid=log.valid + 0.5),
      "valid holds float64 values; expected flags"),
+    ("a NaN time", lambda p, log: _write(p, log, t_s=np.where(np.arange(40) == 7, np.nan,
+                                                            log.t_s)),
+     r"frame 7 has no valid time \(t_s = nan\)"),
+    ("a time that goes backwards", lambda p, log: _write(
+        p, log, t_s=np.where(np.arange(40) == 12, log.t_s[5], log.t_s)),
+     r"time goes backwards at frame 12, t_s = 0\.0\d{5} s after 0\.1\d{5} s at frame 11"),
+    ("a reversed log", lambda p, log: _write(p, log, t_s=log.t_s[::-1].copy()),
+     "time goes backwards at frame 1, .* it goes back 39 times"),
 ]
 
 
@@ -155,3 +163,13 @@ def test_every_truncation_and_bit_flip_is_a_log_file_error(tmp_path, sim_log):
         except LogFileError as exc:
             assert "\n" not in str(exc) and "pickle" not in str(exc).lower(), str(exc)
     assert loaded < len(flips) // 2                     # most flips are caught, none escapes
+
+
+def test_a_batch_log_names_the_robot_whose_time_goes_backwards(tmp_path):
+    log = Simulator("create2", n_robots=3, seed=1).run(np.full((3, 30, 2), 0.1))
+    t = log.t_s.copy()
+    t[2, 20] = t[2, 3]
+    path = tmp_path / "batch.npz"
+    _write(path, log, t_s=t)
+    with pytest.raises(LogFileError, match="time goes backwards at robot 2's frame 20"):
+        load_log(path)

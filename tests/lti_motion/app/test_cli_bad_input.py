@@ -37,6 +37,22 @@ def _npz(path, log, header=None, **changes):
     np.savez(path, header=np.array(json.dumps(header)), **{**arrays, **changes})
 
 
+def _reversed(path, log):
+    _npz(path, log, t_s=log.t_s[::-1].copy())
+
+
+def _nan_time(path, log):
+    t = log.t_s.copy()
+    t[10] = np.nan
+    _npz(path, log, t_s=t)
+
+
+def _repeated_time(path, log):
+    t = log.t_s.copy()
+    t[21] = t[20]
+    _npz(path, log, t_s=t)
+
+
 CASES = [
     ("a zero-byte file", lambda p, log: p.write_bytes(b""), "is empty (0 bytes)"),
     ("a header that is a JSON list", lambda p, log: _npz(p, log, header=[1, 2]),
@@ -51,6 +67,9 @@ CASES = [
      "meta.landmarks is a JSON string"),
     ("a text file", lambda p, log: p.write_text("frame,t_s\n0,0.0\n"),
      "not an NPZ (zip) archive"),
+    ("a reversed log", _reversed, "time goes backwards at frame 1"),
+    ("a NaN time", _nan_time, "frame 10 has no valid time"),
+    ("a repeated time", _repeated_time, "frame 21 has the time of frame 20"),
 ]
 
 
@@ -63,7 +82,7 @@ def test_replay_of_a_bad_log_prints_one_line_and_exits_2(files, tmp_path, capsys
                  "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("lti-motion replay: error: "), err
-    assert str(bad) in err and message in err
+    assert bad.name in err and message in err
     assert "Traceback" not in err and "pickle" not in err.lower()
     assert not (tmp_path / "out").exists()                # refused before any estimator ran
 
