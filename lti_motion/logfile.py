@@ -8,7 +8,9 @@ the log has ground truth) and a ``header`` array holding a JSON string:
 Units are those of :class:`FrameLog` (s, raw 16-bit ticks, m/s, rad).
 
 Files are written atomically: to a temporary file in the same folder, flushed
-to disk, then renamed over the target, so a crash never leaves half a log.
+to disk, then renamed over the target, so a crash never leaves half a log
+(:func:`lti_motion.persistence.atomic_write`); a new file gets the mode a plain
+``open`` gives under the process umask.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ import json
 import math
 import os
 import struct
-import tempfile
 import zipfile
 import zlib
 from pathlib import Path
@@ -26,6 +27,7 @@ import numpy as np
 
 from lti_motion.exceptions import LogFileError
 from lti_motion.frames import FrameLog
+from lti_motion.persistence import atomic_write
 
 __all__ = [
     "LOG_FORMAT",
@@ -64,16 +66,8 @@ def save_log(path: str | os.PathLike, log: FrameLog) -> Path:
     if log.has_truth:
         arrays.update({name: getattr(log, name) for name in _TRUTH})
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:
+        np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
     return path
 
 
