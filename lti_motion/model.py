@@ -28,7 +28,7 @@ import logging
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
@@ -171,7 +171,7 @@ def q_scale_from_errors(ss: StateSpace, r: np.ndarray, errors: Sequence[np.ndarr
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
