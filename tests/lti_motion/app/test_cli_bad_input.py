@@ -101,3 +101,15 @@ def test_replay_with_a_damaged_model_file_prints_one_line(files, tmp_path, capsy
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(bad) in err and "lacks the keys" in err
     assert "MotionModel" not in err                      # no internal names for a user
+
+
+def test_an_error_message_with_line_breaks_is_printed_on_one_line(files, tmp_path, capsys,
+                                                                  monkeypatch):
+    import lti_motion.app.replay as replay
+
+    def fails(*args, **kwargs):
+        raise ValueError("first part\n  second part")
+
+    monkeypatch.setattr(replay, "run_replay", fails)
+    assert main(["replay", str(files["good"]), "--model", str(files["model"])]) == 2
+    assert capsys.readouterr().err == "lti-motion replay: error: first part second part\n"
