@@ -174,7 +174,7 @@ class LandmarkNoise:
 
     Examples
     --------
-    >>> LandmarkNoise(range_std_frac=0.02, bearing_std_rad=0.01).cov(2.0).round(8).tolist()
+    >>> (LandmarkNoise(range_std_frac=0.02, bearing_std_rad=0.01).cov(2.0).round(8) + 0.0).tolist()
     [[0.0016, 0.0], [0.0, 0.0001]]
     """
 

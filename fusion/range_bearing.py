@@ -71,7 +71,8 @@ def range_bearing(pose: np.ndarray, landmark_xy: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> range_bearing(np.array([1.0, 1.0, np.pi / 2]), np.array([1.0, 3.0])).round(12).tolist()
+    >>> rb = range_bearing(np.array([1.0, 1.0, np.pi / 2]), np.array([1.0, 3.0]))
+    >>> (rb.round(12) + 0.0).tolist()
     [2.0, 0.0]
     """
     x, y, theta = _pose_xy_theta(pose)
@@ -108,8 +109,8 @@ def range_bearing_jacobian(pose: np.ndarray, landmark_xy: np.ndarray) -> np.ndar
 
     Examples
     --------
-    >>> range_bearing_jacobian(np.zeros(3), np.array([2.0, 0.0])).tolist()
-    [[-1.0, -0.0, 0.0], [0.0, -0.5, -1.0]]
+    >>> (range_bearing_jacobian(np.zeros(3), np.array([2.0, 0.0])).round(12) + 0.0).tolist()
+    [[-1.0, 0.0, 0.0], [0.0, -0.5, -1.0]]
     """
     x, y, _ = _pose_xy_theta(pose)
     dx, dy = float(landmark_xy[0]) - x, float(landmark_xy[1]) - y

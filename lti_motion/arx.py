@@ -179,8 +179,8 @@ def arx_regression(runs: Runs, *, na: int, nb: int, delay: int = 0
     --------
     >>> u = np.arange(8.0).reshape(4, 2); y = -u
     >>> phi, target = arx_regression([(u, y)], na=1, nb=1, delay=1)
-    >>> phi.tolist()[0], target.tolist()[0]
-    ([0.0, 1.0, -0.0, -1.0], [-2.0, -3.0])
+    >>> (phi[0] + 0.0).tolist(), target[0].tolist()
+    ([0.0, 1.0, 0.0, -1.0], [-2.0, -3.0])
     """
     na, nb, delay = _check_orders(na, nb, delay)
     runs = check_runs(runs)

@@ -199,7 +199,7 @@ def fir_from_steps(
     (5, [[0.5, 0.5], [-4.255, 4.255]])
     >>> y[:, 1] *= 1.01                          # a yaw-rate scale error of 1 %
     >>> servo = fir_from_steps(u, y, phases=seq, dc_gain="wheel_servo", wheel_base_m=0.235)
-    >>> np.round(servo.taps.sum(axis=0) @ [1.0, 1.0], 12).tolist()  # straight: no yaw
+    >>> (np.round(servo.taps.sum(axis=0) @ [1.0, 1.0], 12) + 0.0).tolist()  # straight: no yaw
     [1.005, 0.0]
     """
     ((u, y),) = check_runs([(u, y)])

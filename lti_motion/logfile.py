@@ -8,21 +8,26 @@ the log has ground truth) and a ``header`` array holding a JSON string:
 Units are those of :class:`FrameLog` (s, raw 16-bit ticks, m/s, rad).
 
 Files are written atomically: to a temporary file in the same folder, flushed
-to disk, then renamed over the target, so a crash never leaves half a log.
+to disk, then renamed over the target, so a crash never leaves half a log
+(:func:`lti_motion.persistence.atomic_write`); a new file gets the mode a plain
+``open`` gives under the process umask.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
-import tempfile
+import struct
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
 
 from lti_motion.exceptions import LogFileError
 from lti_motion.frames import FrameLog
+from lti_motion.persistence import atomic_write
 
 __all__ = [
     "LOG_FORMAT",
@@ -61,46 +66,212 @@ def save_log(path: str | os.PathLike, log: FrameLog) -> Path:
     if log.has_truth:
         arrays.update({name: getattr(log, name) for name in _TRUTH})
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as fh:
+        np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
     return path
 
 
 def load_log(path: str | os.PathLike) -> FrameLog:
-    """Read a log written by :func:`save_log`.
+    """Read a log written by :func:`save_log`, checking everything it reads.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ``.npz`` log.
+
+    Returns
+    -------
+    FrameLog
+        One robot or a batch, as saved.
 
     Raises
     ------
-    LogFileError
-        If the file is not a readable archive, is of another format or an
-        unknown version, or lacks a field.
     FileNotFoundError
         If there is no such file.
+    LogFileError
+        If the file is empty, is not an NPZ archive (a text file, a single
+        ``.npy`` array), is damaged or truncated, is of another format or an
+        unknown version, has a header that is not a JSON object with a
+        positive ``dt_s``, lacks an array or holds one of the wrong shape or
+        type, holds no frames, has a frame time that is not finite or that
+        goes backwards (the message gives the frame index and both times), or
+        has landmark sightings in ``meta`` that are not the documented rows
+        (``docs/log_format.md``). The message names the file and the problem;
+        it never suggests loading pickled data.
     """
     path = Path(path)
+    _check_npz(path)
     try:
         with np.load(path, allow_pickle=False) as npz:
-            header = json.loads(str(npz["header"]))
-            if header.get("format") != LOG_FORMAT:
-                raise LogFileError(f"{path} is not an {LOG_FORMAT} file "
-                                   f"(format {header.get('format')!r})")
-            if header.get("version") != LOG_VERSION:
-                raise LogFileError(f"{path} has log version {header.get('version')!r}; "
-                                   f"this lti-motion reads version {LOG_VERSION}")
-            arrays = {name: npz[name] for name in _ARRAYS}
-            truth = {name: npz[name] for name in _TRUTH if name in npz.files}
-    except FileNotFoundError:
+            header = _header(path, npz)
+            missing = [name for name in _ARRAYS if name not in npz.files]
+            if missing:
+                raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
+                                   f"{LOG_FORMAT} file")
+            arrays = {name: _array(path, npz, name)
+                      for name in (*_ARRAYS, *(n for n in _TRUTH if n in npz.files))}
+    except (FileNotFoundError, LogFileError):
         raise
-    except LogFileError:
-        raise
-    except (KeyError, ValueError, OSError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
-        raise LogFileError(f"{path} is damaged or not a log file: {exc}") from exc
-    return FrameLog(dt_s=float(header["dt_s"]), meta=header.get("meta", {}), **arrays, **truth)
+    except _READ_ERRORS as exc:                     # the zip directory itself is damaged
+        raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
+    _check_arrays(path, arrays)
+    _check_times(path, arrays["t_s"])
+    meta = header.get("meta", {})
+    _check_sightings(path, meta)
+    return FrameLog(dt_s=float(header["dt_s"]), meta=meta, **arrays)
+
+
+#: What reading a damaged archive raises (zipfile, zlib and numpy's .npy reader).
+_READ_ERRORS = (OSError, EOFError, ValueError, KeyError, OverflowError, NotImplementedError,
+                RuntimeError, zipfile.BadZipFile, zlib.error, struct.error)
+
+#: The shape of one frame of each array, format version 1 (``docs/log_format.md``).
+_FRAME_SHAPES = {"t_s": (), "ticks": (2,), "light_bump": (6,), "bumps": (2,), "cmd_m_s": (2,),
+                 "valid": (), "true_pose": (3,), "true_body_m_s": (2,)}
+_FLAGS = ("bumps", "valid")
+
+
+def _reason(exc: BaseException) -> str:
+    """What went wrong, on one line, in words that never invite loading pickles."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, EOFError) or not text:
+        return "it ends too early (truncated)"
+    if "pickle" in text.lower() or "object arrays" in text.lower():
+        return "it holds Python objects, which a log never does"
+    return text
+
+
+def _check_npz(path: Path) -> None:
+    """Refuse, by its first bytes, a file that is not a zip archive (what an NPZ file is)."""
+    with open(path, "rb") as fh:              # FileNotFoundError for a missing file
+        magic = fh.read(6)
+    if not magic:
+        raise LogFileError(f"{path} is empty (0 bytes): not an {LOG_FORMAT} file")
+    if magic == b"\x93NUMPY":
+        raise LogFileError(f"{path} is a single NumPy array (.npy), not an {LOG_FORMAT} file "
+                           "(an .npz archive)")
+    if magic[:4] not in (b"PK\x03\x04", b"PK\x05\x06"):
+        raise LogFileError(f"{path} is not an {LOG_FORMAT} file: not an NPZ (zip) archive")
+
+
+def _array(path: Path, npz: np.lib.npyio.NpzFile, name: str) -> np.ndarray:
+    try:
+        return npz[name]
+    except _READ_ERRORS as exc:
+        raise LogFileError(f"{path} is damaged or not a log file: its array {name!r} cannot be "
+                           f"read ({_reason(exc)})") from exc
+
+
+def _header(path: Path, npz: np.lib.npyio.NpzFile) -> dict:
+    """The header as a dict with a known format, version and a positive ``dt_s``."""
+    if "header" not in npz.files:
+        raise LogFileError(f"{path} is an NPZ archive but not an {LOG_FORMAT} file (it has no "
+                           "header)")
+    raw = _array(path, npz, "header")
+    if raw.shape != () or raw.dtype.kind not in "US":
+        raise LogFileError(f"{path} is not an {LOG_FORMAT} file: its header is not a JSON text")
+    try:
+        header = json.loads(str(raw))
+    except json.JSONDecodeError as exc:
+        raise LogFileError(f"{path} is damaged or not a log file: its header is not valid JSON "
+                           f"({exc.msg} at character {exc.pos})") from exc
+    except RecursionError as exc:
+        raise LogFileError(f"{path} is damaged or not a log file: its header is nested too "
+                           "deeply") from exc
+    if not isinstance(header, dict):
+        raise LogFileError(f"{path} is not an {LOG_FORMAT} file: its header is a JSON "
+                           f"{_json_type(header)}, not an object")
+    if header.get("format") != LOG_FORMAT:
+        raise LogFileError(f"{path} is not an {LOG_FORMAT} file "
+                           f"(format {header.get('format')!r})")
+    if header.get("version") != LOG_VERSION:
+        raise LogFileError(f"{path} has log version {header.get('version')!r}; "
+                           f"this lti-motion reads version {LOG_VERSION}")
+    if "dt_s" not in header:
+        raise LogFileError(f"{path} is damaged: its header lacks dt_s, the sensor period [s]")
+    dt_s = header["dt_s"]
+    if (isinstance(dt_s, bool) or not isinstance(dt_s, int | float) or not math.isfinite(dt_s)
+            or dt_s <= 0):
+        raise LogFileError(f"{path} is damaged: its header has dt_s = {dt_s!r}; expected the "
+                           "sensor period, a positive number of seconds")
+    if not isinstance(header.get("meta", {}), dict):
+        raise LogFileError(f"{path} is damaged: its header's meta is a JSON "
+                           f"{_json_type(header['meta'])}; expected an object")
+    return header
+
+
+def _json_type(value: object) -> str:
+    return {dict: "object", list: "list", str: "string", bool: "boolean", type(None): "null"
+            }.get(type(value), "number")
+
+
+def _check_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """Shapes and types as format version 1 has them; 0/1 flags become booleans in place."""
+    lead = arrays["t_s"].shape
+    if len(lead) not in (1, 2):
+        raise LogFileError(f"{path} is damaged: its array t_s has shape {lead}; expected (n,) "
+                           "frames, or (N, n) for N robots")
+    for name, arr in arrays.items():
+        expected = lead + _FRAME_SHAPES[name]
+        if arr.shape != expected:
+            raise LogFileError(f"{path} is damaged: its array {name} has shape {arr.shape}; "
+                               f"expected {expected}")
+        if name in _FLAGS and arr.dtype.kind in "iu" and np.all((arr == 0) | (arr == 1)):
+            arrays[name] = arr.astype(bool)
+        elif name in _FLAGS and arr.dtype.kind != "b":
+            raise LogFileError(f"{path} is damaged: its array {name} holds {arr.dtype} values; "
+                               "expected flags (booleans)")
+        elif name not in _FLAGS and arr.dtype.kind not in "iuf":
+            raise LogFileError(f"{path} is damaged: its array {name} holds {arr.dtype} values; "
+                               "expected numbers")
+    if lead[-1] == 0:
+        raise LogFileError(f"{path} holds no frames")
+
+
+def _check_times(path: Path, t_s: np.ndarray) -> None:
+    """Every frame time finite, and none earlier than the one before it."""
+    for i, t in enumerate(np.atleast_2d(t_s)):
+        robot = f"robot {i}'s " if t_s.ndim == 2 else ""
+        bad = np.flatnonzero(~np.isfinite(t))
+        if bad.size:
+            k = int(bad[0])
+            more = f"; {bad.size} frames have none" if bad.size > 1 else ""
+            raise LogFileError(f"{path} is damaged: {robot}frame {k} has no valid time "
+                               f"(t_s = {t[k]}){more}")
+        back = np.flatnonzero(np.diff(t) < 0)
+        if back.size:
+            k = int(back[0]) + 1
+            more = f"; it goes back {back.size} times" if back.size > 1 else ""
+            raise LogFileError(f"{path} is damaged: time goes backwards at {robot}frame {k}, "
+                               f"t_s = {t[k]:.6f} s after {t[k - 1]:.6f} s at frame {k - 1}"
+                               f"{more}")
+
+
+def _check_sightings(path: Path, meta: dict) -> None:
+    """``meta.landmarks`` and ``meta.observations``, when present, as the rows the format has."""
+    layouts = {"landmarks": ("id", "x_m", "y_m"),
+               "observations": ("frame_index", "id", "range_m", "bearing_rad")}
+    for key, columns in layouts.items():
+        if key not in meta:
+            continue
+        rows, form = meta[key], f"a list of [{', '.join(columns)}] rows"
+        if not isinstance(rows, list):
+            raise LogFileError(f"{path} is damaged: its meta.{key} is a JSON "
+                               f"{_json_type(rows)}; expected {form}")
+        for r, row in enumerate(rows):
+            if not (isinstance(row, list) and len(row) == len(columns)
+                    and all(_is_cell(v, c) for v, c in zip(row, columns, strict=True))):
+                raise LogFileError(f"{path} is damaged: row {r} of its meta.{key} is "
+                                   f"{json.dumps(row)[:60]}; expected {form}")
+
+
+def _is_cell(value: object, column: str) -> bool:
+    if column == "id":
+        return isinstance(value, str) or (isinstance(value, int | float)
+                                          and not isinstance(value, bool)
+                                          and math.isfinite(value))
+    number = (isinstance(value, int | float) and not isinstance(value, bool)
+              and math.isfinite(value))
+    if column == "frame_index":
+        return number and float(value).is_integer() and value >= 0
+    return number

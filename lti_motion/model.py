@@ -28,7 +28,7 @@ import logging
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Literal
@@ -171,7 +171,7 @@ def q_scale_from_errors(ss: StateSpace, r: np.ndarray, errors: Sequence[np.ndarr
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -372,7 +372,7 @@ class MotionModel:
         ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
         ...            residual_cov=np.eye(2) * 1e-6, n_samples=100, source="steps"),
         ...     dt_s=0.015, wheel_base_m=0.25, calibrated_at="2026-01-01T00:00:00+00:00")
-        >>> model.simulate(np.tile([0.2, 0.2], (3, 1))).tolist()
+        >>> (model.simulate(np.tile([0.2, 0.2], (3, 1))).round(12) + 0.0).tolist()
         [[0.0, 0.0], [0.2, 0.0], [0.2, 0.0]]
         """
         return self.propagate(u, z0=z0)[0]
@@ -549,11 +549,12 @@ class MotionModel:
         doc = read_document(path, fmt=FORMAT, versions=(VERSION,))
         keys = ("kind", "dt_s", "wheel_base_m", "m_per_tick", "floor", "calibrated_at",
                 "q_scale", "orders", "diagnostics", "coefficients", "matrices")
+        matrices = doc.get("matrices") if isinstance(doc.get("matrices"), dict) else {}
         missing = [k for k in keys if k not in doc]
-        missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in doc.get("matrices", {})]
+        missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in matrices]
         if missing:
-            raise ModelFileError(f"{path} lacks the keys {missing}; it was not written by "
-                                 "MotionModel.save")
+            raise ModelFileError(f"{path} lacks the keys {missing}; it is not a model file "
+                                 "that lti-motion wrote")
         try:
             return cls(
                 kind=doc["kind"], dt_s=doc["dt_s"], wheel_base_m=doc["wheel_base_m"],

@@ -7,7 +7,9 @@ never be read back silently wrong. So a document is
   name, an integer ``"version"`` and a ``"sha256"`` of its canonical content;
 - written to a temporary file in the target's directory, flushed and
   ``fsync``-ed, then moved over the target with ``os.replace`` (atomic on
-  POSIX and Windows), and the directory entry synced;
+  POSIX and Windows), and the directory entry synced (:func:`atomic_write`,
+  which :mod:`lti_motion.logfile` uses too), with the permissions a plain
+  ``open`` would give under the process umask;
 - read back with every failure (truncation, damage, another format or
   version, a hand edit) turned into a :class:`ModelFileError` that says what
   is wrong.
@@ -23,16 +25,17 @@ import contextlib
 import hashlib
 import json
 import os
-import tempfile
-from collections.abc import Mapping
+import secrets
+import stat
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
 from lti_motion.exceptions import ModelFileError
 
-__all__ = ["decode_array", "encode_array", "read_document", "write_document"]
+__all__ = ["atomic_write", "decode_array", "encode_array", "read_document", "write_document"]
 
 
 def encode_array(arr: np.ndarray) -> dict[str, Any]:
@@ -101,10 +104,51 @@ def write_document(path: str | os.PathLike, payload: Mapping[str, Any], *, fmt: 
     doc = {**payload, "format": fmt, "version": int(version)}
     doc["sha256"] = _digest(doc)
     text = json.dumps(doc, indent=1, sort_keys=True, allow_nan=False) + "\n"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with atomic_write(path, text=True) as f:
+        f.write(text)
+    return path
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike, *, text: bool = False) -> Iterator[IO]:
+    """A file object whose content replaces ``path`` atomically when the block ends.
+
+    Writes go to a temporary file in ``path``'s directory; on leaving the
+    block without an exception it is flushed and ``fsync``-ed, moved over
+    ``path`` with ``os.replace`` (atomic on POSIX and Windows) and, on POSIX,
+    the directory entry is synced. On an exception the temporary file is
+    removed and ``path`` is untouched.
+
+    The file ends with the permissions a plain ``open(path, "w")`` gives: a
+    new file ``0o666`` less the process umask (the kernel applies it, as for
+    any ``open``), an existing file its own mode.
+
+    Parameters
+    ----------
+    path : path-like
+        Target file; its directory must exist.
+    text : bool
+        Keyword-only: a text file (UTF-8) instead of a binary one.
+
+    Yields
+    ------
+    file object
+        Open for writing (``"w"`` or ``"wb"``).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> target = Path(tempfile.mkdtemp()) / "note.txt"
+    >>> with atomic_write(target, text=True) as f:
+    ...     _ = f.write("written whole or not at all")
+    >>> target.read_text()
+    'written whole or not at all'
+    """
+    path = Path(path)
+    fd, tmp = _create_beside(path)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
+        with os.fdopen(fd, "w" if text else "wb", **({"encoding": "utf-8"} if text else {})) as f:
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -118,7 +162,30 @@ def write_document(path: str | os.PathLike, payload: Mapping[str, Any], *, fmt: 
             os.fsync(dir_fd)
         finally:
             os.close(dir_fd)
-    return path
+
+
+def _create_beside(path: Path) -> tuple[int, Path]:
+    """Create a new, uniquely named temporary file beside ``path``; its descriptor and name.
+
+    Created with mode ``0o666`` so that the umask applies as to a plain
+    ``open`` (``tempfile.mkstemp`` would give ``0o600`` whatever the umask);
+    an existing target's mode is copied, as writing over it with ``open`` keeps it.
+    """
+    try:
+        keep = stat.S_IMODE(os.stat(path).st_mode)
+    except FileNotFoundError:
+        keep = None
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+        try:
+            fd = os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+        if keep is not None and hasattr(os, "fchmod"):
+            os.fchmod(fd, keep)
+        return fd, tmp
+    raise FileExistsError(f"no free temporary name beside {path}")
 
 
 def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...]) -> dict:
@@ -153,6 +220,9 @@ def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path} is damaged or truncated: not valid JSON ({exc}); "
                              "restore it from a backup or calibrate again") from None
+    except RecursionError:
+        raise ModelFileError(f"{path} is damaged: not a model file (JSON nested too deeply)"
+                             ) from None
     if not isinstance(doc, dict) or doc.get("format") != fmt:
         found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise ModelFileError(f"{path} is not a {fmt!r} file (format {found!r})")

@@ -16,7 +16,7 @@ https://github.com/MichaelGrupp/evo (``evo_ape tum ...`` reads these files).
 Examples
 --------
 >>> rows = tum_rows(np.array([0.0, 0.1]), np.array([[0.0, 0.0, 0.0], [1.0, 2.0, np.pi]]))
->>> rows[1].round(6).tolist()
+>>> (rows[1].round(6) + 0.0).tolist()
 [0.1, 1.0, 2.0, 0.0, 0.0, 0.0, 1.0, 0.0]
 >>> poses_from_tum(rows)[1].round(6).tolist()
 [1.0, 2.0, 3.141593]

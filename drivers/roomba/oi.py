@@ -613,7 +613,15 @@ class StreamParser:
         Parameters
         ----------
         chunk : bytes-like
-            Bytes as read from the port, any length (empty included).
+            Bytes as read from the port, any length (empty included): any
+            object with the buffer protocol (``bytes``, ``bytearray``,
+            ``memoryview``, ``array.array``, a NumPy ``uint8`` array), read as
+            its raw bytes in C order.
+
+        Raises
+        ------
+        TypeError
+            If ``chunk`` is not bytes-like (e.g. a list of ints or a ``str``).
 
         Returns
         -------
@@ -621,7 +629,8 @@ class StreamParser:
             Frames completed by this chunk, oldest first.
         """
         buf = self._buf
-        buf += chunk
+        view = memoryview(chunk)          # any buffer; a NumPy array would broadcast in +=
+        buf += view.cast("B") if view.c_contiguous else view.tobytes()
         end = len(buf)
         layout = self.layout
         n = layout.n

@@ -132,7 +132,7 @@ documented extension point):
 ...     ekf.predict(u)
 ...     ekf.update(np.array([0.2, 0.0]), encoder_jacobian, encoder_measurement,
 ...                R=fm.encoder_cov, args=(fm,), hx_args=(fm,))
->>> ekf.x[:3].round(4).tolist()
+>>> (ekf.x[:3].round(4) + 0.0).tolist()
 [0.009, 0.0, 0.0]
 """
 

@@ -258,7 +258,8 @@ class ModelEKF(ExtendedKalmanFilter):
     True
     >>> ekf.predict(u)
     >>> rec = ekf.update_encoders(np.array([0, 106]))      # 6 ticks each, left wrapped
-    >>> rec.kind, rec.accepted, ekf.speeds.round(3).tolist(), ekf.pose.round(4).tolist()
+    >>> speeds, pose = ekf.speeds.round(3) + 0.0, ekf.pose.round(4) + 0.0
+    >>> rec.kind, rec.accepted, speeds.tolist(), pose.tolist()
     ('encoders', True, [0.2, 0.0], [0.003, 0.0, 0.0])
     >>> ekf.predict(u)
     >>> ekf.update_encoders(np.array([400, 500])).reason   # a spike: rejected, counted

@@ -110,7 +110,7 @@ def pose2_log(pose: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> pose2_log(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, np.pi / 2]])).round(6).tolist()
+    >>> (pose2_log(np.array([[1.0, 0.0, 0.0], [0.0, 1.0, np.pi / 2]])).round(6) + 0.0).tolist()
     [[1.0, 0.0, 0.0], [0.785398, 0.785398, 1.570796]]
     """
     p = np.asarray(pose, dtype=float).reshape(-1, 3)

@@ -264,7 +264,7 @@ def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.nd
     Examples
     --------
     >>> b, r = predict_range_bearing(np.array([0.0, 0.0, np.pi / 2]), np.array([0.0, 2.0]))
-    >>> float(b), float(r)
+    >>> round(float(b), 12) + 0.0, round(float(r), 12)
     (0.0, 2.0)
     """
     pose = np.asarray(wTb, dtype=float)

@@ -499,8 +499,8 @@ def compose_motions(delta_pose: np.ndarray, *, initial_pose: np.ndarray) -> np.n
 
     Examples
     --------
-    >>> compose_motions(np.array([[1.0, 0.0, np.pi / 2]] * 2), initial_pose=np.zeros(3)).round(9
-    ...     ).tolist()
+    >>> poses = compose_motions(np.array([[1.0, 0.0, np.pi / 2]] * 2), initial_pose=np.zeros(3))
+    >>> (poses.round(9) + 0.0).tolist()
     [[0.0, 0.0, 0.0], [1.0, 0.0, 1.570796327], [1.0, 1.0, 3.141592654]]
     """
     d = np.asarray(delta_pose, dtype=float)

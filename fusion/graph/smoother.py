@@ -92,7 +92,7 @@ class IncrementalSmoother:
     >>> sm.add_motion(pre)
     2
     >>> sm.update()
-    >>> sm.result().poses[-1].round(6).tolist()
+    >>> (sm.result().poses[-1].round(6) + 0.0).tolist()
     [0.2, 0.0, 0.0]
     """
 

@@ -375,7 +375,7 @@ def observation_from_corners(marker_id: int, corners_px: np.ndarray,
     >>> c = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 25.0 + [319.5, 239.5]
     >>> o = observation_from_corners(0, c, cam, marker_size_m=0.1, mount=CameraMount(z_m=0.0),
     ...                              noise=CornerNoise(edge_bias_px=0.0, edge_bias_at_20px=0.0))
-    >>> round(o.range_m, 6), round(o.bearing_rad, 6), o.pixel_size
+    >>> round(o.range_m, 6), round(o.bearing_rad, 6) + 0.0, o.pixel_size
     (1.1, 0.0, 50.0)
     """
     noise = CornerNoise() if noise is None else noise

@@ -258,7 +258,7 @@ class CameraMount:
 
     Examples
     --------
-    >>> CameraMount().robot_R_camera().round(12).tolist()  # optical z = robot x
+    >>> (CameraMount().robot_R_camera().round(12) + 0.0).tolist()  # optical z = robot x
     [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
     """
 

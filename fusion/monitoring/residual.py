@@ -322,7 +322,7 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> whiten(np.array([2.0, 0.0]), np.diag([4.0, 1.0])).tolist()
+    >>> (whiten(np.array([2.0, 0.0]), np.diag([4.0, 1.0])).round(12) + 0.0).tolist()
     [1.0, 0.0]
     """
     nu = np.asarray(innovation, dtype=float)

@@ -133,8 +133,8 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
     Examples
     --------
     >>> pred, H = range_bearing_batch(np.zeros((1, 5)), np.array([[2.0, 0.0]]))
-    >>> pred.tolist(), H[0, :, :3].tolist()
-    ([[2.0, 0.0]], [[-1.0, -0.0, 0.0], [0.0, -0.5, -1.0]])
+    >>> (pred.round(12) + 0.0).tolist(), (H[0, :, :3].round(12) + 0.0).tolist()
+    ([[2.0, 0.0]], [[-1.0, 0.0, 0.0], [0.0, -0.5, -1.0]])
     """
     dx, dy = landmark_xy[:, 0] - x[:, 0], landmark_xy[:, 1] - x[:, 1]
     q = np.maximum(dx * dx + dy * dy, MIN_RANGE_M ** 2)

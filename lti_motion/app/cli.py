@@ -317,7 +317,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return args.func(args)
     except (ValueError, OSError) as exc:
-        print(f"lti-motion {args.command}: error: {exc}", file=sys.stderr)
+        one_line = " ".join(str(exc).split())             # the README promises one line
+        print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
         return 2
 
 

@@ -67,7 +67,8 @@ class ReplaySource:
     cmd_m_s : ndarray, shape (n, 2)
         Wheel commands (left, right) of the periods each frame closes [m/s].
     valid : ndarray of bool, shape (n,)
-        Frames whose sensor readings arrived.
+        Frames whose sensor readings arrived (not a frame whose counts are NaN
+        in the log: the next valid counts span the gap, as after a lost frame).
     dt_s : float
         Sensor period [s].
     ticks : ndarray of int64, shape (n, 2), or None
@@ -158,7 +159,8 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
     FileNotFoundError, LogFileError
         From :func:`lti_motion.logfile.load_log`.
     ValueError
-        For a robot index out of range or an empty stretch.
+        For a robot index out of range, an empty stretch, or two frames with
+        the same time (the TUM files need increasing times).
     """
     log = load_log(path)
     name = Path(path).name
@@ -168,6 +170,11 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
             raise ValueError(f"{name} holds robots 0-{log.n_robots - 1}; there is no robot {i}")
         log, name = log.robot(i), f"{name} robot {i}"
     keep = _window(log.t_s, start_s, duration_s)
+    repeat = np.flatnonzero(np.diff(log.t_s[keep]) <= 0)      # load_log refused earlier times
+    if repeat.size:
+        k = int(keep[repeat[0] + 1])
+        raise ValueError(f"{name}: frame {k} has the time of frame {k - 1} (t_s = "
+                         f"{log.t_s[k]:.6f} s); replay needs increasing frame times")
     meta = log.meta
     landmarks = sightings = None
     if meta.get("landmarks") and meta.get("observations"):
@@ -179,9 +186,14 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
             if 1 <= k < len(keep):
                 sightings.setdefault(k, []).append((_key(key), np.array([r, b], float)))
     periods = _periods(log.t_s[keep], log.dt_s)
+    counted = np.all(np.isfinite(log.ticks[keep]), axis=-1)     # a NaN count: a lost reading
+    if not counted.all():
+        _log.warning("%s: %d frames have no encoder counts (NaN); replayed as lost frames",
+                     name, int(np.count_nonzero(~counted)))
     return ReplaySource(name=name, t_s=log.t_s[keep], periods=periods,
-                        cmd_m_s=log.cmd_m_s[keep], valid=log.valid[keep], dt_s=log.dt_s,
-                        ticks=log.ticks[keep].astype(np.int64),
+                        cmd_m_s=log.cmd_m_s[keep], valid=log.valid[keep] & counted,
+                        dt_s=log.dt_s,
+                        ticks=np.where(counted[:, None], log.ticks[keep], 0).astype(np.int64),
                         truth=None if log.true_pose is None else log.true_pose[keep],
                         sightings=sightings or {}, landmarks=landmarks)
 

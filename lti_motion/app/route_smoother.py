@@ -107,7 +107,7 @@ class SmootherEstimator:
     ...                         light_bump=np.zeros((1, 6), int), bumps=np.zeros((1, 2), bool),
     ...                         cmd_m_s=np.full((1, 2), 0.2))
     ...     pose = est.step(frame, np.full((1, 2), 0.2))
-    >>> pose.round(4).tolist(), est.smoothers[0].keyframes.tolist()
+    >>> (pose.round(4) + 0.0).tolist(), est.smoothers[0].keyframes.tolist()
     ([[0.03, 0.0, 0.0]], [0, 4, 8])
 
     References

@@ -6,6 +6,7 @@ fact sheet ``../shared/spec/roomba_oi.md``.
 
 from __future__ import annotations
 
+import array
 import logging
 import math
 
@@ -452,6 +453,40 @@ def test_banner_charger_text_and_split_frames() -> None:
     assert parser.frames_ok == 2
     assert parser.bytes_dropped == len(banner) + len(charger)
     assert parser.buffered == 0
+
+
+def _strided(data: bytes) -> np.ndarray:
+    """The bytes as every other element of a larger array: not contiguous."""
+    big = np.zeros(2 * len(data), np.uint8)
+    big[::2] = np.frombuffer(data, np.uint8)
+    return big[::2]
+
+
+BYTES_LIKE = {
+    "bytes": bytes,
+    "bytearray": bytearray,
+    "memoryview": memoryview,
+    "array.array": lambda b: array.array("B", b),
+    "numpy uint8": lambda b: np.frombuffer(b, np.uint8),
+    "numpy 2-D": lambda b: np.frombuffer(b, np.uint8).reshape(1, -1),
+    "numpy strided": _strided,
+}
+
+
+@pytest.mark.parametrize("kind", BYTES_LIKE)
+def test_feed_takes_any_bytes_like_chunk(kind: str) -> None:
+    data = b"Roomba by iRobot!\r\n" + SPEC_FRAME_2 + SPEC_FRAME_2[:5]
+    parser = StreamParser([7, 43, 44])
+    frames = []
+    for k in range(0, len(data), 7):
+        frames += parser.feed(BYTES_LIKE[kind](data[k:k + 7]))
+    assert frames == [StreamFrame(ids=(7, 43, 44), values=(1, 1000, 65530))]
+    assert parser.bytes_dropped == 19 and parser.buffered == 5
+
+
+def test_feed_refuses_what_is_not_bytes_like() -> None:
+    with pytest.raises(TypeError):
+        StreamParser([7, 43, 44]).feed([19, 8, 7])
 
 
 def test_frame_starting_inside_a_rejected_candidate() -> None:

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from lti_motion.app.replay import (
 )
 from lti_motion.calibration import CalibrationPlan
 from lti_motion.exceptions import ShapeError
-from lti_motion.logfile import save_log
+from lti_motion.logfile import load_log, save_log
 from lti_motion.tum import read_tum, tum_rows, write_tum
 
 LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (3.0, -1.0), 3: (3.0, 3.0), 4: (-1.0, 3.0)})
@@ -135,6 +136,30 @@ def test_lost_frames_advance_the_filter_without_readings(model, tmp_path):
     for p in poses.values():
         assert np.all(np.isfinite(p))
         assert np.hypot(*(p[-1, :2] - true[-1, :2])) < 0.1
+
+
+def test_a_nan_count_is_a_lost_reading_in_every_estimator(model, sim_log_path, tmp_path):
+    """One NaN tick: no INT64_MIN cast; odometry bridges it, the EKF skips it."""
+    log = load_log(sim_log_path)
+    clean = load_source(sim_log_path, model)
+    ticks = log.ticks.astype(float)
+    ticks[300, 0] = np.nan
+    path = save_log(tmp_path / "nan_tick.npz", dataclasses.replace(log, ticks=ticks))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)        # e.g. "invalid value in cast"
+        src = load_source(path, model)
+    assert not src.valid[300] and np.count_nonzero(~src.valid) == 1
+    names = src.available()
+    assert names == clean.available()
+    ref, _ = estimate(clean, model, names)
+    got, _ = estimate(src, model, names)
+    for name in names:
+        err = np.hypot(*(got[name][:, :2] - src.truth[:, :2]).T).max()
+        err_ref = np.hypot(*(ref[name][:, :2] - clean.truth[:, :2]).T).max()
+        assert err < err_ref + 1e-3, (name, err, err_ref)
+    # the counts after the gap span it: the same odometry from there on
+    np.testing.assert_allclose(got["odometry"][301:], ref["odometry"][301:], atol=1e-6)
+    np.testing.assert_array_equal(got["odometry"][300], got["odometry"][299])
 
 
 def test_replay_errors_are_clear(model, sim_log_path, tmp_path):
