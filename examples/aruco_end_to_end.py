@@ -18,11 +18,10 @@ Run::
         [--seed 0] [--short]
 
 Measurement noise: each detection's covariance ``C`` (``fusion.landmarks.aruco``, eq. 2-3) enters
-both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``:
-``ModelEKF.update_landmark`` takes a :class:`fusion.landmark_map.LandmarkNoise` per
-observation (a diagonal model) and the smoother's ``RangeBearing`` holds one pair of
-sigmas per batch, so each detection goes in as a batch of its own. The range-bearing
-correlation dropped that way is not negligible (median |rho| about 0.5, printed;
+both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``
+(``ModelEKF.update_landmark(id, z, cov=diag(C))``), as the smoother's ``RangeBearing``
+holds one pair of sigmas per batch, so each detection goes in as a batch of its own. The
+range-bearing correlation dropped that way is not negligible (median |rho| about 0.5, printed;
 ``run_ekf(full_covariance=True)`` keeps it; ``docs/aruco_end_to_end.md``).
 
 Neither estimator reads the simulator's truth: they start from the known start pose
@@ -57,7 +56,6 @@ from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyf
 from fusion.landmarks.aruco import MarkerDetector, MarkerObservation
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
-from fusion.noise import LandmarkNoise
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
@@ -196,24 +194,6 @@ def detect_along(true_pose: np.ndarray, frames: np.ndarray, marker_map: MarkerMa
                       elapsed / max(1, len(frames)))
 
 
-def _noise(obs: MarkerObservation) -> LandmarkNoise:
-    """The detection's covariance diagonal as a per-observation :class:`LandmarkNoise`."""
-    return LandmarkNoise(range_std_frac=0.0, range_std_m=math.sqrt(obs.covariance[0, 0]),
-                         bearing_std_rad=math.sqrt(obs.covariance[1, 1]))
-
-
-@dataclass(frozen=True)
-class _FullCovariance:
-    """The detection's full 2 x 2 covariance, in the ``cov(range)`` interface of
-    :class:`LandmarkNoise` that :meth:`ModelEKF.update_landmark` calls."""
-
-    covariance: np.ndarray
-
-    def cov(self, range_m: float) -> np.ndarray:
-        """The covariance, whatever the range (it is per detection)."""
-        return np.array(self.covariance, dtype=float)
-
-
 @dataclass(frozen=True)
 class EkfRun:
     poses: np.ndarray           # (n, 3), every frame
@@ -241,8 +221,8 @@ def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_ma
         ekf.predict(cmd[k])
         ekf.update_encoders(ticks[k])
         for obs in at.get(k, ()):
-            noise = _FullCovariance(obs.covariance) if full_covariance else _noise(obs)
-            ekf.update_landmark(obs.marker_id, obs.z, noise=noise)
+            cov = obs.covariance if full_covariance else np.diag(np.diag(obs.covariance))
+            ekf.update_landmark(obs.marker_id, obs.z, cov=cov)
         poses[k] = ekf.x[:3]
     return EkfRun(poses, ekf.stats.count("landmark", "fused"),
                   ekf.stats.count("landmark", "gated"))

@@ -38,7 +38,8 @@ import numpy as np
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import FilterStats, ModelEKF
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import FilterStats
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.range_bearing import Observations

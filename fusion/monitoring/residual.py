@@ -90,7 +90,7 @@ import numpy as np
 from scipy.special import comb
 from scipy.stats import chi2
 
-from fusion.ekf.model_ekf import UpdateRecord
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
     CovarianceNotPositiveDefiniteError,
     FilterOptionError,

@@ -14,7 +14,8 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 from scipy.stats import chi2
 
 from fusion.ekf import functions as ef
-from fusion.ekf.model_ekf import ModelEKF, UpdateRecord
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
     FilterOptionError,
     MeasurementShapeError,
