@@ -50,12 +50,12 @@ import numpy as np
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from fusion.landmarks.aruco import MarkerDetector, MarkerObservation
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
@@ -255,9 +255,8 @@ def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
             sm.add_motion(pre[k - 1])
         for obs in image_at.get(k, ()):
             sm.add_observations(RangeBearing(
-                [k], [obs.marker_id], [obs.bearing_rad], [obs.range_m],
-                bearing_sigma_rad=math.sqrt(obs.covariance[1, 1]),
-                range_sigma_m=math.sqrt(obs.covariance[0, 0])))
+                k, [obs.marker_id], [obs.range_m], [obs.bearing_rad],
+                cov=[np.diag(np.diag(obs.covariance))]))
         sm.update()
     return SmootherRun(kf, sm.result(covariances=False).poses)
 

@@ -44,7 +44,6 @@ from lti_motion.kinematics import wrap_angle
 
 __all__ = [
     "MIN_RANGE_M",
-    "Observations",
     "RangeBearing",
     "range_bearing",
     "range_bearing_jacobian",
@@ -153,33 +152,6 @@ def range_bearing_residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     d[..., 1] = wrap_angle(d[..., 1])
     return d
 
-
-
-@dataclass(frozen=True)
-class Observations:
-    """Range-bearing observations of a drive, in frame order.
-
-    Attributes
-    ----------
-    frame : ndarray of int, shape (m,)
-        Index of the frame (sensor period) each observation belongs to.
-    landmark_id : tuple, length m
-        Landmark id of each observation.
-    range_bearing : ndarray, shape (m, 2)
-        ``(r [m], b [rad])``.
-    """
-
-    frame: np.ndarray
-    landmark_id: tuple[Hashable, ...]
-    range_bearing: np.ndarray
-
-    def by_frame(self) -> dict[int, list[tuple[Hashable, np.ndarray]]]:
-        """Observations grouped by frame: ``{frame: [(id, (r, b)), ...]}``."""
-        out: dict[int, list[tuple[Hashable, np.ndarray]]] = {}
-        for k, key, rb in zip(self.frame.tolist(), self.landmark_id, self.range_bearing,
-                              strict=True):
-            out.setdefault(k, []).append((key, rb))
-        return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -25,11 +25,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.app.route import Observations
 from lti_motion.exceptions import ShapeError
 from lti_motion.frames import SensorFrame
@@ -63,12 +63,14 @@ class SmootherEstimator:
         Known landmarks (integer ids); observations of other ids are dropped and counted
         in :attr:`dropped_observations`. Without a map, observations are ignored.
     landmark_noise : LandmarkNoise, optional
-        The range-bearing sensor's noise (the route's default :class:`LandmarkNoise`).
+        The range-bearing sensor's noise (the route's default :class:`LandmarkNoise`);
+        it replaces ``options.landmark_noise`` when given.
     keyframe_s : float
         Longest time between keyframes [s] (0.5 s: 33 periods of 15 ms, as
         ``examples/factor_graph.py``); periods with observations are keyframes as well.
     options : SmootherOptions, optional
-        Graph and iSAM2 settings (:data:`ROUTE_SMOOTHER_OPTIONS`).
+        Graph and iSAM2 settings (:data:`ROUTE_SMOOTHER_OPTIONS`), the sighting noise
+        included.
 
     Raises
     ------
@@ -134,9 +136,10 @@ class SmootherEstimator:
                              f"{keyframe_s}")
         self.model = model
         self.landmarks = landmarks
-        self.landmark_noise = landmark_noise or LandmarkNoise()
         self.keyframe_every = round(keyframe_s / model.dt_s)
         self.options = options or ROUTE_SMOOTHER_OPTIONS
+        if landmark_noise is not None:
+            self.options = replace(self.options, landmark_noise=landmark_noise)
         self.smoothers: list[IncrementalSmoother] | None = None
 
     def reset(self, n_robots: int, pose0: np.ndarray) -> None:
@@ -213,15 +216,12 @@ class SmootherEstimator:
                                  y_measured=y, z0=self._z_kf[i])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
-        for landmark_id, rb in seen:
-            if landmark_id not in self.landmarks:
-                self.dropped_observations += 1
-                continue
-            r, b = float(rb[0]), float(rb[1])
-            sr = math.sqrt(self.landmark_noise.cov(r)[0, 0])
-            sm.add_observations(RangeBearing([k], [landmark_id], [b], [r],
-                                             bearing_sigma_rad=self.landmark_noise.bearing_std_rad,
-                                             range_sigma_m=sr))
+        if seen:
+            obs = RangeBearing(k, [lid for lid, _ in seen], [float(rb[0]) for _, rb in seen],
+                               [float(rb[1]) for _, rb in seen])
+            known = np.array([lid in self.landmarks for lid in obs.landmark_id.tolist()])
+            self.dropped_observations += int(np.count_nonzero(~known))
+            sm.add_observations(obs.select(known))
         sm.update()
         self.pose[i] = sm.pose(k)
         if self.options.calibrate:
