@@ -234,7 +234,7 @@ class RangeBearing:
         bearing = _column(self.bearing_rad, "bearing_rad", k)
         index = _index_column(self.index, k)
         ids = _id_column(self.landmark_id, k)
-        if np.any(range_m <= 0):
+        if (range_m <= 0).any():
             row = int(np.argmax(range_m <= 0))
             raise LandmarkGeometryError(
                 f"RangeBearing.range_m must be positive (a distance [m]); row {row} holds "
@@ -357,7 +357,7 @@ def _column(values: object, name: str, k: int | None = None) -> np.ndarray:
     if arr.ndim != 1 or (k is not None and len(arr) != k):
         raise MeasurementShapeError(f"RangeBearing.{name} has shape {arr.shape}, expected "
                                     f"({'k' if k is None else k},): one value per row")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         row = int(np.argmin(np.isfinite(arr)))
         raise NonFiniteInputError(f"RangeBearing.{name} holds a non-finite value ({arr[row]}) "
                                   f"in row {row}; drop the sighting instead")
@@ -405,12 +405,14 @@ def _cov_column(values: object, k: int) -> np.ndarray:
     if cov.shape != (k, 2, 2):
         raise MeasurementShapeError(f"RangeBearing.cov has shape {cov.shape}, expected "
                                     f"({k}, 2, 2): one (range, bearing) covariance per row")
-    if not np.all(np.isfinite(cov)):
-        row = int(np.argmin(np.all(np.isfinite(cov), axis=(1, 2))))
+    if not np.isfinite(cov).all():
+        row = int(np.argmin(np.isfinite(cov).all(axis=(1, 2))))
         raise NonFiniteInputError(f"RangeBearing.cov holds a non-finite value in row {row}")
-    a, b, c, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1]
-    bad = (np.abs(b - c) > 1e-9 * np.sqrt(np.abs(a * d))) | ~(a > 0) | ~(a * d - b * c > 0)
-    if np.any(bad):
+    flat = cov.reshape(k, 4)
+    a, b, c, d = flat.T
+    ad = a * d
+    bad = (abs(b - c) > 1e-9 * np.sqrt(abs(ad))) | ~(a > 0) | ~(ad - b * c > 0)
+    if bad.any():
         row = int(np.argmax(bad))
         raise CovarianceNotPositiveDefiniteError(
             f"RangeBearing.cov must be symmetric positive definite; row {row} is "
