@@ -161,7 +161,7 @@ class MonitoredDrive(Odometry):
         record = ekf.update_encoders(ticks)
         mon.update_record(record)
         mon.update_commands(t, cmd, d)
-        mon.update_landmarks(t, d, [] if observations is None else observations[0])
+        mon.update_landmarks(t, d, None if observations is None else observations[0])
         # the policy's data: commands and encoder speeds in the model in use's scale
         rm = self.recal.model
         wheel = d * rm.m_per_tick / rm.dt_s

@@ -42,6 +42,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.dynamics import DynamicsMonitor
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor
+from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
     NominalFit,
@@ -149,7 +150,7 @@ class MonitorRun:
 
 
 def monitor_frames(model: MotionModel,
-                   frames: Iterator[SensorFrame | tuple[SensorFrame, Sequence]], *,
+                   frames: Iterator[SensorFrame | tuple[SensorFrame, RangeBearing]], *,
                    options: MonitorOptions | None = None, nominal: NominalFit | None = None,
                    landmarks: LandmarkMap | None = None,
                    on_alarm: Callable[[AlarmEvent], None] | None = None,
@@ -165,7 +166,8 @@ def monitor_frames(model: MotionModel,
         One robot's frames in order (a driver's, a simulator's); each frame's
         ``cmd_m_s`` is the command of the period it closes. Frames whose
         ``valid`` is false only advance the filter. With ``landmarks``, each
-        item is a pair: the frame and its sightings ``[(id, (r [m], b [rad]))]``.
+        item is a pair: the frame and its sightings (a
+        :class:`~fusion.range_bearing.RangeBearing`).
     options : MonitorOptions, optional
         Monitor settings (default: the model's period and, with ``nominal``,
         its encoder gate; everything else default).
@@ -221,7 +223,7 @@ def monitor_frames(model: MotionModel,
     half_b = 0.5 * model.wheel_base_m
     ekf = last_ticks = None
     for item in frames:
-        frame, seen = item if isinstance(item, tuple) else (item, ())
+        frame, seen = item if isinstance(item, tuple) else (item, None)
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
@@ -345,7 +347,7 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
              f"{floor} floor)" + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
     sensor_rng = np.random.default_rng([seed, 0x5E45])
 
-    def frames() -> Iterator[tuple[SensorFrame, list]]:
+    def frames() -> Iterator[tuple[SensorFrame, RangeBearing | None]]:
         block = max(1, round(1.0 / sim.dt_s))
         n = 0
         for k0 in range(0, len(commands), block):
@@ -359,7 +361,7 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
                 seen = (sightings(full.true_pose, n, sensor_rng, dt_s=sim.dt_s)
-                        if landmarks else [])
+                        if landmarks else None)
                 n += 1
                 # the filter and the monitor get what a robot reports: no truth
                 yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,

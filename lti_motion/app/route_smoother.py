@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -30,7 +31,6 @@ from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
-from lti_motion.app.route import Observations
 from lti_motion.exceptions import ShapeError
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step
@@ -153,7 +153,7 @@ class SmootherEstimator:
         self._ticks: np.ndarray | None = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         """Take the frame closing the period of ``cmd_m_s`` (N, 2) [m/s] and the landmark
         observations of that period; return the poses (N, 3).
 
@@ -188,9 +188,10 @@ class SmootherEstimator:
         # 1 - W = R_enc (R + R_enc)^-1 (about 2e-6 for the create2 model)
         self.pose = pose_step(self.pose, self._cal[:, 0] * y[:, 0], self._cal[:, 1] * y[:, 1],
                               m.dt_s)
+        none = RangeBearing.empty()
         for i in range(n):
-            seen = [] if observations is None or self.landmarks is None else observations[i]
-            if seen or self._n - self._kf_sample[i] >= self.keyframe_every:
+            seen = none if observations is None or self.landmarks is None else observations[i]
+            if len(seen) or self._n - self._kf_sample[i] >= self.keyframe_every:
                 self._keyframe(i, seen)
         return self.pose
 
@@ -206,7 +207,7 @@ class SmootherEstimator:
         self.smoothers = [IncrementalSmoother(initial_pose=p, options=self.options,
                                               landmarks=self.landmarks) for p in self.pose]
 
-    def _keyframe(self, i: int, seen: list[tuple[int, np.ndarray]]) -> None:
+    def _keyframe(self, i: int, seen: RangeBearing) -> None:
         """Close robot ``i``'s interval at the current sample: motion, observations, update."""
         start = int(self._kf_sample[i])
         first = len(self._u) - (self._n - start)
@@ -216,12 +217,10 @@ class SmootherEstimator:
                                  y_measured=y, z0=self._z_kf[i])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
-        if seen:
-            obs = RangeBearing(k, [lid for lid, _ in seen], [float(rb[0]) for _, rb in seen],
-                               [float(rb[1]) for _, rb in seen])
-            known = np.array([lid in self.landmarks for lid in obs.landmark_id.tolist()])
+        if len(seen):
+            known = np.array([lid in self.landmarks for lid in seen.landmark_id.tolist()])
             self.dropped_observations += int(np.count_nonzero(~known))
-            sm.add_observations(obs.select(known))
+            sm.add_observations(seen.select(known).with_index(k))
         sm.update()
         self.pose[i] = sm.pose(k)
         if self.options.calibrate:
