@@ -32,9 +32,10 @@ import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
 from drivers.sim.config import get_preset
-from fusion.graph.factors import RangeBearing, observe_landmarks
+from fusion.graph.factors import observe_landmarks
 from fusion.graph.preintegration import Preintegrated, preintegrate, preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.kinematics import integrate_poses
 
@@ -73,7 +74,7 @@ def _encoder_odometry(y: np.ndarray, dt_s: float, keyframes: np.ndarray) -> Prei
 
 def _smooth(pre: Preintegrated, obs: RangeBearing, landmarks, start: np.ndarray,
             options: SmootherOptions) -> np.ndarray:
-    bounds = np.searchsorted(obs.pose_index, np.arange(len(pre) + 2))
+    bounds = np.searchsorted(obs.index, np.arange(len(pre) + 2))
     sm = IncrementalSmoother(initial_pose=start, options=options, landmarks=landmarks)
     for k in range(len(pre) + 1):
         if k > 0:
@@ -111,10 +112,10 @@ def graph() -> list[Figure]:
     obs_frames = observe_landmarks(
         log.true_pose[frames], landmarks, rng=np.random.default_rng(1),
         bearing_sigma_rad=ex.BEARING_SIGMA_RAD, range_sigma_m=ex.RANGE_SIGMA_M,
-        max_range_m=ex.MAX_RANGE_M, field_of_view_rad=ex.FIELD_OF_VIEW_RAD, pose_index=frames)
+        max_range_m=ex.MAX_RANGE_M, field_of_view_rad=ex.FIELD_OF_VIEW_RAD, index=frames)
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(int(frames[-1]), every=EVERY)
-    obs = obs_frames.with_pose_index(np.searchsorted(kf, obs_frames.pose_index))
+    obs = obs_frames.with_index(np.searchsorted(kf, obs_frames.index))
     start = log.true_pose[0]
     plain, calibrated = SmootherOptions(calibrate=False), SmootherOptions(calibrate=True)
 

@@ -46,8 +46,9 @@ class Drives:
     """Route drives of a batch: what the robot reported, and the truth for scoring.
 
     ``deltas`` (N, n, 2) count changes of periods 1..n, ``sightings`` the
-    landmark sightings of frames 1..n, ``driving_s`` (N,) time until the last
-    non-zero command, ``true_poses`` (N, n + 1, 3).
+    landmark sightings of frames 1..n (one ``RangeBearing`` per robot each),
+    ``driving_s`` (N,) time until the last non-zero command, ``true_poses``
+    (N, n + 1, 3).
     """
 
     deltas: np.ndarray

@@ -6,7 +6,9 @@
 3. At 5 Hz (every 13th or 14th 15 ms frame) render the camera image from the robot's
    *true* pose (:class:`fusion.landmarks.SyntheticCamera`, 640 x 480, fx 500 px: the
    physical world) and detect the markers in it (:class:`fusion.landmarks.MarkerDetector`):
-   range, bearing and a per-detection covariance. Ids not in the map are dropped.
+   range, bearing and a per-detection covariance, as rows of a
+   :class:`fusion.range_bearing.RangeBearing` whose ``index`` is the image's frame. Ids not
+   in the map are dropped.
 4. Fuse the same detections, with the commands and encoder counts, in
    :class:`fusion.ekf.ModelEKF` (causal) and :class:`fusion.graph.IncrementalSmoother`
    (iSAM2 over keyframes; every image is a keyframe, plus one every 33 frames).
@@ -18,12 +20,12 @@ Run::
         [--seed 0] [--short]
 
 Measurement noise: each detection's covariance ``C`` (``fusion.landmarks.aruco``, eq. 2-3) enters
-both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``:
-``ModelEKF.update_landmark`` takes a :class:`fusion.landmark_map.LandmarkNoise` per
-observation (a diagonal model) and the smoother's ``RangeBearing`` holds one pair of
-sigmas per batch, so each detection goes in as a batch of its own. The range-bearing
-correlation dropped that way is not negligible (median |rho| about 0.5, printed;
-``run_ekf(full_covariance=True)`` keeps it; ``docs/aruco_end_to_end.md``).
+both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``
+(:func:`diagonal`), as the figures of ``docs/aruco_end_to_end.md`` were measured. The
+range-bearing correlation dropped that way is not negligible (median |rho| about 0.5,
+printed); ``run_ekf(full_covariance=True)`` keeps it (the EKF and the graph both take a full
+2 x 2 covariance per row; using it by default belongs with the measurement model's own
+issue).
 
 Neither estimator reads the simulator's truth: they start from the known start pose
 :data:`START_POSE` and see only commands, encoder counts and detections. The path
@@ -38,7 +40,7 @@ import math
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
 
@@ -51,13 +53,12 @@ import numpy as np
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
-from fusion.landmarks.aruco import MarkerDetector, MarkerObservation
+from fusion.landmarks.aruco import MarkerDetector
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
-from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.model import MotionModel
@@ -72,6 +73,7 @@ __all__ = [
     "EndToEndRun",
     "camera_frames",
     "detect_along",
+    "diagonal",
     "load_ekf_example",
     "main",
     "make_camera",
@@ -155,9 +157,10 @@ class Detections:
     Attributes
     ----------
     frames : ndarray of int, shape (n_images,)
-        Frame index of each image.
-    by_image : list of tuple of MarkerObservation
-        Known-id detections per image.
+        Frame index of each image, increasing.
+    sightings : RangeBearing
+        Known-id detections of all images, ``index`` = the image's frame, each with its
+        covariance.
     unknown_ids : tuple of int
         Misread ids (not in the map), dropped.
     seconds_per_image : float
@@ -165,18 +168,22 @@ class Detections:
     """
 
     frames: np.ndarray
-    by_image: list[tuple[MarkerObservation, ...]]
+    sightings: RangeBearing
     unknown_ids: tuple[int, ...]
     seconds_per_image: float
 
     @property
     def per_image(self) -> np.ndarray:
         """Number of detections in each image."""
-        return np.array([len(d) for d in self.by_image])
+        index = self.sightings.index
+        return (np.searchsorted(index, self.frames, side="right")
+                - np.searchsorted(index, self.frames, side="left"))
 
     def range_bearing_correlation(self) -> np.ndarray:
         """Correlation coefficient of range and bearing in each detection's covariance."""
-        c = np.array([o.covariance for d in self.by_image for o in d]).reshape(-1, 2, 2)
+        if not len(self.sightings):
+            return np.zeros(0)
+        c = self.sightings.cov
         return c[:, 0, 1] / np.sqrt(c[:, 0, 0] * c[:, 1, 1])
 
 
@@ -184,34 +191,23 @@ def detect_along(true_pose: np.ndarray, frames: np.ndarray, marker_map: MarkerMa
                  camera: SyntheticCamera, rng: np.random.Generator) -> Detections:
     """Render an image at each frame's *true* pose (the world) and detect its markers."""
     detector = MarkerDetector.for_map(camera.intrinsics, marker_map, mount=camera.mount)
-    by_image, unknown = [], {}
+    parts, unknown = [], {}
     t0 = time.perf_counter()
     for k in frames:
-        found = detector.detect(camera.render(marker_map, true_pose[k], rng))
+        found = detector.detect(camera.render(marker_map, true_pose[k], rng), index=int(k))
         known, bad = marker_map.split_known(found)
-        by_image.append(known)
+        parts.append(known)
         unknown.update(dict.fromkeys(bad))
     elapsed = time.perf_counter() - t0
-    return Detections(np.asarray(frames, np.int64), by_image, tuple(unknown),
-                      elapsed / max(1, len(frames)))
+    return Detections(np.asarray(frames, np.int64), RangeBearing.concatenate(parts),
+                      tuple(unknown), elapsed / max(1, len(frames)))
 
 
-def _noise(obs: MarkerObservation) -> LandmarkNoise:
-    """The detection's covariance diagonal as a per-observation :class:`LandmarkNoise`."""
-    return LandmarkNoise(range_std_frac=0.0, range_std_m=math.sqrt(obs.covariance[0, 0]),
-                         bearing_std_rad=math.sqrt(obs.covariance[1, 1]))
-
-
-@dataclass(frozen=True)
-class _FullCovariance:
-    """The detection's full 2 x 2 covariance, in the ``cov(range)`` interface of
-    :class:`LandmarkNoise` that :meth:`ModelEKF.update_landmark` calls."""
-
-    covariance: np.ndarray
-
-    def cov(self, range_m: float) -> np.ndarray:
-        """The covariance, whatever the range (it is per detection)."""
-        return np.array(self.covariance, dtype=float)
+def diagonal(sightings: RangeBearing) -> RangeBearing:
+    """The sightings with their covariances' diagonals only (range-bearing correlation dropped)."""
+    if sightings.cov is None:
+        return sightings
+    return replace(sightings, cov=sightings.cov * np.eye(2))
 
 
 @dataclass(frozen=True)
@@ -235,14 +231,14 @@ def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_ma
     n = len(log.t_s)
     poses = np.empty((n, 3))
     poses[0] = ekf.x[:3]
-    at = dict(zip(detections.frames.tolist(), detections.by_image, strict=True))
+    sightings = detections.sightings
+    at = (sightings if full_covariance else diagonal(sightings)).by_index()
+    none = RangeBearing.empty()
     cmd, ticks = log.cmd_m_s, log.ticks
     for k in range(1, n):
         ekf.predict(cmd[k])
         ekf.update_encoders(ticks[k])
-        for obs in at.get(k, ()):
-            noise = _FullCovariance(obs.covariance) if full_covariance else _noise(obs)
-            ekf.update_landmark(obs.marker_id, obs.z, noise=noise)
+        ekf.update_landmarks(at.get(k, none))
         poses[k] = ekf.x[:3]
     return EkfRun(poses, ekf.stats.count("landmark", "fused"),
                   ekf.stats.count("landmark", "gated"))
@@ -260,24 +256,21 @@ def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
                  options: SmootherOptions = SMOOTHER_OPTIONS) -> SmootherRun:
     """iSAM2 over keyframes (every image, plus every ``keyframe_every`` frames).
 
-    Each detection is added as a one-row :class:`RangeBearing` carrying its own sigmas.
+    Each detection is a range-bearing factor with its covariance's diagonal (:func:`diagonal`).
     """
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=keyframe_every, extra=detections.frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y)
     landmarks = marker_map.to_landmark_map()
-    image_at = dict(zip(np.searchsorted(kf, detections.frames).tolist(), detections.by_image,
-                        strict=True))
+    sightings = diagonal(detections.sightings)
+    at = sightings.with_index(np.searchsorted(kf, sightings.index)).by_index()
     sm = IncrementalSmoother(initial_pose=np.asarray(initial_pose, float), landmarks=landmarks,
                              options=options)
     for k in range(len(kf)):
         if k > 0:
             sm.add_motion(pre[k - 1])
-        for obs in image_at.get(k, ()):
-            sm.add_observations(RangeBearing(
-                [k], [obs.marker_id], [obs.bearing_rad], [obs.range_m],
-                bearing_sigma_rad=math.sqrt(obs.covariance[1, 1]),
-                range_sigma_m=math.sqrt(obs.covariance[0, 0])))
+        if k in at:
+            sm.add_observations(at[k])
         sm.update()
     return SmootherRun(kf, sm.result(covariances=False).poses)
 

@@ -38,10 +38,11 @@ import numpy as np
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import FilterStats, ModelEKF
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import FilterStats
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
-from fusion.range_bearing import Observations
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import CalibrationPlan
 from lti_motion.frames import FrameLog
 from lti_motion.kinematics import integrate_poses, wrap_angle
@@ -214,7 +215,7 @@ class FilterRun:
 
 
 def run_filter(model: MotionModel, log: FrameLog, *, initial_pose: Sequence[float],
-               observations: Observations | None = None, landmarks: LandmarkMap | None = None,
+               observations: RangeBearing | None = None, landmarks: LandmarkMap | None = None,
                pose_std: tuple[float, float, float] = (0.005, 0.005, 0.005),
                **options: Any) -> FilterRun:
     """Run :class:`ModelEKF` over one robot's frames (and landmark observations).
@@ -230,14 +231,14 @@ def run_filter(model: MotionModel, log: FrameLog, *, initial_pose: Sequence[floa
     enc_ok = np.zeros(n, bool)
     lm_nis = []
     poses[0], covs[0] = ekf.x[:3], ekf.P[:3, :3]
-    by_frame = observations.by_frame() if observations is not None else {}
+    by_frame = observations.by_index() if observations is not None else {}
+    none = RangeBearing.empty()
     cmd, ticks = log.cmd_m_s, log.ticks
     for k in range(1, n):
         ekf.predict(cmd[k])
         rec = ekf.update_encoders(ticks[k])
         enc_nis[k], enc_ok[k] = rec.nis, rec.accepted
-        for key, rb in by_frame.get(k, ()):
-            lm_nis.append(ekf.update_landmark(key, rb).nis)
+        lm_nis += [r.nis for r in ekf.update_landmarks(by_frame.get(k, none))]
         poses[k] = ekf.x[:3]
         covs[k] = ekf.P[:3, :3]
     return FilterRun(poses, covs, enc_nis, enc_ok, np.array(lm_nis), ekf.stats)

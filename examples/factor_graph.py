@@ -26,7 +26,7 @@ from matplotlib.figure import Figure
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, RobotParams, Room, get_preset
 from drivers.sim.simulator import Simulator
-from fusion.graph.factors import RangeBearing, observe_landmarks
+from fusion.graph.factors import observe_landmarks
 from fusion.graph.preintegration import compose_motions, fit_calibration, preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from fusion.graph.transient_noise import (
@@ -34,6 +34,7 @@ from fusion.graph.transient_noise import (
     transient_speed_covariance_from_data,
 )
 from fusion.landmark_map import LandmarkMap
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
@@ -106,12 +107,12 @@ def drive(robot: RobotParams, *, n_robots: int, seed: int, duration_s: float,
 
 def observe(log: FrameLog, landmarks: LandmarkMap, *, rng: np.random.Generator,
             every: int = KEYFRAME_EVERY) -> RangeBearing:
-    """Camera observations every ``every`` frames of one robot (``pose_index`` = frame)."""
+    """Camera observations every ``every`` frames of one robot (``index`` = frame)."""
     frames = np.arange(0, len(log) - 1, every)
     return observe_landmarks(log.true_pose[frames], landmarks, rng=rng,
                              bearing_sigma_rad=BEARING_SIGMA_RAD, range_sigma_m=RANGE_SIGMA_M,
                              max_range_m=MAX_RANGE_M, field_of_view_rad=FIELD_OF_VIEW_RAD,
-                             pose_index=frames)
+                             index=frames)
 
 
 @dataclass(frozen=True)
@@ -151,10 +152,10 @@ def run_smoother(model: MotionModel, log: FrameLog, observations: RangeBearing,
     logs (:func:`calibrated_model_and_noise`); ``None`` uses the model's own.
     """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
-    kf = log_keyframes(len(u), every=KEYFRAME_EVERY, extra=observations.pose_index)
+    kf = log_keyframes(len(u), every=KEYFRAME_EVERY, extra=observations.index)
     pre = preintegrate_model(model, u, keyframes=kf, speed_covariance=speed_covariance)
-    obs = observations.with_pose_index(np.searchsorted(kf, observations.pose_index))
-    bounds = np.searchsorted(obs.pose_index, np.arange(len(kf) + 1))
+    obs = observations.with_index(np.searchsorted(kf, observations.index))
+    bounds = np.searchsorted(obs.index, np.arange(len(kf) + 1))
     sm = IncrementalSmoother(initial_pose=initial_pose, options=options, landmarks=landmarks)
     cal, sig = np.empty((len(kf), 2)), np.empty((len(kf), 2))
     for k in range(len(kf)):

@@ -141,7 +141,7 @@ class MonitoredDrive(Odometry):
         pose = super().step(frame, cmd_m_s, observations)       # steering odometry
         cmd = np.asarray(cmd_m_s, float)[0]
         res = self.filter.step(np.asarray(frame.ticks)[0], cmd,
-                               sightings=[] if observations is None else observations[0])
+                               sightings=None if observations is None else observations[0])
         if res.encoders is None:                                 # the first frame anchors
             return pose
         t, d, record = res.t_s, res.tick_deltas, res.encoders

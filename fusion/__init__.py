@@ -19,13 +19,13 @@ OpenCV load with the wing that uses them.
 from fusion.exceptions import FusionError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
-from fusion.range_bearing import Observations
+from fusion.range_bearing import RangeBearing
 
 __all__ = [
     "FusionError",
     "LandmarkMap",
     "LandmarkNoise",
-    "Observations",
+    "RangeBearing",
     "ScaleErrors",
     "SlipNoise",
 ]

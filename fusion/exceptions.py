@@ -51,7 +51,8 @@ class UnknownLandmarkError(FusionError):
 
 
 class NonFiniteInputError(FusionError, NonFiniteError):
-    """A command or an option holds NaN or infinity (measurements with NaN are skipped instead)."""
+    """A command, an option or a sighting (:class:`fusion.range_bearing.RangeBearing`) holds NaN
+    or infinity (a single reading with NaN given to a filter's update is skipped instead)."""
 
 
 class FilterOptionError(FusionError):
@@ -63,11 +64,13 @@ class LandmarkGeometryError(FusionError):
 
 
 class LandmarkIdError(FusionError):
-    """Landmark ids repeat, or are not integers where the factor graph keys them (``L(id)``)."""
+    """Landmark ids repeat, are not hashable, or are not integers where the factor graph keys
+    them (``L(id)``)."""
 
 
 class CovarianceNotPositiveDefiniteError(FusionError):
-    """An innovation covariance is not symmetric positive definite (no Cholesky factor)."""
+    """A covariance (an innovation's, a sighting's) is not symmetric positive definite (no
+    Cholesky factor)."""
 
 
 class TimeOrderError(FusionError):

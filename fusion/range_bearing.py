@@ -17,7 +17,10 @@ eq. 6.40). Residuals of bearings are wrapped too
 ``+-pi`` seam does not produce a residual of almost ``2 pi``.
 
 This module holds the measurement model for one pose (the filter lifts it to
-its state in :mod:`fusion.ekf.functions`) and the observation type. The map is
+its state in :mod:`fusion.ekf.functions`) and the one observation type,
+:class:`RangeBearing`: sightings as columns (index, id, range, bearing and
+an optional covariance per row), which every estimator, detector and
+simulated sensor of the package reads or writes. The map is
 :class:`fusion.landmark_map.LandmarkMap`, the sensor's noise
 :class:`fusion.noise.LandmarkNoise`.
 """
@@ -25,17 +28,23 @@ its state in :mod:`fusion.ekf.functions`) and the observation type. The map is
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Hashable, Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.exceptions import LandmarkGeometryError, MeasurementShapeError
+from fusion.exceptions import (
+    CovarianceNotPositiveDefiniteError,
+    LandmarkGeometryError,
+    LandmarkIdError,
+    MeasurementShapeError,
+    NonFiniteInputError,
+)
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
     "MIN_RANGE_M",
-    "Observations",
+    "RangeBearing",
     "range_bearing",
     "range_bearing_jacobian",
     "range_bearing_residual",
@@ -145,28 +154,271 @@ def range_bearing_residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return d
 
 
-@dataclass(frozen=True)
-class Observations:
-    """Range-bearing observations of a drive, in frame order.
 
-    Attributes
+@dataclass(frozen=True, eq=False)
+class RangeBearing:
+    """Range-bearing sightings of landmarks, one row each: the package's one observation type.
+
+    The EKFs (:meth:`fusion.ekf.ModelEKF.update_landmarks`), the factor graph
+    (:meth:`fusion.graph.IncrementalSmoother.add_observations`), the scale test
+    (:meth:`fusion.monitoring.ScaleMonitor.update`), the ArUco detector
+    (:meth:`fusion.landmarks.MarkerDetector.detect`) and the synthetic sensors
+    all read or write this type. Columns of ``k`` rows, validated at
+    construction and read-only.
+
+    Parameters
     ----------
-    frame : ndarray of int, shape (m,)
-        Index of the frame (sensor period) each observation belongs to.
-    landmark_id : tuple, length m
-        Landmark id of each observation.
-    range_bearing : ndarray, shape (m, 2)
-        ``(r [m], b [rad])``.
+    index : int or array_like of int, shape (k,)
+        What each row belongs to: the frame (sensor period) it was seen at, or,
+        for the smoother, the keyframe. One int stands for every row.
+    landmark_id : array_like, shape (k,)
+        Landmark ids: any hashable values for the EKFs; integers where the
+        factor graph keys landmarks as ``L(id)``. Stored as ``int64`` when all
+        are integers, else as an object array.
+    range_m : array_like, shape (k,)
+        Measured distance [m], positive.
+    bearing_rad : array_like, shape (k,)
+        Measured bearing in the robot frame, counter-clockwise from the
+        heading [rad].
+    cov : array_like, shape (k, 2, 2), optional
+        Covariance of each row's ``(range [m], bearing [rad])``, symmetric
+        positive definite. ``None``: the estimator's own
+        :class:`fusion.noise.LandmarkNoise` applies.
+
+    Raises
+    ------
+    MeasurementShapeError
+        If a column does not have ``k`` rows, ``cov`` is not ``(k, 2, 2)`` or
+        ``index`` does not hold integers.
+    NonFiniteInputError
+        If a range, bearing or covariance holds NaN or infinity.
+    LandmarkGeometryError
+        If a range is not positive.
+    LandmarkIdError
+        If an id is not hashable.
+    CovarianceNotPositiveDefiniteError
+        If a covariance is not symmetric positive definite.
+
+    Notes
+    -----
+    The covariance is the sensor's, in the order of the measurement vector
+    ``z = (r, b)``; gtsam's ``BearingRange`` measurement runs the other way,
+    ``(b, r)``, and :func:`fusion.graph.factors.range_bearing_factors`
+    reorders it.
+
+    Examples
+    --------
+    Two frames of sightings, grouped for a filter loop:
+
+    >>> obs = RangeBearing([3, 3, 5], [7, 9, 7], [2.0, 1.5, 1.8], [0.1, -0.4, 0.2])
+    >>> len(obs), obs.landmark_id.dtype, sorted(obs.by_index())
+    (3, dtype('int64'), [3, 5])
+    >>> [(lid, z.tolist(), cov) for lid, z, cov in obs.by_index()[3]]
+    [(7, [2.0, 0.1], None), (9, [1.5, -0.4], None)]
+
+    Ids may be any hashable values, and each row may carry its own covariance:
+
+    >>> one = RangeBearing(4, ["door"], [2.0], [0.3], cov=[[[4e-4, 1e-5], [1e-5, 1e-4]]])
+    >>> one.index.tolist(), one.cov.shape
+    ([4], (1, 2, 2))
     """
 
-    frame: np.ndarray
-    landmark_id: tuple[Hashable, ...]
-    range_bearing: np.ndarray
+    index: np.ndarray
+    landmark_id: np.ndarray
+    range_m: np.ndarray
+    bearing_rad: np.ndarray
+    cov: np.ndarray | None = None
 
-    def by_frame(self) -> dict[int, list[tuple[Hashable, np.ndarray]]]:
-        """Observations grouped by frame: ``{frame: [(id, (r, b)), ...]}``."""
-        out: dict[int, list[tuple[Hashable, np.ndarray]]] = {}
-        for k, key, rb in zip(self.frame.tolist(), self.landmark_id, self.range_bearing,
-                              strict=True):
-            out.setdefault(k, []).append((key, rb))
+    def __post_init__(self) -> None:
+        range_m = _column(self.range_m, "range_m")
+        k = len(range_m)
+        bearing = _column(self.bearing_rad, "bearing_rad", k)
+        index = _index_column(self.index, k)
+        ids = _id_column(self.landmark_id, k)
+        if (range_m <= 0).any():
+            row = int(np.argmax(range_m <= 0))
+            raise LandmarkGeometryError(
+                f"RangeBearing.range_m must be positive (a distance [m]); row {row} holds "
+                f"{range_m[row]}")
+        cov = None if self.cov is None else _cov_column(self.cov, k)
+        for name, arr in (("index", index), ("landmark_id", ids), ("range_m", range_m),
+                          ("bearing_rad", bearing), ("cov", cov)):
+            if arr is not None:
+                arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+    @classmethod
+    def _trusted(cls, index: np.ndarray, landmark_id: np.ndarray, range_m: np.ndarray,
+                 bearing_rad: np.ndarray, cov: np.ndarray | None) -> RangeBearing:
+        """Rows of an already validated value (a selection): no checks, columns read-only."""
+        out = object.__new__(cls)
+        for name, arr in (("index", index), ("landmark_id", landmark_id), ("range_m", range_m),
+                          ("bearing_rad", bearing_rad), ("cov", cov)):
+            if arr is not None and arr.flags.writeable:
+                arr.flags.writeable = False
+            object.__setattr__(out, name, arr)
         return out
+
+    @classmethod
+    def empty(cls) -> RangeBearing:
+        """No sightings (shared: the value is immutable).
+
+        Examples
+        --------
+        >>> len(RangeBearing.empty()), RangeBearing.empty() is RangeBearing.empty()
+        (0, True)
+        """
+        return _EMPTY
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[RangeBearing]) -> RangeBearing:
+        """The rows of ``parts``, in order.
+
+        Covariances are kept if every part has them; a mix of parts with and
+        without raises :class:`~fusion.exceptions.MeasurementShapeError`.
+
+        Examples
+        --------
+        >>> a = RangeBearing(1, [7], [2.0], [0.1])
+        >>> RangeBearing.concatenate([a, RangeBearing(2, ["door"], [1.0], [0.0])]).landmark_id
+        array([7, 'door'], dtype=object)
+        """
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return _EMPTY
+        if len(parts) == 1:
+            return parts[0]
+        with_cov = [p.cov is not None for p in parts]
+        if any(with_cov) and not all(with_cov):
+            raise MeasurementShapeError("cannot concatenate sightings with and without "
+                                        "covariances; give every part a cov, or none")
+        ids = [p.landmark_id for p in parts]
+        if any(i.dtype != np.int64 for i in ids):
+            ids = [i.astype(object) for i in ids]
+        return cls._trusted(np.concatenate([p.index for p in parts]), np.concatenate(ids),
+                            np.concatenate([p.range_m for p in parts]),
+                            np.concatenate([p.bearing_rad for p in parts]),
+                            np.concatenate([p.cov for p in parts]) if all(with_cov) else None)
+
+    def __len__(self) -> int:
+        return len(self.range_m)
+
+    def __iter__(self) -> Iterator[tuple[Hashable, np.ndarray, np.ndarray | None]]:
+        """Rows as ``(landmark_id, z = (r [m], b [rad]) (2,), cov (2, 2) or None)``."""
+        covs = self.cov if self.cov is not None else [None] * len(self)
+        for lid, r, b, c in zip(self.landmark_id.tolist(), self.range_m.tolist(),
+                                self.bearing_rad.tolist(), covs, strict=True):
+            yield lid, np.array((r, b)), c
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, RangeBearing):
+            return NotImplemented
+        if (self.cov is None) != (other.cov is None):
+            return False
+        return all(np.array_equal(getattr(self, n), getattr(other, n))
+                   for n in ("index", "landmark_id", "range_m", "bearing_rad", "cov"))
+
+    __hash__ = None  # type: ignore[assignment]  # holds arrays
+
+    def select(self, rows: np.ndarray | slice) -> RangeBearing:
+        """The rows ``rows`` picks (a boolean mask, integer positions or a slice)."""
+        return RangeBearing._trusted(self.index[rows], self.landmark_id[rows],
+                                     self.range_m[rows], self.bearing_rad[rows],
+                                     None if self.cov is None else self.cov[rows])
+
+    def with_index(self, index: np.ndarray | int) -> RangeBearing:
+        """The same sightings attached to other indices (frames to keyframes, say).
+
+        Raises
+        ------
+        MeasurementShapeError
+            If ``index`` is not one integer or ``k`` of them.
+        """
+        return RangeBearing._trusted(_index_column(index, len(self)), self.landmark_id,
+                                     self.range_m, self.bearing_rad, self.cov)
+
+    def by_index(self) -> dict[int, RangeBearing]:
+        """The rows grouped by index, ``{index: rows}``, indices ascending, rows in order.
+
+        Group once before a filter loop and look each frame up in the result;
+        selecting one frame's rows from the whole drive at every frame would
+        scan all rows each time.
+        """
+        if not len(self):
+            return {}
+        order = np.argsort(self.index, kind="stable")
+        keys, starts = np.unique(self.index[order], return_index=True)
+        bounds = [*starts.tolist(), len(order)]
+        return {key: self.select(order[bounds[j]:bounds[j + 1]])
+                for j, key in enumerate(keys.tolist())}
+
+
+def _column(values: object, name: str, k: int | None = None) -> np.ndarray:
+    arr = np.array(values, dtype=float)
+    if arr.ndim != 1 or (k is not None and len(arr) != k):
+        raise MeasurementShapeError(f"RangeBearing.{name} has shape {arr.shape}, expected "
+                                    f"({'k' if k is None else k},): one value per row")
+    if not np.isfinite(arr).all():
+        row = int(np.argmin(np.isfinite(arr)))
+        raise NonFiniteInputError(f"RangeBearing.{name} holds a non-finite value ({arr[row]}) "
+                                  f"in row {row}; drop the sighting instead")
+    return arr
+
+
+def _index_column(values: object, k: int) -> np.ndarray:
+    arr = np.asarray(values)
+    if arr.ndim == 0:
+        arr = np.full(k, arr, dtype=arr.dtype)
+    if arr.size == 0:
+        arr = np.zeros(0, np.int64)
+    if arr.dtype.kind not in "iu":
+        raise MeasurementShapeError(f"RangeBearing.index must hold integers (frame or keyframe "
+                                    f"numbers), got dtype {arr.dtype}")
+    if arr.shape != (k,):
+        raise MeasurementShapeError(f"RangeBearing.index has shape {arr.shape}, expected ({k},) "
+                                    "or one int for every row")
+    return arr.astype(np.int64)
+
+
+def _id_column(values: object, k: int) -> np.ndarray:
+    if isinstance(values, np.ndarray) and values.dtype.kind in "iu":
+        arr = values.astype(np.int64)
+    else:
+        items = values.tolist() if isinstance(values, np.ndarray) else list(values)
+        if all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+               for v in items):
+            arr = np.array(items, dtype=np.int64).reshape(-1)
+        else:
+            bad = [v for v in items if not isinstance(v, Hashable)]
+            if bad:
+                raise LandmarkIdError(f"landmark ids must be hashable, got {bad[0]!r}")
+            arr = np.empty(len(items), dtype=object)
+            for j, v in enumerate(items):
+                arr[j] = v
+    if arr.shape != (k,):
+        raise MeasurementShapeError(f"RangeBearing.landmark_id has shape {arr.shape}, expected "
+                                    f"({k},): one id per row")
+    return arr
+
+
+def _cov_column(values: object, k: int) -> np.ndarray:
+    cov = np.array(values, dtype=float)
+    if cov.shape != (k, 2, 2):
+        raise MeasurementShapeError(f"RangeBearing.cov has shape {cov.shape}, expected "
+                                    f"({k}, 2, 2): one (range, bearing) covariance per row")
+    if not np.isfinite(cov).all():
+        row = int(np.argmin(np.isfinite(cov).all(axis=(1, 2))))
+        raise NonFiniteInputError(f"RangeBearing.cov holds a non-finite value in row {row}")
+    flat = cov.reshape(k, 4)
+    a, b, c, d = flat.T
+    ad = a * d
+    bad = (abs(b - c) > 1e-9 * np.sqrt(abs(ad))) | ~(a > 0) | ~(ad - b * c > 0)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise CovarianceNotPositiveDefiniteError(
+            f"RangeBearing.cov must be symmetric positive definite; row {row} is "
+            f"{cov[row].tolist()}")
+    return cov
+
+
+_EMPTY = RangeBearing(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))

@@ -4,11 +4,15 @@
 - :mod:`fusion.ekf.functions`: the same maths as plain functions, for a user's own
   filterpy EKF or UKF (:class:`FilterModel` lays a model out for a filter);
 - :class:`VelocityModelEKF` (:mod:`fusion.ekf.velocity_ekf`): the textbook
-  velocity-model EKF, the baseline.
+  velocity-model EKF, the baseline;
+- :mod:`fusion.ekf.updates`: what both filters share, the chi-square gate,
+  :class:`UpdateRecord`, :class:`FilterStats` and the landmark updates
+  (``update_landmark``, ``update_landmarks``).
 """
 
 from fusion.ekf.functions import FilterModel
-from fusion.ekf.model_ekf import FilterStats, ModelEKF, UpdateRecord
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import FilterStats, UpdateRecord
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 
 __all__ = ["FilterModel", "FilterStats", "ModelEKF", "UpdateRecord", "VelocityModelEKF"]

@@ -11,11 +11,14 @@ One sensor period ``k`` (frame ``k`` closes period ``k``, whose command
 
     ekf.predict(u_k)                   # model + kinematics: pose at frame k
     ekf.update_encoders(ticks_k)       # raw 16-bit counts of frame k
-    ekf.update_landmark(id, (r, b))    # any landmarks seen at frame k
+    ekf.update_landmarks(sightings_k)  # the landmarks seen at frame k (a RangeBearing)
     ekf.update_pose(pose, cov)         # optional absolute fix
 
-Every update returns an :class:`UpdateRecord` (innovation, its covariance,
-NIS, accepted flag, kind, time, reason) and appends it to :attr:`ModelEKF.records`.
+Every update returns an :class:`~fusion.ekf.updates.UpdateRecord` (innovation,
+its covariance, NIS, accepted flag, kind, time, reason) and appends it to
+:attr:`ModelEKF.records`; the gate, the records and the landmark updates are
+:class:`fusion.ekf.updates.GatedUpdates`, which :class:`fusion.ekf.VelocityModelEKF`
+shares.
 A reading is fused only if its NIS is inside the chi-square gate; otherwise it
 is counted and the state is left alone. A reading with NaN is skipped and
 counted, never fused. Encoder counts are cumulative: after a gated, NaN or lost
@@ -36,12 +39,8 @@ still works (no gate, no record); ``predict_update`` is disabled.
 
 from __future__ import annotations
 
-import logging
 import math
-from collections import Counter, deque
 from collections.abc import Hashable, Mapping
-from dataclasses import dataclass
-from types import MappingProxyType
 from typing import Literal
 
 import filterpy
@@ -54,10 +53,6 @@ from fusion.ekf.functions import (
     encoder_speeds,
     initial_covariance,
     initial_state,
-    joseph_covariance,
-    landmark_jacobian,
-    landmark_measurement,
-    landmark_residual,
     pose_jacobian,
     pose_residual,
     predict_terms,
@@ -65,120 +60,20 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
-from fusion.exceptions import (
-    FilterOptionError,
-    MeasurementShapeError,
-    UnknownLandmarkError,
-)
+from fusion.ekf.updates import GatedUpdates, UpdateReason, UpdateRecord
+from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
-from fusion.noise import (
-    LandmarkNoise,
-    ScaleErrors,
-    SlipNoise,
-    gate_threshold,
-    inverse_covariance,
-    nis,
-)
-from fusion.range_bearing import MIN_RANGE_M
+from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
-__all__ = ["FilterStats", "ModelEKF", "UpdateKind", "UpdateReason", "UpdateRecord"]
-
-_log = logging.getLogger(__name__)
+__all__ = ["ModelEKF"]
 
 if int(filterpy.__version__.split(".")[0]) < 2:     # 1.4.5's EKF.update never set SI
     raise ImportError(f"fusion.ekf.model_ekf needs filterpy >= 2.0, found {filterpy.__version__}; "
                       "upgrade it (pip install 'filterpy>=2.0')")
 
-UpdateKind = Literal["encoders", "landmark", "pose"]
-UpdateReason = Literal["fused", "forced", "gated", "non_finite", "unknown_landmark", "anchor",
-                       "gap", "degenerate"]
-
-
-@dataclass(frozen=True, slots=True)
-class UpdateRecord:
-    """What one update did: the figures a residual monitor reads.
-
-    Attributes
-    ----------
-    kind : {"encoders", "landmark", "pose"}
-        The measurement.
-    t_s : float
-        Filter time of the update [s].
-    innovation : ndarray, shape (m,)
-        Measurement minus prediction (angles wrapped); NaN when the reading
-        was not compared (``reason`` in non_finite, unknown_landmark, anchor,
-        gap, degenerate). Read-only.
-    innovation_cov : ndarray, shape (m, m)
-        ``S = H P H^T + R`` (NaN when not compared). Read-only.
-    nis : float
-        ``nu^T S^-1 nu`` (NaN when not compared).
-    accepted : bool
-        Whether the reading was fused.
-    reason : str
-        ``"fused"``, ``"forced"`` (encoder counts outside the gate fused
-        anyway: after ``reanchor_periods`` gated periods both wheels count
-        steadily, so the model is what misses, e.g. a start from rest),
-        ``"gated"`` (NIS outside the gate), ``"non_finite"``
-        (NaN or inf in the reading), ``"unknown_landmark"``, ``"anchor"``
-        (first encoder counts: a reference only), ``"gap"`` (counts right
-        after others with no :meth:`ModelEKF.predict` between, or more than
-        ``max_periods`` periods after the last fused ones: the reference is
-        renewed), or ``"degenerate"`` (robot on the landmark). An encoder
-        reading after gated, NaN or lost ones spans all the periods since the
-        last fused counts (its innovation is the summed speed residual).
-    landmark_id : hashable or None
-        The landmark, for ``kind="landmark"``.
-    """
-
-    kind: UpdateKind
-    t_s: float
-    innovation: np.ndarray
-    innovation_cov: np.ndarray
-    nis: float
-    accepted: bool
-    reason: UpdateReason
-    landmark_id: Hashable | None = None
-
-
-@dataclass(frozen=True)
-class FilterStats:
-    """Counts of updates by kind and reason (a snapshot).
-
-    Attributes
-    ----------
-    counts : mapping of (kind, reason) to int
-        How many updates of each kind ended each way.
-    unknown_landmark_ids : tuple
-        Ids seen that the map does not hold, in order of first sight.
-    """
-
-    counts: Mapping[tuple[str, str], int]
-    unknown_landmark_ids: tuple[Hashable, ...]
-
-    def count(self, kind: UpdateKind, reason: UpdateReason) -> int:
-        """Updates of ``kind`` that ended with ``reason``."""
-        return self.counts.get((kind, reason), 0)
-
-    def rejected(self, kind: UpdateKind) -> int:
-        """Readings of ``kind`` not fused, for any reason but ``"anchor"``."""
-        return sum(c for (k, r), c in self.counts.items()
-                   if k == kind and r not in ("fused", "anchor"))
-
-
-_NAN2 = np.full(2, np.nan)
-_NAN2.flags.writeable = False
-_NAN22 = np.full((2, 2), np.nan)
-_NAN22.flags.writeable = False
-
-
-def _frozen(arr: np.ndarray) -> np.ndarray:
-    arr.flags.writeable = False
-    return arr
-
-
-class ModelEKF(ExtendedKalmanFilter):
+class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     """filterpy EKF with a calibrated :class:`~lti_motion.model.MotionModel` inside.
 
     Parameters
@@ -206,11 +101,13 @@ class ModelEKF(ExtendedKalmanFilter):
         Chi-square gate of every update (0.999: a good reading is rejected
         once in a thousand); ``None`` fuses everything.
     landmarks : LandmarkMap or mapping, optional
-        Known landmark positions, for :meth:`update_landmark`.
+        Known landmark positions, for :meth:`update_landmark` and
+        :meth:`update_landmarks`.
     landmark_noise : LandmarkNoise, optional
-        Range-bearing noise (default 2% of range, 1 degree).
+        Range-bearing noise of sightings without a covariance of their own
+        (default 2% of range, 1 degree).
     unknown_landmarks : {"count", "raise"}
-        What an observation of an id not in the map does.
+        What a sighting of an id not in the map does.
     initial_ticks : array_like, shape (2,), optional
         Raw encoder counts at the start; otherwise the first
         :meth:`update_encoders` call only sets the reference.
@@ -294,19 +191,10 @@ class ModelEKF(ExtendedKalmanFilter):
         fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
                          encoder_std=encoder_std, m_per_tick=m_per_tick)
         super().__init__(dim_x=fm.n, dim_z=2, dim_u=2)
-        if unknown_landmarks not in ("count", "raise"):
-            raise FilterOptionError(f"unknown_landmarks must be 'count' or 'raise', got "
-                                    f"{unknown_landmarks!r}")
-        if gate_probability is None:
-            self._gates = {2: math.inf, 3: math.inf}
-        else:
-            self._gates = {d: gate_threshold(gate_probability, d) for d in (2, 3)}
+        self._init_updates(gate_probability=gate_probability, landmarks=landmarks,
+                           landmark_noise=landmark_noise, unknown_landmarks=unknown_landmarks,
+                           history=history)
         self.fm = fm
-        self.gate_probability = gate_probability
-        self.landmarks = (landmarks if isinstance(landmarks, LandmarkMap) or landmarks is None
-                          else LandmarkMap(landmarks))
-        self.landmark_noise = landmark_noise or LandmarkNoise()
-        self.unknown_landmarks = unknown_landmarks
         for name, value in (("reanchor_periods", reanchor_periods), ("max_periods", max_periods)):
             if not (isinstance(value, int) and value >= 1):
                 raise FilterOptionError(f"{name} must be a positive int, got {value!r}")
@@ -329,9 +217,6 @@ class ModelEKF(ExtendedKalmanFilter):
         self.t_s = float(t0_s)
         self._dt_s = fm.dt_s
         self._speed_at = fm.n - 2
-        self.records: deque[UpdateRecord] = deque(maxlen=max(0, int(history)))
-        self._counts: Counter[tuple[str, str]] = Counter()
-        self._unknown: dict[Hashable, None] = {}
         # rows: counts of the last fused (or anchoring) frame, counts of the current frame
         self._tick_pair = np.zeros((2, 2), dtype=np.int64)
         self._have_ref = False
@@ -381,12 +266,6 @@ class ModelEKF(ExtendedKalmanFilter):
     def scale_errors(self) -> np.ndarray:
         """Estimated relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, (2,)."""
         return self.x[SCALES].copy()
-
-    @property
-    def stats(self) -> FilterStats:
-        """Counts of fused and rejected readings so far."""
-        return FilterStats(counts=MappingProxyType(dict(self._counts)),
-                           unknown_landmark_ids=tuple(self._unknown))
 
     # -- predict ---------------------------------------------------------------------------------
     def predict_x(self, u: np.ndarray = 0) -> None:
@@ -547,62 +426,6 @@ class ModelEKF(ExtendedKalmanFilter):
         return self._gated("encoders", t, y, y - self.x[self._speed_at:], self.fm.H_encoders,
                            self.R, None, PHt=self.P[:, self._speed_at:])
 
-    def update_landmark(self, landmark_id: Hashable, range_bearing: np.ndarray, *,
-                        t_s: float | None = None, noise: LandmarkNoise | None = None
-                        ) -> UpdateRecord:
-        """Fuse a range-bearing observation of a landmark at a known position.
-
-        Parameters
-        ----------
-        landmark_id : hashable
-            Id in the filter's :class:`LandmarkMap`.
-        range_bearing : array_like, shape (2,)
-            ``(r [m], b [rad])`` in the robot frame; the bearing residual is
-            wrapped to ``(-pi, pi]``.
-        t_s : float, optional
-            Time for the record.
-        noise : LandmarkNoise, optional
-            Noise of this observation (default the filter's).
-
-        Returns
-        -------
-        UpdateRecord
-            ``kind="landmark"``.
-
-        Raises
-        ------
-        MeasurementShapeError
-            If the observation is not (2,).
-        FilterOptionError
-            If the filter has no landmark map.
-        UnknownLandmarkError
-            For an id not in the map, with ``unknown_landmarks="raise"``.
-        """
-        zmeas = np.asarray(range_bearing, dtype=float)
-        if zmeas.shape != (2,):
-            raise MeasurementShapeError(f"expected a range-bearing observation of shape (2,), "
-                                        f"got {zmeas.shape}")
-        if self.landmarks is None:
-            raise FilterOptionError("this filter has no landmark map; pass landmarks=...")
-        t = self.t_s if t_s is None else float(t_s)
-        if landmark_id not in self.landmarks:
-            self._unknown.setdefault(landmark_id, None)
-            if self.unknown_landmarks == "raise":
-                self._counts["landmark", "unknown_landmark"] += 1
-                self.landmarks.position(landmark_id)        # raises UnknownLandmarkError
-                raise UnknownLandmarkError(landmark_id)     # pragma: no cover
-            return self._skip("landmark", t, "unknown_landmark", 2, landmark_id)
-        if not (math.isfinite(zmeas[0]) and math.isfinite(zmeas[1])):
-            return self._skip("landmark", t, "non_finite", 2, landmark_id)
-        lxy = self.landmarks.position(landmark_id)
-        predicted = landmark_measurement(self.x, lxy)
-        if predicted[0] < MIN_RANGE_M:
-            return self._skip("landmark", t, "degenerate", 2, landmark_id)
-        H = landmark_jacobian(self.x, lxy)
-        R = (noise or self.landmark_noise).cov(predicted[0])
-        return self._gated("landmark", t, zmeas, landmark_residual(zmeas, predicted), H, R,
-                           landmark_id)
-
     def update_pose(self, pose: np.ndarray, cov: np.ndarray, *, t_s: float | None = None
                     ) -> UpdateRecord:
         """Fuse an absolute pose fix ``(x [m], y [m], theta [rad])`` with covariance ``cov``.
@@ -628,50 +451,3 @@ class ModelEKF(ExtendedKalmanFilter):
             raise FilterOptionError("the pose fix covariance must be symmetric positive definite")
         return self._gated("pose", t, zmeas, pose_residual(zmeas, self.x[:3]),
                            pose_jacobian(self.x), R, None)
-
-    # -- shared ----------------------------------------------------------------------------------
-    def _gated(self, kind: UpdateKind, t: float, zmeas: np.ndarray, innovation: np.ndarray,
-               H: np.ndarray, R: np.ndarray, landmark_id: Hashable | None, *,
-               PHt: np.ndarray | None = None, force: bool = False) -> UpdateRecord:
-        """Gate on the NIS, then a Joseph-form update (Bar-Shalom et al. 2001, eq. 5.2.3-18);
-        ``force`` fuses a reading outside the gate (reason ``"forced"``)."""
-        P = self.P
-        m = innovation.shape[0]
-        if PHt is None:
-            PHt = P @ H.T
-            S = H @ PHt + R
-        else:
-            S = PHt[-m:] + R                     # H P H^T for a selector H on the last rows
-        SI = inverse_covariance(S)
-        value = nis(innovation, SI)
-        inside = value <= self._gates[m]
-        accepted = inside or force
-        innovation.flags.writeable = False
-        S.flags.writeable = False
-        self.y, self.S, self.SI, self.z = innovation, S, SI, zmeas
-        if accepted:
-            K = PHt @ SI
-            self.K = K
-            self.x = self.x_post = self.x + K @ innovation
-            self.P = self.P_post = joseph_covariance(P, K, H, R, PHt)
-            self._log_likelihood = self._likelihood = self._mahalanobis = None
-            reason: UpdateReason = "fused" if inside else "forced"
-        else:
-            self.K = np.zeros((self.fm.n, m))
-            self.x_post, self.P_post = self.x, P
-            reason = "gated"
-        record = UpdateRecord(kind, t, innovation, S, value, accepted, reason, landmark_id)
-        self._counts[kind, reason] += 1
-        self.records.append(record)
-        return record
-
-    def _skip(self, kind: UpdateKind, t: float, reason: UpdateReason, m: int,
-              landmark_id: Hashable | None = None) -> UpdateRecord:
-        nan_v = _NAN2 if m == 2 else _frozen(np.full(m, np.nan))
-        nan_m = _NAN22 if m == 2 else _frozen(np.full((m, m), np.nan))
-        record = UpdateRecord(kind, t, nan_v, nan_m, math.nan, False, reason, landmark_id)
-        self._counts[kind, reason] += 1
-        self.records.append(record)
-        if reason not in ("anchor",):
-            _log.debug("%s reading at t=%.3f s not fused: %s", kind, t, reason)
-        return record

@@ -10,23 +10,32 @@ filter is measured against on real data (``lti_motion.app.mrclam``).
 The arc and its Jacobians are :func:`lti_motion.kinematics.pose_step` and
 :func:`lti_motion.kinematics.pose_step_jacobians` (chord form, eq. 11 of the
 paper; the same exact arc as Thrun's table 5.3, without its ``1/w``
-singularity); the measurement is :mod:`fusion.landmark_map`.
+singularity); the measurement is :mod:`fusion.range_bearing`. The landmark
+updates, their gate and their records are the model filter's
+(:class:`fusion.ekf.updates.GatedUpdates`): the same ``update_landmark(id,
+(r, b))`` and ``update_landmarks(sightings)`` on a
+:class:`~fusion.landmark_map.LandmarkMap`, the same
+:class:`~fusion.ekf.updates.UpdateRecord` and ``stats``.
 """
 
 from __future__ import annotations
 
+from collections.abc import Hashable, Mapping
+from typing import Literal
+
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
+from fusion.ekf.updates import GatedUpdates
 from fusion.exceptions import MeasurementShapeError
-from fusion.noise import LandmarkNoise, gate_threshold, nis
-from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
+from fusion.landmark_map import LandmarkMap
+from fusion.noise import LandmarkNoise
 from lti_motion.kinematics import pose_step, pose_step_jacobians
 
 __all__ = ["VelocityModelEKF"]
 
 
-class VelocityModelEKF(ExtendedKalmanFilter):
+class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
     """Stock filterpy EKF on ``(x [m], y [m], theta [rad])`` driven by commanded ``(v, w)``.
 
     Parameters
@@ -39,28 +48,57 @@ class VelocityModelEKF(ExtendedKalmanFilter):
     initial_pose : array_like, shape (3,)
     pose_std : tuple of float
         Initial standard deviations ``(x [m], y [m], theta [rad])``.
-    landmark_noise : LandmarkNoise
-        Range-bearing noise.
-    gate_probability : float
-        Chi-square gate of the landmark updates (2 degrees of freedom).
+    landmarks : LandmarkMap or mapping, optional
+        Known landmark positions, for :meth:`update_landmark` and
+        :meth:`update_landmarks`.
+    landmark_noise : LandmarkNoise, optional
+        Range-bearing noise of sightings without a covariance of their own
+        (default 2% of range, 1 degree), at the predicted range.
+    gate_probability : float or None
+        Chi-square gate of the landmark updates (2 degrees of freedom);
+        ``None`` fuses everything.
+    unknown_landmarks : {"count", "raise"}
+        What a sighting of an id not in the map does.
+    history : int
+        How many update records :attr:`records` keeps (0: none).
+
+    Raises
+    ------
+    MeasurementShapeError
+        If ``speed_cov`` is not (2, 2).
+    FilterOptionError
+        For an invalid gate probability or ``unknown_landmarks``.
+
+    Examples
+    --------
+    >>> ekf = VelocityModelEKF(dt_s=0.1, speed_cov=np.diag([1e-4, 1e-3]),
+    ...                        landmarks={7: (2.0, 0.0)})
+    >>> ekf.predict(np.array([0.5, 0.0]))
+    >>> rec = ekf.update_landmark(7, np.array([1.96, 0.0]))
+    >>> rec.accepted, round(rec.t_s, 3), (ekf.x.round(4) + 0.0).tolist()
+    (True, 0.1, [0.0494, 0.0, 0.0])
     """
 
     def __init__(self, *, dt_s: float, speed_cov: np.ndarray,
                  initial_pose: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
                  pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
+                 landmarks: LandmarkMap | Mapping[Hashable, tuple[float, float]] | None = None,
                  landmark_noise: LandmarkNoise | None = None,
-                 gate_probability: float = 0.999) -> None:
+                 gate_probability: float | None = 0.999,
+                 unknown_landmarks: Literal["count", "raise"] = "count",
+                 history: int = 10_000) -> None:
         super().__init__(dim_x=3, dim_z=2, dim_u=2)
         m = np.asarray(speed_cov, float)
         if m.shape != (2, 2):
             raise MeasurementShapeError(f"speed_cov must be (2, 2), got {m.shape}")
+        self._init_updates(gate_probability=gate_probability, landmarks=landmarks,
+                           landmark_noise=landmark_noise, unknown_landmarks=unknown_landmarks,
+                           history=history)
         self.dt_s = float(dt_s)
+        self.t_s = 0.0
         self.speed_cov = m
         self.x = np.array(initial_pose, float)
         self.P = np.diag(np.square(pose_std))
-        self.landmark_noise = landmark_noise or LandmarkNoise()
-        self.gate = gate_threshold(gate_probability, 2)
-        self.fused = self.gated = 0
 
     def predict_x(self, u: np.ndarray = 0) -> None:
         """The arc of one period (filterpy's hook for a non-linear ``f``)."""
@@ -68,7 +106,7 @@ class VelocityModelEKF(ExtendedKalmanFilter):
 
     def predict(self, u: np.ndarray = 0, B: None = None, F: None = None,
                 Q: None = None) -> None:
-        """One period with commanded ``u = (v [m/s], w [rad/s])``.
+        """One period with commanded ``u = (v [m/s], w [rad/s])``; adds ``dt_s`` to ``t_s``.
 
         ``F = d pose' / d pose`` and ``Q = V M V^T`` with ``V = d pose' / d (v, w)``
         (Thrun et al. 2005, table 7.2, lines 3-7).
@@ -77,19 +115,4 @@ class VelocityModelEKF(ExtendedKalmanFilter):
         self.F = f_pose
         self.Q = f_speed @ self.speed_cov @ f_speed.T
         super().predict(u=u)
-
-    def update_landmark(self, landmark_xy: np.ndarray, z: np.ndarray) -> bool:
-        """Fuse one ``(range [m], bearing [rad])`` of a known landmark; ``False`` if gated."""
-        R = self.landmark_noise.cov(float(z[0]))
-        H = range_bearing_jacobian(self.x, landmark_xy)[:, :3]
-        z = np.asarray(z, float)
-        innovation = range_bearing_residual(z, range_bearing(self.x, landmark_xy))
-        S = H @ self.P @ H.T + R
-        if nis(innovation, np.linalg.inv(S)) > self.gate:
-            self.gated += 1
-            return False
-        self.update(z, lambda x: range_bearing_jacobian(x, landmark_xy)[:, :3],
-                    lambda x: range_bearing(x, landmark_xy), R=R,
-                    residual=range_bearing_residual)
-        self.fused += 1
-        return True
+        self.t_s += self.dt_s

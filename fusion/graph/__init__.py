@@ -3,14 +3,15 @@
 - :mod:`fusion.graph.preintegration`: relative poses, covariances and calibration
   Jacobians between keyframes;
 - :mod:`fusion.graph.factors`, :mod:`fusion.graph.calibrated_factors`: native and
-  calibration-aware motion factors, range-bearing factors;
+  calibration-aware motion factors, range-bearing factors (from the package's one
+  observation type, :class:`fusion.range_bearing.RangeBearing`);
 - :mod:`fusion.graph.speed_noise`, :mod:`fusion.graph.transient_noise`: the speed-error
   covariances to preintegrate with, measured from calibration data;
 - :mod:`fusion.graph.builder`, :mod:`fusion.graph.smoother`,
   :mod:`fusion.graph.smoother_options`: the graph and the iSAM2 smoother.
 """
 
-from fusion.graph.factors import RangeBearing, observe_landmarks
+from fusion.graph.factors import observe_landmarks
 from fusion.graph.preintegration import Preintegrated, preintegrate, preintegrate_model
 from fusion.graph.smoother import (
     IncrementalSmoother,
@@ -22,7 +23,6 @@ from fusion.graph.smoother import (
 __all__ = [
     "IncrementalSmoother",
     "Preintegrated",
-    "RangeBearing",
     "SmootherOptions",
     "SmootherResult",
     "log_keyframes",

@@ -6,9 +6,11 @@ yet handed to an optimiser; :class:`~fusion.graph.IncrementalSmoother` and
 cannot drift apart. Not public API: use :mod:`fusion.graph.smoother`.
 
 The graph: a prior on the first pose; one motion factor per keyframe interval;
-range-bearing factors to landmark variables, known landmarks held by a prior
-of ``options.landmark_sigma_m``, unknown ones initialised from their first
-observation. With ``options.calibrate`` the intervals are grouped by
+range-bearing factors (:func:`~fusion.graph.factors.range_bearing_factors`, a
+full Gaussian noise model per sighting: its own covariance, or
+``options.landmark_noise``) to landmark variables, known landmarks held by a
+prior of ``options.landmark_sigma_m``, unknown ones initialised from their
+first observation. With ``options.calibrate`` the intervals are grouped by
 calibration variable (``calibration_every`` consecutive intervals share
 ``C(g)``, with a prior on ``C(0)`` and a random walk between successive ones):
 
@@ -39,18 +41,18 @@ import numpy as np
 
 from fusion.exceptions import KeyframeOrderError, UnknownPoseError
 from fusion.graph.factors import (
-    RangeBearing,
     calibrated_motion_group_factor,
     calibration_key,
     calibration_walk_factor,
     landmark_key,
     motion_factor,
     pose_key,
-    range_bearing_factor,
+    range_bearing_factors,
 )
 from fusion.graph.preintegration import Preintegrated
 from fusion.graph.smoother_options import SmootherOptions, SmootherResult
 from fusion.landmark_map import LandmarkMap
+from fusion.range_bearing import RangeBearing
 
 __all__ = ["GraphBuilder"]
 
@@ -184,22 +186,21 @@ class GraphBuilder:
         self._open_calibrated = len(self._open)
 
     def add_observations(self, obs: RangeBearing) -> None:
-        """Add range-bearing factors (``pose_index`` = keyframe index)."""
-        bad = (obs.pose_index < 0) | (obs.pose_index >= self.n_poses)
+        """Add range-bearing factors (``obs.index`` = keyframe index), one per row, in order."""
+        bad = (obs.index < 0) | (obs.index >= self.n_poses)
         if np.any(bad):
-            first = int(obs.pose_index[np.argmax(bad)])
+            first = int(obs.index[np.argmax(bad)])
             raise UnknownPoseError(
                 f"observation of pose {first}, but the graph holds poses 0 .. "
                 f"{self.n_poses - 1}; add the motion up to that keyframe first")
-        noise = gtsam.noiseModel.Diagonal.Sigmas([obs.bearing_sigma_rad, obs.range_sigma_m])
-        if self.opts.landmark_huber_k is not None:
-            noise = gtsam.noiseModel.Robust.Create(
-                gtsam.noiseModel.mEstimator.Huber.Create(self.opts.landmark_huber_k), noise)
+        factors = range_bearing_factors(obs, landmark_noise=self.opts.landmark_noise,
+                                        huber_k=self.opts.landmark_huber_k)
         prior = gtsam.noiseModel.Isotropic.Sigma(2, self.opts.landmark_sigma_m)
-        for p, lid, b, r in zip(obs.pose_index.tolist(), obs.landmark_id.tolist(),
-                                obs.bearing_rad.tolist(), obs.range_m.tolist(), strict=True):
-            key = landmark_key(lid)
+        for p, lid, r, b, factor in zip(obs.index.tolist(), obs.landmark_id.tolist(),
+                                        obs.range_m.tolist(), obs.bearing_rad.tolist(), factors,
+                                        strict=True):
             if lid not in self.landmarks:
+                key = landmark_key(lid)
                 if lid in self.known:
                     xy = self.known[lid]
                     self._add(gtsam.PriorFactorPoint2(key, xy, prior))
@@ -207,8 +208,7 @@ class GraphBuilder:
                     xy = self.guess[p].transformFrom(np.array([r * np.cos(b), r * np.sin(b)]))
                 self._values.insert(key, np.asarray(xy, dtype=float))
                 self.landmarks[lid] = None
-            self._add(range_bearing_factor(b, r, key_pose=pose_key(p), key_landmark=key,
-                                           noise=noise))
+            self._add(factor)
 
     @property
     def has_pending(self) -> bool:

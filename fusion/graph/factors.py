@@ -9,18 +9,29 @@
   first order in ``c``, as IMU preintegration corrects for the bias (Forster et
   al. 2017, eq. 44), so a smoother with landmarks estimates the calibration
   online. :func:`calibration_walk_factor` lets ``c`` drift.
-- :func:`range_bearing_factor`: a native ``gtsam.BearingRangeFactor2D`` to a
-  landmark variable (known landmarks carry a prior, or a tight one for a
-  constant). :class:`RangeBearing` holds observations for the graph (one
-  noise level per set; :meth:`RangeBearing.from_observations` converts the
-  EKF's :class:`fusion.landmark_map.Observations`), the map is
-  :class:`fusion.landmark_map.LandmarkMap`; :func:`predict_range_bearing` is the
-  measurement model and :func:`observe_landmarks` a simulator of observations
-  for experiments.
+- :func:`range_bearing_factors`: one native ``gtsam.BearingRangeFactor2D``
+  per row of a :class:`fusion.range_bearing.RangeBearing` (the package's one
+  observation type, the EKFs' too; ``index`` = keyframe), each with a full
+  Gaussian noise model from the row's 2 x 2 covariance (or the sensor's
+  :class:`fusion.noise.LandmarkNoise` at the measured range), to a landmark
+  variable (known landmarks carry a prior, or a tight one for a constant).
+  The map is :class:`fusion.landmark_map.LandmarkMap`;
+  :func:`predict_range_bearing` is the measurement model and
+  :func:`observe_landmarks` a simulator of observations for experiments.
 
 Variables: poses ``X(i)`` (``gtsam.Pose2``, ``wTb``: body in world), calibrations
 ``C(i)`` (``Point2`` holding ``(s, g)`` around ``(1, 1)``), landmarks ``L(id)``
 (``Point2`` in the world frame).
+
+Range-bearing noise: gtsam's ``BearingRange`` measurement, and so its error
+and noise model, is ordered ``(bearing, range)``, the reverse of the
+package's ``z = (r, b)``; :func:`range_bearing_factors` reorders each
+covariance. A diagonal one becomes ``noiseModel.Diagonal.Sigmas``; any other
+``noiseModel.Gaussian.Covariance(cov, smart=False)``: the smart default takes
+a covariance whose off-diagonal entries are below 1e-9 in absolute value for
+diagonal (gtsam ``checkIfDiagonal``, ``linear/NoiseModel.cpp``), which would
+drop the range-bearing correlation of a precise sensor (ArUco covariances are
+about 1e-8).
 
 References
 ----------
@@ -31,18 +42,11 @@ Preintegration for Real-Time Visual-Inertial Odometry", IEEE Trans. Robotics
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import C, L, X
 
-from fusion.exceptions import (
-    GraphInputError,
-    LandmarkIdError,
-    MeasurementShapeError,
-    NonFiniteInputError,
-)
+from fusion.exceptions import LandmarkIdError, MeasurementShapeError
 from fusion.graph.calibrated_factors import (
     calibrated_motion_error,
     calibrated_motion_factor,
@@ -50,12 +54,12 @@ from fusion.graph.calibrated_factors import (
 )
 from fusion.graph.preintegration import Preintegrated
 from fusion.landmark_map import LandmarkMap
-from fusion.range_bearing import Observations
+from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
     "CONSTANT_SIGMA_M",
-    "RangeBearing",
     "calibrated_motion_error",
     "calibrated_motion_factor",
     "calibrated_motion_group_factor",
@@ -66,7 +70,7 @@ __all__ = [
     "observe_landmarks",
     "pose_key",
     "predict_range_bearing",
-    "range_bearing_factor",
+    "range_bearing_factors",
 ]
 
 #: Prior standard deviation [m] that stands for "constant" on a known landmark:
@@ -137,115 +141,6 @@ def calibration_walk_factor(key_a: int, key_b: int, *, sigma_per_sqrt_s: np.ndar
                                      gtsam.noiseModel.Diagonal.Sigmas(sig))
 
 
-@dataclass(frozen=True, eq=False)
-class RangeBearing:
-    """Range-bearing observations of landmarks, one row each.
-
-    Attributes
-    ----------
-    pose_index : ndarray of int, shape (k,)
-        The pose each was taken from: a keyframe index for
-        :class:`~fusion.graph.IncrementalSmoother`, a frame index for the
-        log-level helpers of :mod:`fusion.graph.smoother`.
-    landmark_id : ndarray of int, shape (k,)
-        Which landmark.
-    bearing_rad : ndarray, shape (k,)
-        Bearing in the body frame, counter-clockwise from the heading [rad].
-    range_m : ndarray, shape (k,)
-        Distance [m].
-    bearing_sigma_rad, range_sigma_m : float
-        Measurement standard deviations.
-    """
-
-    pose_index: np.ndarray
-    landmark_id: np.ndarray
-    bearing_rad: np.ndarray
-    range_m: np.ndarray
-    bearing_sigma_rad: float
-    range_sigma_m: float
-
-    def __post_init__(self) -> None:
-        cols = {"pose_index": np.asarray(self.pose_index).astype(np.int64).reshape(-1),
-                "landmark_id": np.asarray(self.landmark_id).astype(np.int64).reshape(-1),
-                "bearing_rad": np.asarray(self.bearing_rad, dtype=float).reshape(-1),
-                "range_m": np.asarray(self.range_m, dtype=float).reshape(-1)}
-        k = len(cols["pose_index"])
-        for name, arr in cols.items():
-            if arr.shape != (k,):
-                raise MeasurementShapeError(f"RangeBearing.{name} has shape {arr.shape}, "
-                                            f"expected ({k},)")
-            if not np.all(np.isfinite(arr)):
-                raise NonFiniteInputError(f"RangeBearing.{name} holds NaN or infinite values")
-            arr.flags.writeable = False
-            object.__setattr__(self, name, arr)
-        if np.any(cols["range_m"] <= 0):
-            raise GraphInputError("ranges must be positive")
-        for name in ("bearing_sigma_rad", "range_sigma_m"):
-            value = float(getattr(self, name))
-            if not (np.isfinite(value) and value > 0):
-                raise GraphInputError(f"RangeBearing.{name} must be positive, got {value}")
-            object.__setattr__(self, name, value)
-
-    def __len__(self) -> int:
-        return len(self.pose_index)
-
-    def select(self, mask: np.ndarray) -> RangeBearing:
-        """The rows where ``mask`` (boolean or index array) holds."""
-        return RangeBearing(self.pose_index[mask], self.landmark_id[mask], self.bearing_rad[mask],
-                            self.range_m[mask], self.bearing_sigma_rad, self.range_sigma_m)
-
-    def with_pose_index(self, pose_index: np.ndarray) -> RangeBearing:
-        """The same observations attached to other pose indices."""
-        return RangeBearing(pose_index, self.landmark_id, self.bearing_rad, self.range_m,
-                            self.bearing_sigma_rad, self.range_sigma_m)
-
-    @classmethod
-    def from_observations(cls, observations: Observations, *, bearing_sigma_rad: float,
-                          range_sigma_m: float) -> RangeBearing:
-        """The EKF's :class:`fusion.landmark_map.Observations` as graph observations.
-
-        Parameters
-        ----------
-        observations : Observations
-            ``pose_index`` becomes their ``frame``; ids must be integers.
-        bearing_sigma_rad, range_sigma_m : float
-            The noise the graph gives every row (``Observations`` carry none; a
-            :class:`fusion.landmark_map.LandmarkNoise` with a range fraction has no
-            single range sigma, so choose one).
-
-        Raises
-        ------
-        LandmarkIdError
-            If an id is not an integer.
-        ValueError
-            If a range or a sigma is not positive.
-
-        Examples
-        --------
-        >>> from fusion.range_bearing import Observations
-        >>> obs = Observations(np.array([3]), (7,), np.array([[2.0, 0.1]]))
-        >>> rb = RangeBearing.from_observations(obs, bearing_sigma_rad=0.02, range_sigma_m=0.05)
-        >>> rb.pose_index.tolist(), rb.landmark_id.tolist(), rb.range_m.tolist()
-        ([3], [7], [2.0])
-        >>> rb.to_observations().range_bearing.tolist()
-        [[2.0, 0.1]]
-        """
-        bad = [i for i in observations.landmark_id
-               if isinstance(i, bool) or not isinstance(i, (int, np.integer))]
-        if bad:
-            raise LandmarkIdError(f"the factor graph keys landmarks by integer id; got "
-                                  f"{bad[:5]!r}; number the landmarks first")
-        rb = np.asarray(observations.range_bearing, dtype=float).reshape(-1, 2)
-        return cls(observations.frame, np.array(observations.landmark_id, dtype=np.int64),
-                   rb[:, 1], rb[:, 0], bearing_sigma_rad, range_sigma_m)
-
-    def to_observations(self) -> Observations:
-        """These rows as :class:`fusion.landmark_map.Observations` (``frame`` = ``pose_index``)."""
-        return Observations(frame=self.pose_index.copy(),
-                            landmark_id=tuple(self.landmark_id.tolist()),
-                            range_bearing=np.column_stack([self.range_m, self.bearing_rad]))
-
-
 def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bearing and range of world points seen from body poses (the measurement model).
 
@@ -276,7 +171,7 @@ def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.nd
 def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random.Generator,
                       bearing_sigma_rad: float, range_sigma_m: float, max_range_m: float,
                       min_range_m: float = 0.2, field_of_view_rad: float = 2 * np.pi,
-                      pose_index: np.ndarray | None = None) -> RangeBearing:
+                      index: np.ndarray | None = None) -> RangeBearing:
     """Simulate range-bearing observations of a map from true poses.
 
     Parameters
@@ -294,19 +189,27 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
         fit in view, a marker under its nose), are not seen [m].
     field_of_view_rad : float
         Full angular width of the sensor, centred on the heading.
-    pose_index : array_like of int, shape (n,), optional
+    index : array_like of int, shape (n,), optional
         Index recorded for each pose (default ``0 .. n-1``).
 
     Returns
     -------
     RangeBearing
-        Every (pose, landmark) pair in view, ordered by pose.
+        Every (pose, landmark) pair in view, ordered by pose, each with the
+        covariance the noise was drawn with, ``diag(range_sigma_m^2,
+        bearing_sigma_rad^2)``.
+
+    Raises
+    ------
+    MeasurementShapeError
+        If ``index`` does not have one entry per pose.
+    LandmarkIdError
+        If a landmark id is not an integer (the graph keys them as ``L(id)``).
     """
     poses = np.asarray(wTb, dtype=float).reshape(-1, 3)
-    idx = np.arange(len(poses)) if pose_index is None else np.asarray(pose_index).reshape(-1)
+    idx = np.arange(len(poses)) if index is None else np.asarray(index).reshape(-1)
     if idx.shape != (len(poses),):
-        raise MeasurementShapeError(f"pose_index has shape {idx.shape}, expected "
-                                    f"({len(poses)},)")
+        raise MeasurementShapeError(f"index has shape {idx.shape}, expected ({len(poses)},)")
     ids = landmarks.integer_ids                      # raises for non-integer ids
     bearing, rng_m = predict_range_bearing(poses[:, None, :], landmarks.xy_m[None, :, :])
     seen = ((rng_m <= max_range_m) & (rng_m >= min_range_m)
@@ -314,27 +217,86 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     rows, cols = np.nonzero(seen)
     noisy_b = wrap_angle(bearing[rows, cols] + bearing_sigma_rad * rng.standard_normal(rows.size))
     noisy_r = np.abs(rng_m[rows, cols] + range_sigma_m * rng.standard_normal(rows.size))
-    return RangeBearing(idx[rows], ids[cols], noisy_b, noisy_r,
-                        bearing_sigma_rad, range_sigma_m)
+    cov = np.diag([range_sigma_m ** 2, bearing_sigma_rad ** 2])
+    return RangeBearing(idx[rows], ids[cols], noisy_r, noisy_b,
+                        cov=np.broadcast_to(cov, (rows.size, 2, 2)))
 
 
-def range_bearing_factor(bearing_rad: float, range_m: float, *, key_pose: int,
-                         key_landmark: int, noise: gtsam.noiseModel.Base
-                         ) -> gtsam.BearingRangeFactor2D:
-    """A native range-bearing factor between a pose and a landmark variable.
+def _integer_ids(observations: RangeBearing) -> np.ndarray:
+    """The ids as ``int64``, as gtsam keys landmarks (``L(id)``); :class:`LandmarkIdError` else."""
+    ids = observations.landmark_id
+    if ids.dtype != np.int64:
+        bad = [i for i in ids.tolist()
+               if isinstance(i, bool) or not isinstance(i, (int, np.integer))]
+        raise LandmarkIdError(f"the factor graph keys landmarks by integer id (gtsam L(id)); "
+                              f"got {bad[:5]!r}; number the landmarks first")
+    return ids
+
+
+def _noise_model(cov: np.ndarray, huber_k: float | None) -> gtsam.noiseModel.Base:
+    """gtsam noise of one ``(range, bearing)`` covariance, reordered to gtsam's
+    ``(bearing, range)``: ``Diagonal.Sigmas`` if diagonal, else a full ``Gaussian`` (module
+    notes: never gtsam's smart diagonal test), in a Huber kernel if ``huber_k``."""
+    br = np.asarray(cov, dtype=float)[::-1, ::-1]
+    if br[0, 1] == 0.0 and br[1, 0] == 0.0:
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.sqrt(np.diag(br)))
+    else:
+        noise = gtsam.noiseModel.Gaussian.Covariance(np.ascontiguousarray(br), False)
+    if huber_k is not None:
+        noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(huber_k),
+                                               noise)
+    return noise
+
+
+def range_bearing_factors(observations: RangeBearing, *, landmark_noise: LandmarkNoise,
+                          huber_k: float | None = None) -> list[gtsam.BearingRangeFactor2D]:
+    """Native range-bearing factors, one per row: pose ``X(index)`` to landmark ``L(id)``.
 
     Parameters
     ----------
-    bearing_rad, range_m : float
-        The measurement (:func:`predict_range_bearing` is its model).
-    key_pose, key_landmark : int
-        Keys of the ``Pose2`` (``wTb``) and the ``Point2`` (world frame).
-    noise : gtsam.noiseModel.Base
-        Two-dimensional (bearing [rad], range [m]) noise model.
+    observations : RangeBearing
+        ``index`` = keyframe of each row; integer landmark ids.
+    landmark_noise : LandmarkNoise
+        The sensor's noise, for rows without a covariance of their own: its
+        covariance at the *measured* range (the EKF takes the predicted one).
+    huber_k : float, optional
+        Huber threshold of a robust kernel on every factor.
 
     Returns
     -------
-    gtsam.BearingRangeFactor2D
+    list of gtsam.BearingRangeFactor2D
+        In row order. Each noise model is the row's covariance reordered to
+        gtsam's ``(bearing, range)`` (module notes): ``Diagonal`` if diagonal,
+        else a full ``Gaussian``; rows with the same covariance share one.
+        :func:`predict_range_bearing` is the measurement model.
+
+    Raises
+    ------
+    LandmarkIdError
+        If an id is not an integer.
+
+    Examples
+    --------
+    >>> obs = RangeBearing([2, 3], [7, 7], [1.5, 1.4], [0.1, 0.2],
+    ...                    cov=[np.diag([1e-4, 4e-6]), [[1e-4, 1e-6], [1e-6, 4e-6]]])
+    >>> f = range_bearing_factors(obs, landmark_noise=LandmarkNoise())
+    >>> len(f), f[1].measured().range(), f[0].noiseModel().sigmas().tolist()   # (b, r)
+    (2, 1.4, [0.002, 0.01])
+    >>> np.allclose(f[1].noiseModel().covariance(), [[4e-6, 1e-6], [1e-6, 1e-4]], rtol=1e-12)
+    True
     """
-    return gtsam.BearingRangeFactor2D(key_pose, key_landmark, gtsam.Rot2(float(bearing_rad)),
-                                      float(range_m), noise)
+    ids = _integer_ids(observations)
+    covs = observations.cov
+    models: dict[bytes, gtsam.noiseModel.Base] = {}
+    out = []
+    for j, (i, lid, r, b) in enumerate(zip(observations.index.tolist(), ids.tolist(),
+                                           observations.range_m.tolist(),
+                                           observations.bearing_rad.tolist(), strict=True)):
+        cov = landmark_noise.cov(r) if covs is None else covs[j]
+        key = cov.tobytes()
+        noise = models.get(key)
+        if noise is None:
+            noise = models[key] = _noise_model(cov, huber_k)
+        out.append(gtsam.BearingRangeFactor2D(pose_key(i), landmark_key(lid), gtsam.Rot2(b), r,
+                                              noise))
+    return out

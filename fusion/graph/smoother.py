@@ -32,11 +32,12 @@ import numpy as np
 
 from fusion.exceptions import UnknownPoseError
 from fusion.graph.builder import GraphBuilder
-from fusion.graph.factors import RangeBearing, calibration_key, pose_key
+from fusion.graph.factors import calibration_key, pose_key
 from fusion.graph.preintegration import Preintegrated, SpeedMode, preintegrate_model
 from fusion.graph.smoother_options import SmootherOptions, SmootherResult
 from fusion.graph.transient_noise import TransientSpeedCovariance
 from fusion.landmark_map import LandmarkMap
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
@@ -140,12 +141,16 @@ class IncrementalSmoother:
         return self.n_poses - 1
 
     def add_observations(self, observations: RangeBearing) -> None:
-        """Add range-bearing observations (``pose_index`` = keyframe index).
+        """Add range-bearing observations (``observations.index`` = keyframe index).
+
+        Rows without a covariance take ``options.landmark_noise`` at their measured range.
 
         Raises
         ------
         UnknownPoseError
             If an observation names a pose not (yet) in the graph.
+        LandmarkIdError
+            If a landmark id is not an integer (gtsam keys landmarks as ``L(id)``).
         """
         self._graph.add_observations(observations)
 
@@ -230,7 +235,7 @@ def smooth_batch(motion: Preintegrated, *, initial_pose: np.ndarray,
     initial_pose : array_like, shape (3,)
         ``wTb`` of the first keyframe (held by the prior).
     observations : RangeBearing, optional
-        ``pose_index`` = keyframe index.
+        ``index`` = keyframe index.
     landmarks : fusion.landmark_map.LandmarkMap, optional
         Known landmarks (integer ids).
     options : SmootherOptions, optional
@@ -311,7 +316,7 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
     initial_pose : array_like, shape (3,)
         ``wTb`` at frame 0.
     observations : RangeBearing, optional
-        With ``pose_index`` = *frame* index; a keyframe is placed at each.
+        With ``index`` = *frame* index; a keyframe is placed at each.
     landmarks : fusion.landmark_map.LandmarkMap, optional
         Known landmarks (integer ids).
     keyframe_every : int
@@ -350,22 +355,22 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
     if method not in ("isam2", "batch"):
         raise ValueError(f"method must be 'isam2' or 'batch', got {method!r}")
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
-    frames = np.zeros(0, np.int64) if observations is None else observations.pose_index
+    frames = np.zeros(0, np.int64) if observations is None else observations.index
     kf = log_keyframes(len(u), every=keyframe_every, extra=frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y,
                              covariance_scale=covariance_scale,
                              speed_covariance=speed_covariance)
-    obs = None if observations is None else observations.with_pose_index(
-        np.searchsorted(kf, observations.pose_index))
+    obs = None if observations is None else observations.with_index(
+        np.searchsorted(kf, observations.index))
     if method == "batch":
         return smooth_batch(pre, initial_pose=initial_pose, observations=obs, landmarks=landmarks,
                             options=options, covariances=covariances)
     sm = IncrementalSmoother(initial_pose=initial_pose, options=options, landmarks=landmarks)
     bounds = np.zeros(len(kf) + 1, np.int64)
     if obs is not None:
-        order = np.argsort(obs.pose_index, kind="stable")
+        order = np.argsort(obs.index, kind="stable")
         obs = obs.select(order)
-        bounds = np.searchsorted(obs.pose_index, np.arange(len(kf) + 1))
+        bounds = np.searchsorted(obs.index, np.arange(len(kf) + 1))
     for k in range(len(kf)):
         if k > 0:
             sm.add_motion(pre[k - 1])
@@ -386,7 +391,7 @@ def smoother_ates(model: MotionModel, logs: Sequence[FrameLog],
     logs : sequence of FrameLog
         Single-robot logs with ground truth (``true_pose``).
     observations : sequence of RangeBearing or None
-        Per log, with ``pose_index`` = frame index (the same observations an
+        Per log, with ``index`` = frame index (the same observations an
         EKF would be given, for a like-for-like comparison).
     **options
         Passed to :func:`smooth_log` (``landmarks``, ``mode``, ``options`` ...).

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from fusion.graph.factors import CONSTANT_SIGMA_M
+from fusion.noise import LandmarkNoise
 
 __all__ = ["SmootherOptions", "SmootherResult"]
 
@@ -64,6 +65,12 @@ class SmootherOptions:
         (the EKF gates them) cannot drag the path. ``None``: plain Gaussian.
         The kernel's weights follow the linearisation point, so use it with a
         small ``relinearize_threshold`` (1e-3 with ``relinearize_skip=1``).
+    landmark_noise : LandmarkNoise
+        The range-bearing sensor's noise, for sightings without a covariance
+        of their own (:class:`fusion.range_bearing.RangeBearing` rows with
+        ``cov=None``), taken at the *measured* range: the graph builds each
+        factor before it predicts one (the EKFs take the predicted range).
+        Default 2% of range (5 mm floor) and 1 degree, as the EKFs'.
     landmark_sigma_m : float
         Standard deviation [m] of the prior that holds each known landmark
         (:class:`fusion.landmark_map.LandmarkMap`) at its mapped position: the
@@ -79,7 +86,8 @@ class SmootherOptions:
     Raises
     ------
     ValueError
-        For a non-positive sigma, threshold or count.
+        For a non-positive sigma, threshold or count, or a ``landmark_noise`` that
+        is not a :class:`fusion.noise.LandmarkNoise`.
     """
 
     initial_pose_sigmas: tuple[float, float, float] = (1e-3, 1e-3, 1e-3)
@@ -91,6 +99,7 @@ class SmootherOptions:
     relinearize_threshold: float = 0.1
     relinearize_skip: int = 10
     landmark_huber_k: float | None = None
+    landmark_noise: LandmarkNoise = field(default_factory=LandmarkNoise)
     landmark_sigma_m: float = CONSTANT_SIGMA_M
     reinitialize_every: int = 10
 
@@ -109,6 +118,9 @@ class SmootherOptions:
         k = self.landmark_huber_k
         if k is not None and not (np.isfinite(k) and k > 0):
             raise ValueError(f"landmark_huber_k must be positive or None, got {k}")
+        if not isinstance(self.landmark_noise, LandmarkNoise):
+            raise ValueError(f"landmark_noise must be a LandmarkNoise, got "
+                             f"{type(self.landmark_noise).__name__}")
         for name in ("relinearize_threshold", "landmark_sigma_m"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):

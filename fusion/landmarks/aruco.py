@@ -14,6 +14,22 @@ marker centre ``t`` (optical frame) goes to the robot frame
 
 (range from the robot centre in the ground plane [m], bearing
 counter-clockwise from the robot's heading [rad]); the height ``p_z`` is dropped.
+Detections come out as the package's one observation type,
+:class:`fusion.range_bearing.RangeBearing`: one row per marker, its id, range,
+bearing and covariance (eq. 2-3 below), ``index`` the frame the image belongs
+to; the EKFs and the factor graph take it as it is.
+
+Diagnostics
+-----------
+Two figures of a detection say how far to trust it beyond its covariance: the
+marker's apparent size ``pixel_size`` [px] (the square root of its area in the
+image; it sets the corner noise, :meth:`CornerNoise.at_size`) and its
+obliquity [rad] (the angle between the marker's outward normal and the line
+of sight; near 0, small markers may report the mirror pose, IPPE's two-fold
+ambiguity, which changes the obliquity but hardly the range and bearing).
+They are not part of the observation: :func:`detection_diagnostics` computes
+them from the corners :meth:`MarkerDetector.detect_corners` returns, with the
+same pose solution as :func:`observation_from_corners`.
 
 Covariance
 ----------
@@ -78,7 +94,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import KW_ONLY, dataclass, field
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import cv2
 import numpy as np
@@ -91,13 +107,14 @@ from fusion.exceptions import (
 )
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerMap, dictionary_size
+from fusion.range_bearing import RangeBearing
 
 __all__ = [
     "CornerNoise",
     "MarkerDetector",
-    "MarkerObservation",
     "correct_edge_bias",
     "detect_markers",
+    "detection_diagnostics",
     "edge_shift_directions",
     "marker_object_points",
     "observation_from_corners",
@@ -132,8 +149,9 @@ _REFINEMENT = {"none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_
 class CornerNoise:
     """Corner error model of the covariance (module docstring, eq. 1), by apparent size.
 
-    With ``s`` the marker's apparent size (:attr:`MarkerObservation.pixel_size`)
-    [px], the independent noise and the mean inward edge offset are
+    With ``s`` the marker's apparent size (the square root of its area in
+    the image, :func:`detection_diagnostics`) [px], the independent noise and
+    the mean inward edge offset are
 
     .. math::
 
@@ -191,53 +209,6 @@ class CornerNoise:
         ratio = 20.0 / max(float(pixel_size), 1.0)
         return (math.hypot(self.sigma_px, self.sigma_at_20px * ratio * ratio),
                 self.edge_bias_px + self.edge_bias_at_20px * ratio)
-
-
-@dataclass(frozen=True, eq=False)
-class MarkerObservation:
-    """One detected marker, as the filters use it.
-
-    Attributes
-    ----------
-    marker_id : int
-        Id in the detector's dictionary.
-    range_m : float
-        Ground-plane distance from the robot centre to the marker centre [m].
-    bearing_rad : float
-        ``atan2(y, x)`` of the marker centre in the robot frame, counter-clockwise
-        positive [rad], in ``(-pi, pi]``.
-    covariance : ndarray, shape (2, 2)
-        Covariance of ``(range_m, bearing_rad)`` [m^2, m rad; m rad, rad^2]
-        (module docstring, eq. 2-3), read-only.
-    pixel_size : float
-        Square root of the marker's area in the image [px] (its side when seen head-on).
-    obliquity_rad : float
-        Angle between the marker's outward normal and the line of sight to the
-        camera [rad]; 0 when seen head-on. Small markers seen almost head-on
-        may report the mirror pose (IPPE's two-fold ambiguity), which changes
-        this angle but hardly the range and bearing.
-    """
-
-    marker_id: int
-    range_m: float
-    bearing_rad: float
-    covariance: np.ndarray
-    pixel_size: float
-    obliquity_rad: float
-
-    @property
-    def z(self) -> np.ndarray:
-        """The measurement vector ``(range_m, bearing_rad)``, shape (2,)."""
-        return np.array([self.range_m, self.bearing_rad])
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, MarkerObservation):
-            return NotImplemented
-        scalars = ("marker_id", "range_m", "bearing_rad", "pixel_size", "obliquity_rad")
-        return all(getattr(self, n) == getattr(other, n) for n in scalars) and \
-            np.array_equal(self.covariance, other.covariance)
-
-    __hash__ = None  # type: ignore[assignment]  # holds an array
 
 
 def marker_object_points(marker_size_m: float) -> np.ndarray:
@@ -333,51 +304,19 @@ def correct_edge_bias(corners_px: np.ndarray, edge_bias_px: float) -> np.ndarray
     return c + edge_bias_px * edge_shift_directions(c)
 
 
-def observation_from_corners(marker_id: int, corners_px: np.ndarray,
-                             intrinsics: CameraIntrinsics, *, marker_size_m: float,
-                             mount: CameraMount, noise: CornerNoise | None = None,
-                             ) -> MarkerObservation:
-    """Range, bearing and covariance of a marker from its four detected image corners.
+class _Measured(NamedTuple):
+    """One detection solved: the observation row and its diagnostics."""
 
-    Parameters
-    ----------
-    marker_id : int
-        The marker's id (copied into the observation).
-    corners_px : array_like, shape (4, 2)
-        Corners [px] as detected: top-left, top-right, bottom-right,
-        bottom-left of the marker (the ArUco order), in the distorted image.
-    intrinsics : CameraIntrinsics
-        The camera.
-    marker_size_m : float
-        Side of the marker's black square [m].
-    mount : CameraMount
-        The camera's pose on the robot.
-    noise : CornerNoise, optional
-        Corner error model; its edge offset ``beta_0`` is removed first
-        (default ``CornerNoise()``).
+    range_m: float
+    bearing_rad: float
+    cov: np.ndarray
+    pixel_size: float
+    obliquity_rad: float
 
-    Returns
-    -------
-    MarkerObservation
 
-    Raises
-    ------
-    ImageShapeError
-        If ``corners_px`` is not (4, 2) or not finite.
-    CameraOptionError
-        If ``marker_size_m`` is not a positive length.
-    MarkerPoseError
-        If the pose cannot be solved, is degenerate, or shows the marker's back.
-
-    Examples
-    --------
-    >>> cam = CameraIntrinsics.pinhole(fx_px=500.0)
-    >>> c = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 25.0 + [319.5, 239.5]
-    >>> o = observation_from_corners(0, c, cam, marker_size_m=0.1, mount=CameraMount(z_m=0.0),
-    ...                              noise=CornerNoise(edge_bias_px=0.0, edge_bias_at_20px=0.0))
-    >>> round(o.range_m, 6), round(o.bearing_rad, 6) + 0.0, o.pixel_size
-    (1.1, 0.0, 50.0)
-    """
+def _measure(marker_id: int, corners_px: np.ndarray, intrinsics: CameraIntrinsics, *,
+             marker_size_m: float, mount: CameraMount, noise: CornerNoise | None) -> _Measured:
+    """Range, bearing, covariance (module docstring, eq. 1-3), apparent size and obliquity."""
     noise = CornerNoise() if noise is None else noise
     raw = np.asarray(corners_px, dtype=np.float64)
     if raw.shape != (4, 2) or not np.all(np.isfinite(raw)):
@@ -414,15 +353,108 @@ def observation_from_corners(marker_id: int, corners_px: np.ndarray,
     g = np.array([[p[0] / r, p[1] / r], [-p[1] / q, p[0] / q]]) @ robot_r_cam[:2, :]   # eq. 3
     cov = g @ cov_pose[3:, 3:] @ g.T
     cov = 0.5 * (cov + cov.T)
-    cov.flags.writeable = False
     # The outward normal is -z of the pose frame; the line of sight to the camera is -t.
     into_face = cv2.Rodrigues(rvec)[0][:, 2]
     cos_obl = float(into_face @ tvec[:, 0]) / float(np.linalg.norm(tvec))
     if cos_obl <= 0.0:
         raise MarkerPoseError(f"marker {marker_id}: the corners {raw.tolist()} are in mirror "
                               "order (the marker would be seen from behind)")
-    return MarkerObservation(int(marker_id), r, math.atan2(p[1], p[0]), cov, pixel_size,
-                             math.acos(min(1.0, cos_obl)))
+    return _Measured(r, math.atan2(p[1], p[0]), cov, pixel_size, math.acos(min(1.0, cos_obl)))
+
+
+def observation_from_corners(marker_id: int, corners_px: np.ndarray,
+                             intrinsics: CameraIntrinsics, *, marker_size_m: float,
+                             mount: CameraMount, noise: CornerNoise | None = None,
+                             index: int = 0) -> RangeBearing:
+    """Range, bearing and covariance of a marker from its four detected image corners.
+
+    Parameters
+    ----------
+    marker_id : int
+        The marker's id (the row's landmark id).
+    corners_px : array_like, shape (4, 2)
+        Corners [px] as detected: top-left, top-right, bottom-right,
+        bottom-left of the marker (the ArUco order), in the distorted image.
+    intrinsics : CameraIntrinsics
+        The camera.
+    marker_size_m : float
+        Side of the marker's black square [m].
+    mount : CameraMount
+        The camera's pose on the robot.
+    noise : CornerNoise, optional
+        Corner error model; its edge offset ``beta_0`` is removed first
+        (default ``CornerNoise()``).
+    index : int
+        The row's index: the frame the image belongs to.
+
+    Returns
+    -------
+    RangeBearing
+        One row: ``range_m`` (ground-plane distance from the robot centre to
+        the marker centre [m]), ``bearing_rad`` (``atan2(y, x)`` of the
+        marker centre in the robot frame, in ``(-pi, pi]``) and ``cov``, the
+        covariance of ``(range, bearing)`` (module docstring, eq. 2-3).
+
+    Raises
+    ------
+    ImageShapeError
+        If ``corners_px`` is not (4, 2) or not finite.
+    CameraOptionError
+        If ``marker_size_m`` is not a positive length.
+    MarkerPoseError
+        If the pose cannot be solved, is degenerate, or shows the marker's back.
+
+    Examples
+    --------
+    >>> cam = CameraIntrinsics.pinhole(fx_px=500.0)
+    >>> c = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 25.0 + [319.5, 239.5]
+    >>> o = observation_from_corners(0, c, cam, marker_size_m=0.1, mount=CameraMount(z_m=0.0),
+    ...                              noise=CornerNoise(edge_bias_px=0.0, edge_bias_at_20px=0.0))
+    >>> round(float(o.range_m[0]), 6), round(float(o.bearing_rad[0]), 6) + 0.0, o.cov.shape
+    (1.1, 0.0, (1, 2, 2))
+    """
+    m = _measure(marker_id, corners_px, intrinsics, marker_size_m=marker_size_m, mount=mount,
+                 noise=noise)
+    return RangeBearing(index, [int(marker_id)], [m.range_m], [m.bearing_rad], cov=[m.cov])
+
+
+def detection_diagnostics(corners_px: np.ndarray, intrinsics: CameraIntrinsics, *,
+                          marker_size_m: float, mount: CameraMount,
+                          noise: CornerNoise | None = None) -> tuple[float, float]:
+    """Apparent size and obliquity of a detected marker (module docstring, *Diagnostics*).
+
+    The figures that say how far to trust a detection beyond its covariance,
+    from the same pose solution as :func:`observation_from_corners` (same
+    arguments); not part of the observation.
+
+    Returns
+    -------
+    pixel_size : float
+        Square root of the marker's area in the image [px] (its side when seen
+        head-on); it sets the corner noise (:meth:`CornerNoise.at_size`).
+    obliquity_rad : float
+        Angle between the marker's outward normal and the line of sight to
+        the camera [rad]; 0 when seen head-on. Small markers seen almost
+        head-on may report the mirror pose (IPPE's two-fold ambiguity), which
+        changes this angle but hardly the range and bearing.
+
+    Raises
+    ------
+    ImageShapeError, CameraOptionError, MarkerPoseError
+        As :func:`observation_from_corners`.
+
+    Examples
+    --------
+    >>> cam = CameraIntrinsics.pinhole(fx_px=500.0)
+    >>> c = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 25.0 + [319.5, 239.5]
+    >>> size, obliquity = detection_diagnostics(c, cam, marker_size_m=0.1,
+    ...                                         mount=CameraMount(z_m=0.0))
+    >>> size, obliquity < 1e-6
+    (50.0, True)
+    """
+    m = _measure(-1, corners_px, intrinsics, marker_size_m=marker_size_m, mount=mount,
+                 noise=noise)
+    return m.pixel_size, m.obliquity_rad
 
 
 def _solve_pose(obj: np.ndarray, image_pts: np.ndarray, k: np.ndarray,
@@ -497,8 +529,8 @@ class MarkerDetector:
     Examples
     --------
     >>> det = MarkerDetector(CameraIntrinsics.pinhole(fx_px=500.0), marker_size_m=0.15)
-    >>> det.detect(np.full((480, 640), 128, np.uint8))
-    []
+    >>> len(det.detect(np.full((480, 640), 128, np.uint8)))
+    0
     """
 
     intrinsics: CameraIntrinsics
@@ -573,28 +605,50 @@ class MarkerDetector:
             return none
         return ids.ravel().astype(int), np.asarray(corners, dtype=float).reshape(-1, 4, 2)
 
-    def detect(self, image: np.ndarray) -> list[MarkerObservation]:
-        """Detect markers and turn each into a :class:`MarkerObservation`.
+    def detect(self, image: np.ndarray, *, index: int = 0) -> RangeBearing:
+        """Detect markers: one range-bearing row with its covariance per marker.
 
-        Markers whose pose is degenerate (:class:`MarkerPoseError`) are skipped
-        and logged at debug level. Arguments and errors as in :meth:`detect_corners`.
+        Parameters
+        ----------
+        image : ndarray
+            As in :meth:`detect_corners`.
+        index : int
+            The rows' index: the frame the image belongs to.
+
+        Returns
+        -------
+        RangeBearing
+            The markers in OpenCV's order, ``cov`` set (module docstring,
+            eq. 2-3); ids the map may not hold (a misread code) included
+            (:meth:`fusion.landmarks.MarkerMap.split_known` sorts them out).
+            Markers whose pose is degenerate (:class:`MarkerPoseError`) are
+            skipped and logged at debug level. Their apparent size and
+            obliquity: :func:`detection_diagnostics` on :meth:`detect_corners`.
+
+        Raises
+        ------
+        ImageDtypeError, ImageShapeError
+            For an image of the wrong dtype, layout or size.
         """
         ids, corners = self.detect_corners(image)
-        out = []
-        for marker_id, c in zip(ids, corners, strict=True):
+        rows = []
+        for marker_id, c in zip(ids.tolist(), corners, strict=True):
             try:
-                out.append(observation_from_corners(
-                    int(marker_id), c, self.intrinsics, marker_size_m=self.marker_size_m,
-                    mount=self.mount, noise=self.noise))
+                rows.append((marker_id, _measure(marker_id, c, self.intrinsics,
+                                                 marker_size_m=self.marker_size_m,
+                                                 mount=self.mount, noise=self.noise)))
             except MarkerPoseError as exc:
                 _log.debug("skipping a detection: %s", exc)
-        return out
+        if not rows:
+            return RangeBearing.empty()
+        return RangeBearing(index, [i for i, _ in rows], [m.range_m for _, m in rows],
+                            [m.bearing_rad for _, m in rows], cov=[m.cov for _, m in rows])
 
 
 def detect_markers(image: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray | None,
                    *, marker_size_m: float, mount: CameraMount | None = None,
                    dictionary: str = "DICT_4X4_50",
-                   noise: CornerNoise | None = None) -> list[MarkerObservation]:
+                   noise: CornerNoise | None = None, index: int = 0) -> RangeBearing:
     """Detect markers in one image (builds a :class:`MarkerDetector`; keep one for a stream).
 
     Parameters
@@ -613,10 +667,13 @@ def detect_markers(image: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np
         ``cv2.aruco`` predefined dictionary name.
     noise : CornerNoise, optional
         Corner error model (default ``CornerNoise()``).
+    index : int
+        The rows' index: the frame the image belongs to.
 
     Returns
     -------
-    list of MarkerObservation
+    RangeBearing
+        One row per marker (:meth:`MarkerDetector.detect`).
 
     Raises
     ------
@@ -636,17 +693,18 @@ def detect_markers(image: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np
     intrinsics = CameraIntrinsics(camera_matrix, max(grey.shape[1], 1), max(grey.shape[0], 1),
                                   dist_coeffs=dist_coeffs)
     if grey.size == 0:
-        return []
+        return RangeBearing.empty()
     detector = MarkerDetector(intrinsics, marker_size_m,
                               mount=CameraMount() if mount is None else mount,
                               dictionary=dictionary,
                               noise=CornerNoise() if noise is None else noise)
-    return detector.detect(grey)
+    return detector.detect(grey, index=index)
 
 
 def observations_from_pose(camera: SyntheticCamera, marker_map: MarkerMap,
                            robot_pose: np.ndarray, rng: np.random.Generator, *,
-                           detector: MarkerDetector | None = None) -> list[MarkerObservation]:
+                           detector: MarkerDetector | None = None,
+                           index: int = 0) -> RangeBearing:
     """Render the map from a robot pose and detect its markers (simulation).
 
     Parameters
@@ -664,12 +722,15 @@ def observations_from_pose(camera: SyntheticCamera, marker_map: MarkerMap,
         ``MarkerDetector.for_map(camera.intrinsics, marker_map, mount=camera.mount)``.
         Its intrinsics, mount and marker size are what the estimator believes;
         make them differ from the camera's to simulate calibration errors.
+    index : int
+        The rows' index: the frame the image belongs to.
 
     Returns
     -------
-    list of MarkerObservation
-        May hold ids the map does not have (a misread code); sort them out
-        with :meth:`fusion.landmarks.MarkerMap.split_known`.
+    RangeBearing
+        One row per marker, with its covariance. May hold ids the map does not
+        have (a misread code); sort them out with
+        :meth:`fusion.landmarks.MarkerMap.split_known`.
 
     Examples
     --------
@@ -677,10 +738,11 @@ def observations_from_pose(camera: SyntheticCamera, marker_map: MarkerMap,
     >>> from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
     >>> mm = MarkerMap([MarkerLandmark(3, 2.0, 0.5, z_m=0.2, yaw_rad=math.pi)])
     >>> cam = SyntheticCamera(CameraIntrinsics.pinhole(fx_px=500.0))
-    >>> [o] = observations_from_pose(cam, mm, np.zeros(3), np.random.default_rng(1))
-    >>> o.marker_id, round(o.range_m, 1), round(math.degrees(o.bearing_rad), 1)
-    (3, 2.1, 14.0)
+    >>> [(marker_id, z, cov)] = observations_from_pose(cam, mm, np.zeros(3),
+    ...                                                np.random.default_rng(1), index=7)
+    >>> marker_id, round(float(z[0]), 1), round(math.degrees(z[1]), 1), cov.shape
+    (3, 2.1, 14.0, (2, 2))
     """
     if detector is None:
         detector = MarkerDetector.for_map(camera.intrinsics, marker_map, mount=camera.mount)
-    return detector.detect(camera.render(marker_map, robot_pose, rng))
+    return detector.detect(camera.render(marker_map, robot_pose, rng), index=index)

@@ -37,17 +37,18 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import KW_ONLY, dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, Protocol, TypeVar
+from typing import Any
 
 import cv2
 import numpy as np
 
 from fusion.exceptions import MarkerMapError, UnknownLandmarkError
 from fusion.landmark_map import LandmarkMap
+from fusion.range_bearing import RangeBearing
 
 __all__ = [
     "FILE_FORMAT",
@@ -66,14 +67,6 @@ FILE_VERSION = 1
 _DEFAULT_Z_M = 0.3
 
 
-
-
-class _HasMarkerId(Protocol):
-    @property
-    def marker_id(self) -> int: ...
-
-
-_Obs = TypeVar("_Obs", bound=_HasMarkerId)
 
 
 def dictionary_size(dictionary: str) -> int:
@@ -261,29 +254,34 @@ class MarkerMap:
                 f"marker {marker_id!r} is not in the map (ids {list(self._by_id)[:10]}"
                 f"{' ...' if len(self) > 10 else ''}); add it or drop the observation") from None
 
-    def split_known(self, observations: Iterable[_Obs]) -> tuple[tuple[_Obs, ...], tuple[int, ...]]:
-        """Separate observations of mapped markers from those of unknown ids.
+    def split_known(self, observations: RangeBearing) -> tuple[RangeBearing, tuple[int, ...]]:
+        """Separate sightings of mapped markers from those of unknown ids.
 
         Parameters
         ----------
-        observations : iterable
-            Objects with a ``marker_id`` attribute (e.g.
-            :class:`fusion.landmarks.MarkerObservation`).
+        observations : RangeBearing
+            Detections (:meth:`fusion.landmarks.MarkerDetector.detect`).
 
         Returns
         -------
-        known : tuple
-            The observations whose id is in the map, in input order.
+        known : RangeBearing
+            The rows whose id is in the map, in input order.
         unknown_ids : tuple of int
             The other ids, in order of first appearance, without repeats.
+
+        Examples
+        --------
+        >>> mm = MarkerMap([MarkerLandmark(4, 1.0, 0.0)])
+        >>> known, unknown = mm.split_known(RangeBearing(0, [4, 9, 4, 9], [1.0, 2.0, 1.5, 2.5],
+        ...                                              [0.0, 0.1, 0.2, 0.3]))
+        >>> known.range_m.tolist(), unknown
+        ([1.0, 1.5], (9,))
         """
-        known, unknown = [], {}
-        for obs in observations:
-            if obs.marker_id in self._by_id:
-                known.append(obs)
-            else:
-                unknown.setdefault(int(obs.marker_id), None)
-        return tuple(known), tuple(unknown)
+        ids = observations.landmark_id.tolist()
+        mask = np.array([i in self._by_id for i in ids], dtype=bool)
+        unknown = dict.fromkeys(int(i) for i, ok in zip(ids, mask.tolist(), strict=True)
+                                if not ok)
+        return observations.select(mask), tuple(unknown)
 
     def to_landmark_map(self) -> LandmarkMap:
         """The 2-D map of the EKF and the factor graph: marker id -> centre ``(x, y)`` [m]."""

@@ -9,7 +9,7 @@ import numpy as np
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from fusion.range_bearing import Observations
+from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
@@ -26,7 +26,7 @@ def synthetic_observations(
     rate_hz: float = 2.0,
     noise: LandmarkNoise | None = None,
     max_range_m: float = math.inf,
-) -> Observations:
+) -> RangeBearing:
     """Noisy range-bearing observations of every landmark from a sequence of poses.
 
     For simulation: give it the simulator's *true* poses; the filter then sees
@@ -54,8 +54,10 @@ def synthetic_observations(
 
     Returns
     -------
-    Observations
-        In frame order; frame 0 is never observed (the filter starts there).
+    RangeBearing
+        ``index`` = frame, in frame order (frame 0 is never observed: the
+        filter starts there), without covariances: the estimator's own
+        :class:`LandmarkNoise` applies.
 
     Raises
     ------
@@ -91,5 +93,4 @@ def synthetic_observations(
     frame = np.concatenate(frames) if frames else np.zeros(0, int)
     rb = np.concatenate(values) if values else np.zeros((0, 2))
     order = np.argsort(frame, kind="stable")
-    return Observations(frame=frame[order], landmark_id=tuple(keys[i] for i in order),
-                        range_bearing=rb[order])
+    return RangeBearing(frame[order], [keys[i] for i in order], rb[order, 0], rb[order, 1])

@@ -28,12 +28,13 @@ Alarms go to ``on_alarm`` as they are raised and come back in each
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from fusion.ekf.model_ekf import ModelEKF, UpdateRecord
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.dynamics import DynamicsMonitor
@@ -41,6 +42,7 @@ from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor
 from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -199,8 +201,7 @@ class MonitoredFilter:
         return FrameResult(ekf.t_s, ekf.pose, ekf.speeds, deltas, record, tuple(alarms))
 
     def step(self, ticks: np.ndarray | Sequence[int], cmd_m_s: np.ndarray | Sequence[float], *,
-             valid: bool = True,
-             sightings: Sequence[tuple[Hashable, np.ndarray]] = ()) -> FrameResult:
+             valid: bool = True, sightings: RangeBearing | None = None) -> FrameResult:
         """Take one frame: predict, test, fuse, in the module's order.
 
         Parameters
@@ -211,8 +212,9 @@ class MonitoredFilter:
             Wheel commands ``(left, right)`` [m/s] of the period the frame closes.
         valid : bool
             False for a lost frame: the filter only advances.
-        sightings : sequence of (id, (r [m], b [rad]))
-            Landmarks seen at this frame (used with a landmark map).
+        sightings : RangeBearing, optional
+            Landmarks seen at this frame (used with a landmark map; rows without
+            a covariance take ``landmark_noise``).
 
         Returns
         -------
@@ -238,8 +240,8 @@ class MonitoredFilter:
             alarms += mon.update_commands(t, cmd, deltas)
         if self.scale is not None:
             alarms += mon.update_landmarks(t, deltas, sightings)
-        if self._fuse:
-            for landmark_id, range_bearing in sightings:
-                alarms += mon.update_record(ekf.update_landmark(landmark_id, range_bearing))
+        if self._fuse and sightings is not None:
+            for record in ekf.update_landmarks(sightings):
+                alarms += mon.update_record(record)
         self._last_ticks = now
         return self._result(deltas, record, alarms)

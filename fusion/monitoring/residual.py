@@ -82,7 +82,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -90,7 +90,7 @@ import numpy as np
 from scipy.special import comb
 from scipy.stats import chi2
 
-from fusion.ekf.model_ekf import UpdateRecord
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
     CovarianceNotPositiveDefiniteError,
     FilterOptionError,
@@ -100,6 +100,7 @@ from fusion.exceptions import (
 from fusion.monitoring.cusum import cusum_threshold
 from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
+from fusion.range_bearing import RangeBearing
 from lti_motion.model import MotionModel
 
 __all__ = [
@@ -566,8 +567,7 @@ class ResidualMonitor:
         return t - sensor_t < self.options.refractory_s
 
     def update_landmarks(self, t_s: float, tick_deltas: np.ndarray,
-                         sightings: Sequence[tuple[Hashable, np.ndarray]] = ()
-                         ) -> list[AlarmEvent]:
+                         sightings: RangeBearing | None = None) -> list[AlarmEvent]:
         """Feed the scale test one period: count changes and the frame's landmark sightings.
 
         Parameters
@@ -576,8 +576,9 @@ class ResidualMonitor:
             Time of the frame closing the period [s].
         tick_deltas : array_like, shape (2,)
             Count changes of (left, right) over the period [ticks]; NaN: missing.
-        sightings : sequence of (id, (r [m], b [rad]))
-            Landmarks seen at this frame (:meth:`ScaleMonitor.update`).
+        sightings : RangeBearing, optional
+            Landmarks seen at this frame (:meth:`ScaleMonitor.update`); none if
+            ``None``.
 
         Returns
         -------
@@ -590,7 +591,7 @@ class ResidualMonitor:
             raise FilterOptionError("update_landmarks needs a ScaleMonitor: pass scale=...")
         t = self._check_time(t_s)
         hits = self.scale.update(t, np.asarray(tick_deltas, dtype=float).reshape(1, 2),
-                                 [list(sightings)])
+                                 None if sightings is None else [sightings])
         raised = [AlarmEvent(t, "scale_changed", "scale_glr", a.statistic, a.threshold,
                              a.onset_s, scale=a)
                   for a in hits if not self._sensor_alarm_recent(t)]

@@ -69,7 +69,7 @@ Annals of Mathematical Statistics 42, 1897-1908.
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -81,11 +81,9 @@ from fusion.monitoring.scale_odometry import KV as _KV
 from fusion.monitoring.scale_odometry import KW as _KW
 from fusion.monitoring.scale_odometry import landmark_update, odometry_predict
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
+from fusion.range_bearing import RangeBearing
 
-__all__ = ["RobotObservations", "ScaleAlarm", "ScaleMonitor", "ScaleOptions"]
-
-#: Each robot's landmark sightings of one frame: ``[[(id, (r [m], b [rad])), ...], ...]``.
-RobotObservations = Sequence[Sequence[tuple[Hashable, np.ndarray]]]
+__all__ = ["ScaleAlarm", "ScaleMonitor", "ScaleOptions"]
 
 
 @dataclass(frozen=True)
@@ -204,7 +202,8 @@ class ScaleMonitor:
     pose_std : tuple of 3 float
         Standard deviations of the start poses [m, m, rad].
     landmark_noise : LandmarkNoise, optional
-        The landmark sensor's noise (default 2% of range, 1 degree).
+        The landmark sensor's noise, for sightings without a covariance of their
+        own (default 2% of range, 1 degree).
     options : ScaleOptions, optional
         Test design.
 
@@ -216,8 +215,7 @@ class ScaleMonitor:
         Current log-likelihood ratios ``L`` (eq. 1).
     counts : dict of str to int
         ``"updates"`` (landmark updates fused by the main filters),
-        ``"gated"``, ``"missing"`` (NaN sightings or counts),
-        ``"unknown_landmark"``.
+        ``"gated"``, ``"missing"`` (NaN counts), ``"unknown_landmark"``.
 
     Raises
     ------
@@ -237,8 +235,8 @@ class ScaleMonitor:
     >>> for k in range(1, 1000):
     ...     x_m += (1.0 if k < 400 else 0.96) * 7.5 * 5e-4           # ground travel
     ...     j = 1 + k // 8 % 2
-    ...     seen = [] if k % 8 else [(j, range_bearing(np.array([x_m, 0.0, 0.0]),
-    ...                                                lm.position(j)))]
+    ...     r, b = range_bearing(np.array([x_m, 0.0, 0.0]), lm.position(j))
+    ...     seen = RangeBearing.empty() if k % 8 else RangeBearing(k, [j], [r], [b])
     ...     alarms += mon.update(0.015 * k, np.array([7.5, 7.5]), [seen])
     >>> a = alarms[0]
     >>> a.onset_s, round(a.scale_ratio, 3), a.t_s < 16.0
@@ -341,7 +339,7 @@ class ScaleMonitor:
 
     # -- input -----------------------------------------------------------------------------------
     def update(self, t_s: float, tick_deltas: np.ndarray,
-               observations: RobotObservations | None = None) -> list[ScaleAlarm]:
+               observations: Sequence[RangeBearing] | None = None) -> list[ScaleAlarm]:
         """Feed one period of every robot: encoder counts, then the frame's landmark sightings.
 
         Parameters
@@ -351,10 +349,12 @@ class ScaleMonitor:
         tick_deltas : array_like, shape (n_robots, 2) or (2,)
             Count changes of (left, right) over the period (unwrapped) [ticks];
             NaN: missing (the travel is unknown and the pose uncertainty grows).
-        observations : RobotObservations, optional
-            Each robot's sightings ``(id, (r [m], b [rad]))`` at this frame, one
-            list per robot. NaN readings count as missing, ids not in the map
-            as ``unknown_landmark``.
+        observations : sequence of RangeBearing, optional
+            Each robot's sightings at this frame, one :class:`RangeBearing` per
+            robot (their ``index`` is not read); ids not in the map count as
+            ``unknown_landmark``, rows without a covariance take
+            :attr:`landmark_noise`. The ``k``-th sightings of all robots are
+            fused together.
 
         Returns
         -------
@@ -364,7 +364,7 @@ class ScaleMonitor:
         Raises
         ------
         MeasurementShapeError
-            For tick deltas or observations of the wrong shape.
+            For tick deltas of the wrong shape, or observations not one per robot.
         FusionError
             If ``t_s`` is not finite or earlier than the last one.
         """
@@ -390,35 +390,36 @@ class ScaleMonitor:
             raise MeasurementShapeError(f"expected observations for {n} robots, got "
                                         f"{len(observations)}")
         alarms: list[ScaleAlarm] = []
-        for k in range(max((len(o) for o in observations), default=0)):
-            robots, lxy, zs = [], [], []
-            for i, obs in enumerate(observations):
-                if k >= len(obs):
+        per_robot = [list(obs) for obs in observations]
+        for k in range(max((len(o) for o in per_robot), default=0)):
+            robots, lxy, zs, covs = [], [], [], []
+            for i, rows in enumerate(per_robot):
+                if k >= len(rows):
                     continue
-                landmark_id, rb = obs[k]
-                rb = np.asarray(rb, dtype=float)
-                if rb.shape != (2,):
-                    raise MeasurementShapeError(f"expected an observation (r, b) of shape "
-                                                f"(2,), got {rb.shape}")
+                landmark_id, rb, cov = rows[k]
                 if landmark_id not in self.landmarks:
                     self.counts["unknown_landmark"] += 1
-                elif not np.all(np.isfinite(rb)):
-                    self.counts["missing"] += 1
                 else:
                     robots.append(i)
                     lxy.append(self.landmarks.position(landmark_id))
                     zs.append(rb)
+                    covs.append(cov)
             if robots:
-                alarms += self._test(t, np.array(robots), np.array(lxy), np.array(zs))
+                alarms += self._test(t, np.array(robots), np.array(lxy), np.array(zs), covs)
         return alarms
 
-    def _test(self, t: float, robots: np.ndarray, lxy: np.ndarray, zs: np.ndarray
-              ) -> list[ScaleAlarm]:
-        """Main and shadow updates, eq. 1, alarms."""
+    def _test(self, t: float, robots: np.ndarray, lxy: np.ndarray, zs: np.ndarray,
+              covs: list[np.ndarray | None]) -> list[ScaleAlarm]:
+        """Main and shadow updates, eq. 1, alarms; ``covs`` the sightings' own covariances."""
         n, m, w = self.n_robots, len(robots), self.options.n_shadows
         rows = (np.arange(1 + w)[:, None] * n + robots[None, :]).ravel()
+        cov = None
+        if any(c is not None for c in covs):             # NaN: the sensor's noise
+            cov = np.tile([np.full((2, 2), np.nan) if c is None else c for c in covs],
+                          (1 + w, 1, 1))
         x, P, ok, ll = landmark_update(self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)),
-                                       np.tile(zs, (1 + w, 1)), self.landmark_noise, self._gate)
+                                       np.tile(zs, (1 + w, 1)), self.landmark_noise, self._gate,
+                                       cov=cov)
         self._x[rows], self._P[rows] = x, P
         ok, ll = ok.reshape(1 + w, m), ll.reshape(1 + w, m)
         self.counts["updates"] += int(ok[0].sum())

@@ -24,8 +24,10 @@ the pose and to ``g`` (:func:`lti_motion.kinematics.pose_step_jacobians`)::
          [0,   I                   ]]          [0,                       diag(q_c)]]
 
 Landmark sightings ``(r, b)`` update the pose with the range-bearing model
-(Thrun, Burgard & Fox 2005, table 7.2; :mod:`fusion.landmark_map`), gated on
-the NIS, in Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18).
+(Thrun, Burgard & Fox 2005, table 7.2; :mod:`fusion.range_bearing`), gated on
+the NIS, in Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18), with each
+sighting's own covariance or the sensor's :class:`~fusion.noise.LandmarkNoise`
+at the predicted range.
 
 References
 ----------
@@ -147,7 +149,8 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
 
 
 def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
-                    range_bearing: np.ndarray, noise: LandmarkNoise, gate: float
+                    range_bearing: np.ndarray, noise: LandmarkNoise, gate: float, *,
+                    cov: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Range-bearing updates of every row, gated on the NIS, Joseph form.
 
@@ -160,9 +163,12 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
     range_bearing : ndarray, shape (n, 2)
         Sightings ``(r [m], b [rad])``.
     noise : LandmarkNoise
-        The sensor's noise.
+        The sensor's noise, at each row's predicted range.
     gate : float
         NIS gate: rows with ``nu^T S^-1 nu`` above it are not fused.
+    cov : ndarray, shape (n, 2, 2), optional
+        A sighting's own covariance of ``(r [m], b [rad])`` per row, replacing
+        ``noise``; rows of NaN take ``noise``.
 
     Returns
     -------
@@ -179,6 +185,9 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
     R = np.zeros((len(x), 2, 2))
     R[:, 0, 0] = np.maximum(noise.range_std_m, noise.range_std_frac * pred[:, 0]) ** 2
     R[:, 1, 1] = noise.bearing_std_rad ** 2                       # LandmarkNoise.cov
+    if cov is not None:
+        own = ~np.isnan(cov[:, 0, 0])
+        R[own] = cov[own]
     PHt = P @ H.transpose(0, 2, 1)
     S = H @ PHt + R
     Si = np.linalg.inv(S)

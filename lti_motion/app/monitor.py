@@ -35,6 +35,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
     monitor_route,
@@ -140,7 +141,7 @@ class MonitorRun:
 
 
 def monitor_frames(model: MotionModel,
-                   frames: Iterator[SensorFrame | tuple[SensorFrame, Sequence]], *,
+                   frames: Iterator[SensorFrame | tuple[SensorFrame, RangeBearing]], *,
                    options: MonitorOptions | None = None, nominal: NominalFit | None = None,
                    landmarks: LandmarkMap | None = None,
                    on_alarm: Callable[[AlarmEvent], None] | None = None,
@@ -156,7 +157,8 @@ def monitor_frames(model: MotionModel,
         One robot's frames in order (a driver's, a simulator's); each frame's
         ``cmd_m_s`` is the command of the period it closes. Frames whose
         ``valid`` is false only advance the filter. With ``landmarks``, each
-        item is a pair: the frame and its sightings ``[(id, (r [m], b [rad]))]``.
+        item is a pair: the frame and its sightings (a
+        :class:`~fusion.range_bearing.RangeBearing`).
     options : MonitorOptions, optional
         Monitor settings (default: the model's period and, with ``nominal``,
         its encoder gate; everything else default).
@@ -193,7 +195,7 @@ def monitor_frames(model: MotionModel,
                          fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks))
     for item in frames:
-        frame, seen = item if isinstance(item, tuple) else (item, ())
+        frame, seen = item if isinstance(item, tuple) else (item, None)
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
@@ -299,7 +301,7 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
              f"{floor} floor)" + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
     sensor_rng = np.random.default_rng([seed, 0x5E45])
 
-    def frames() -> Iterator[tuple[SensorFrame, list]]:
+    def frames() -> Iterator[tuple[SensorFrame, RangeBearing | None]]:
         block = max(1, round(1.0 / sim.dt_s))
         n = 0
         for k0 in range(0, len(commands), block):
@@ -313,7 +315,7 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
                 seen = (sightings(full.true_pose, n, sensor_rng, dt_s=sim.dt_s)
-                        if landmarks else [])
+                        if landmarks else None)
                 n += 1
                 # the filter and the monitor get what a robot reports: no truth
                 yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,

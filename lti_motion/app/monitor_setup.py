@@ -19,7 +19,7 @@ import numpy as np
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.phase_one import NominalFit, fit_nominal
 from fusion.noise import LandmarkNoise
-from fusion.range_bearing import range_bearing
+from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.kinematics import wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
 
@@ -58,27 +58,25 @@ def monitor_route(duration_s: float, *, dt_s: float, wheel_base_m: float,
 
 def sightings(true_pose: np.ndarray, k: int, rng: np.random.Generator, *,
               landmarks: LandmarkMap = MONITOR_LANDMARKS, rate_hz: float = 2.0,
-              dt_s: float = 0.015, noise: LandmarkNoise | None = None
-              ) -> list[tuple[int, np.ndarray]]:
+              dt_s: float = 0.015, noise: LandmarkNoise | None = None) -> RangeBearing:
     """The simulated landmark sensor at frame ``k``: each landmark at ``rate_hz``, in turn.
 
-    Reads the true pose (the world's side); returns ``[(id, (r [m], b [rad]))]``
-    with range noise ``max(range_std_m, range_std_frac r)`` and bearing noise
-    ``bearing_std_rad`` (default 2% of range, 1 degree).
+    Reads the true pose (the world's side); returns the frame's sightings (``index`` =
+    ``k``, no covariance) with range noise ``max(range_std_m, range_std_frac r)`` and
+    bearing noise ``bearing_std_rad`` (default 2% of range, 1 degree).
     """
     noise = noise or LandmarkNoise()
     stride = max(1, round(1.0 / (rate_hz * dt_s)))
     ids = landmarks.ids
-    out = []
+    rows = []
     for j, landmark_id in enumerate(ids):
         if (k + j * stride // len(ids)) % stride:
             continue
         r, b = range_bearing(np.asarray(true_pose, float), landmarks.position(landmark_id))
         sr = max(noise.range_std_m, noise.range_std_frac * r)
-        out.append((landmark_id, np.array([r + sr * rng.standard_normal(),
-                                           wrap_angle(b + noise.bearing_std_rad
-                                                      * rng.standard_normal())])))
-    return out
+        rows.append((landmark_id, r + sr * rng.standard_normal(),
+                     wrap_angle(b + noise.bearing_std_rad * rng.standard_normal())))
+    return RangeBearing(k, *zip(*rows, strict=True)) if rows else RangeBearing.empty()
 
 
 def nominal_on_simulator(model: MotionModel, *, preset: str = "create2", n_drives: int = 20,

@@ -74,14 +74,14 @@ from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
-from fusion.range_bearing import range_bearing, range_bearing_residual
+from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_residual
 from lti_motion.app.mrclam import WARMUP_S, evaluate_robot, split_halves
 from lti_motion.app.mrclam_noise import VARIANTS, speed_covariances
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import COVARIANCE_JITTER, MotionModel
 
 __all__ = ["GATE_PROBABILITY", "FilterResult", "MotionNoise", "evaluate_filters",
-           "landmark_noise_from_truth", "main", "output_error_model"]
+           "landmark_noise_from_truth", "main", "output_error_model", "sightings_in"]
 
 log = logging.getLogger(__name__)
 
@@ -141,15 +141,13 @@ def _robust_std(x: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
-def _sightings_in(robot: MrclamRobot, seg: MrclamSegment) -> list[list[tuple[int, np.ndarray]]]:
-    """Sightings per grid step ``k``: those with ``t_(k-1) < t <= t_k``."""
+def sightings_in(robot: MrclamRobot, seg: MrclamSegment) -> RangeBearing:
+    """The robot's sightings in a segment, on grid step ``k`` (their ``index``) for
+    ``t_(k-1) < t <= t_k``; without a covariance (the filters' measured noise applies)."""
     s = robot.sightings
-    per: list[list[tuple[int, np.ndarray]]] = [[] for _ in seg.t_s]
     keep = (s[:, 0] > seg.t_s[0]) & (s[:, 0] <= seg.t_s[-1])
-    for row in s[keep]:
-        k = int(np.searchsorted(seg.t_s, row[0], side="left"))
-        per[k].append((int(row[1]), row[2:4].copy()))
-    return per
+    return RangeBearing(np.searchsorted(seg.t_s, s[keep, 0], side="left"),
+                        s[keep, 1].astype(np.int64), s[keep, 2], s[keep, 3])
 
 
 def landmark_noise_from_truth(robot: MrclamRobot, segments: list[MrclamSegment],
@@ -157,10 +155,9 @@ def landmark_noise_from_truth(robot: MrclamRobot, segments: list[MrclamSegment],
     """Sighting noise measured against Vicon on the given (training) segments."""
     res = []
     for seg in segments:
-        for k, sightings in enumerate(_sightings_in(robot, seg)):
-            for lid, z in sightings:
-                res.append(range_bearing_residual(z, range_bearing(seg.pose[k],
-                                                                   landmarks[lid][:2])))
+        obs = sightings_in(robot, seg)
+        for k, (lid, z, _) in zip(obs.index.tolist(), obs, strict=True):
+            res.append(range_bearing_residual(z, range_bearing(seg.pose[k], landmarks[lid][:2])))
     r = np.array(res)
     return LandmarkNoise(range_std_frac=0.0, range_std_m=_robust_std(r[:, 0]),
                          bearing_std_rad=_robust_std(r[:, 1]))
@@ -275,24 +272,23 @@ def evaluate_filters(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: 
                              history=0)
         raw_ekf = VelocityModelEKF(dt_s=dt_s, speed_cov=speed_cov["raw"],
                                    initial_pose=seg.pose[warmup], pose_std=POSE_STD,
-                                   landmark_noise=noise, gate_probability=GATE_PROBABILITY)
-        sightings = _sightings_in(robot, seg)
+                                   landmarks=lmap, landmark_noise=noise,
+                                   gate_probability=GATE_PROBABILITY, history=0)
+        filters = {"model": model_ekf, "raw": raw_ekf}
+        sightings = sightings_in(robot, seg).by_index()
+        none = RangeBearing.empty()
         for k in range(warmup + 1, len(seg.t_s)):
             model_ekf.predict(u[k - 1])
             raw_ekf.predict(seg.commands_vw[k - 1])
-            for lid, z in sightings[k]:
-                rec = model_ekf.update_landmark(lid, z)
-                if rec.accepted:
-                    nis["model"].append(rec.nis)
-                if raw_ekf.update_landmark(landmarks[lid][:2], z):
-                    nis["raw"].append(float(raw_ekf.y @ raw_ekf.SI @ raw_ekf.y))
-            for name, ekf in (("model", model_ekf), ("raw", raw_ekf)):
+            for name, ekf in filters.items():
+                nis[name] += [rec.nis for rec in ekf.update_landmarks(sightings.get(k, none))
+                              if rec.accepted]
                 e = ekf.x[:2] - seg.pose[k, :2]
                 sq[name].append(float(e @ e))
                 # position NEES (Bar-Shalom et al. 2001, section 5.4.2)
                 nees[name].append(float(e @ np.linalg.solve(ekf.P[:2, :2], e)))
-        gated["raw"] += raw_ekf.gated
-        gated["model"] += model_ekf.stats.count("landmark", "gated")
+        for name, ekf in filters.items():
+            gated[name] += ekf.stats.count("landmark", "gated")
     rms = {name: float(np.sqrt(np.mean(v))) for name, v in sq.items()}
     log.info("robot %d (%s): landmark EKF RMS model %.3f m, raw %.3f m", robot.robot,
              motion_noise, rms["model"], rms["raw"])

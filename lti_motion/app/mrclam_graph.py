@@ -2,7 +2,7 @@
 
 Per robot, on the second half of its run (never used for fitting), two GTSAM
 graphs get the same barcode sightings as range-bearing factors
-(:func:`fusion.graph.factors.range_bearing_factor`) to the surveyed landmarks, with
+(:func:`fusion.graph.factors.range_bearing_factors`) to the surveyed landmarks, with
 the same noise and the same robust kernel, and differ only in their motion
 factors (:func:`fusion.graph.preintegrate`, one between-factor per
 0.1 s grid step):
@@ -55,16 +55,17 @@ from drivers.datasets import (
     load_mrclam,
     resample_robot,
 )
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import Preintegrated, compose_motions, preintegrate
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, smooth_batch
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.app.mrclam import WARMUP_S, split_halves
 from lti_motion.app.mrclam_filters import (
     GATE_PROBABILITY,
     POSE_STD,
     landmark_noise_from_truth,
+    sightings_in,
 )
 from lti_motion.app.mrclam_noise import VARIANTS, predicted_speeds, speed_covariances
 from lti_motion.kinematics import wheel_from_body
@@ -114,17 +115,16 @@ class GraphResult:
     seconds: float
 
 
-def _observations(robot: MrclamRobot, seg: MrclamSegment, warmup: int,
-                  noise: LandmarkNoise) -> RangeBearing:
+def _observations(robot: MrclamRobot, seg: MrclamSegment, warmup: int) -> RangeBearing:
     """Sightings with ``t_(k-1) < t <= t_k`` on keyframe ``k - warmup``, for ``k > warmup``.
 
-    The landmark EKFs fuse the same sightings at the same grid steps.
+    The landmark EKFs fuse the same sightings at the same grid steps
+    (:func:`~lti_motion.app.mrclam_filters.sightings_in`), with the same noise (the
+    graph's ``options.landmark_noise``).
     """
-    s = robot.sightings
-    keep = (s[:, 0] > seg.t_s[warmup]) & (s[:, 0] <= seg.t_s[-1])
-    k = np.searchsorted(seg.t_s, s[keep, 0], side="left")
-    return RangeBearing(k - warmup, s[keep, 1], s[keep, 3], s[keep, 2],
-                        bearing_sigma_rad=noise.bearing_std_rad, range_sigma_m=noise.range_std_m)
+    obs = sightings_in(robot, seg)
+    after = obs.select(obs.index > warmup)
+    return after.with_index(after.index - warmup)
 
 
 def _rms(est: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -136,9 +136,9 @@ def _incremental(pre: Preintegrated, obs: RangeBearing, pose0: np.ndarray,
                  options: SmootherOptions, lmap: LandmarkMap) -> tuple[np.ndarray, np.ndarray]:
     """iSAM2 over one segment, one update per keyframe: (final poses, online poses)."""
     sm = IncrementalSmoother(initial_pose=pose0, options=options, landmarks=lmap)
-    order = np.argsort(obs.pose_index, kind="stable")
+    order = np.argsort(obs.index, kind="stable")
     obs = obs.select(order)
-    bounds = np.searchsorted(obs.pose_index, np.arange(len(pre) + 2))
+    bounds = np.searchsorted(obs.index, np.arange(len(pre) + 2))
     online = np.empty((len(pre) + 1, 3))
     online[0] = pose0
     for k in range(1, len(pre) + 1):
@@ -195,13 +195,13 @@ def evaluate_graph(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: Mo
     covs = speed_covariances(arx, train, warmup=warmup)
     lmap = LandmarkMap({lid: xy[:2] for lid, xy in landmarks.items()})
     options = SmootherOptions(initial_pose_sigmas=POSE_STD, calibrate=False,
-                              landmark_huber_k=huber_k)
+                              landmark_huber_k=huber_k, landmark_noise=noise)
     sq: dict[str, dict[str, list[np.ndarray]]] = {
         kind: {name: [] for name in VARIANTS} for kind in ("batch", "isam2", "online", "dr")}
     n_obs = 0
     for seg in test:
         truth = seg.pose[warmup:]
-        obs = _observations(robot, seg, warmup, noise)
+        obs = _observations(robot, seg, warmup)
         n_obs += len(obs)
         keyframes = np.arange(len(truth))          # one keyframe per grid time
         for name, speeds in predicted_speeds(arx, seg, warmup).items():

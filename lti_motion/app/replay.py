@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion.ekf.model_ekf import ModelEKF
+from fusion.range_bearing import RangeBearing
 from lti_motion.app.replay_sources import (
     ESTIMATORS,
     MRCLAM_LANDMARK_NOISE,
@@ -103,14 +104,14 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
                    landmark_noise=src.landmark_noise, history=0)
     poses = np.empty((len(src), 3))
     poses[0] = ekf.pose
+    sightings = src.sightings.by_index() if landmarks else {}
+    none = RangeBearing.empty()
     for k in range(1, len(src)):
         for _ in range(int(src.periods[k])):
             ekf.predict(src.cmd_m_s[k])
         if encoders and src.valid[k] and k > first:
             ekf.update_encoders(src.ticks[k])
-        if landmarks:
-            for key, rb in src.sightings.get(k, ()):
-                ekf.update_landmark(key, rb)
+        ekf.update_landmarks(sightings.get(k, none))
         poses[k] = ekf.x[:3]
     stats = ekf.stats
     return poses, {"encoders_gated": stats.count("encoders", "gated"),
@@ -298,7 +299,7 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
 
     src = load_source(source_path, model, robot=robot, start_s=start_s, duration_s=duration_s)
     names = list(estimators) if estimators else src.available()
-    n_sight = sum(len(v) for v in src.sightings.values())
+    n_sight = len(src.sightings)
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
              f"{'encoder counts' if src.ticks is not None else 'no encoders'}, "
              f"{n_sight} landmark sightings, "

@@ -18,6 +18,7 @@ from drivers.datasets import MrclamDataset, MrclamRobot, load_mrclam
 from drivers.exceptions import DatasetError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.logfile import load_log
 from lti_motion.model import MotionModel
@@ -49,8 +50,6 @@ ESTIMATORS = {
 MRCLAM_LANDMARK_NOISE = LandmarkNoise(range_std_frac=0.05, range_std_m=0.05,
                                       bearing_std_rad=0.02)
 
-Sightings = dict[int, list[tuple[Hashable, np.ndarray]]]
-
 
 @dataclass(frozen=True)
 class ReplaySource:
@@ -75,8 +74,8 @@ class ReplaySource:
         Raw 16-bit encoder counts; ``None`` for a data set without encoders.
     truth : ndarray, shape (n, 3), or None
         Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
-    sightings : dict of int to list of (id, (range m, bearing rad))
-        Landmark observations by frame index.
+    sightings : RangeBearing
+        Landmark observations, ``index`` = frame index (none: empty).
     landmarks : LandmarkMap or None
         Landmark positions, when the source has sightings.
     landmark_noise : LandmarkNoise or None
@@ -91,7 +90,7 @@ class ReplaySource:
     dt_s: float
     ticks: np.ndarray | None = None
     truth: np.ndarray | None = None
-    sightings: Sightings = field(default_factory=dict)
+    sightings: RangeBearing = field(default_factory=RangeBearing.empty)
     landmarks: LandmarkMap | None = None
     landmark_noise: LandmarkNoise | None = None
 
@@ -176,15 +175,16 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
         raise ValueError(f"{name}: frame {k} has the time of frame {k - 1} (t_s = "
                          f"{log.t_s[k]:.6f} s); replay needs increasing frame times")
     meta = log.meta
-    landmarks = sightings = None
+    landmarks, sightings = None, RangeBearing.empty()
     if meta.get("landmarks") and meta.get("observations"):
         landmarks = LandmarkMap({_key(row[0]): (row[1], row[2]) for row in meta["landmarks"]})
-        sightings = {}
         first = int(keep[0])
-        for frame, key, r, b in meta["observations"]:
-            k = int(frame) - first
-            if 1 <= k < len(keep):
-                sightings.setdefault(k, []).append((_key(key), np.array([r, b], float)))
+        rows = [(int(frame) - first, _key(key), r, b)
+                for frame, key, r, b in meta["observations"]
+                if 1 <= int(frame) - first < len(keep)]
+        if rows:
+            k, ids, r, b = zip(*rows, strict=True)
+            sightings = RangeBearing(list(k), ids, r, b)
     periods = _periods(log.t_s[keep], log.dt_s)
     counted = np.all(np.isfinite(log.ticks[keep]), axis=-1)     # a NaN count: a lost reading
     if not counted.all():
@@ -195,7 +195,7 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
                         dt_s=log.dt_s,
                         ticks=np.where(counted[:, None], log.ticks[keep], 0).astype(np.int64),
                         truth=None if log.true_pose is None else log.true_pose[keep],
-                        sightings=sightings or {}, landmarks=landmarks)
+                        sightings=sightings, landmarks=landmarks)
 
 
 def _key(value: object) -> Hashable:
@@ -254,11 +254,9 @@ def source_from_mrclam(path: str | os.PathLike, *, robot: int, dt_s: float,
     j = np.clip(np.searchsorted(gt[:, 0], t), 1, len(gt) - 1)
     truth[gt[j, 0] - gt[j - 1, 0] > max_gap_s] = np.nan          # inside a Vicon gap
     frame = np.rint((rec.sightings[:, 0] - t[0]) / dt_s).astype(np.int64)
-    sightings: Sightings = {}
-    for k, subject, r, b in zip(frame, rec.sightings[:, 1], rec.sightings[:, 2],
-                                rec.sightings[:, 3], strict=True):
-        if 1 <= k < len(t):
-            sightings.setdefault(int(k), []).append((int(subject), np.array([r, b])))
+    inside = (frame >= 1) & (frame < len(t))
+    sightings = RangeBearing(frame[inside], rec.sightings[inside, 1].astype(np.int64),
+                             rec.sightings[inside, 2], rec.sightings[inside, 3])
     landmarks = LandmarkMap({k: v[:2] for k, v in dataset.landmarks.items()})
     return ReplaySource(name=f"{Path(path).name} robot {robot}", t_s=t,
                         periods=np.concatenate([[0], np.ones(len(t) - 1, np.int64)]),

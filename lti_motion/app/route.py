@@ -9,7 +9,8 @@ true start and the true stop (paper III.D). Thirty seeded runs per estimator.
 An *estimator* here is anything with ``reset(n_robots, pose0)`` and
 ``step(frame, cmd, observations) -> poses (N, 3)``: it sees the frame the robot reports
 (encoder counts, timestamps), the command just executed, and the landmark sensor's noisy
-range-bearing observations, never the simulator's truth.
+range-bearing observations (one :class:`fusion.range_bearing.RangeBearing` per robot,
+``index`` = the period), never the simulator's truth.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from fusion.range_bearing import range_bearing
+from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
@@ -54,10 +55,6 @@ ROUTE_M = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [1.5, 2.7], [0.0, 2.0], 
 #: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
 ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
 
-#: Per-robot landmark observations of one period: ``[(landmark id, (range m, bearing rad))]``.
-Observations = list[list[tuple[int, np.ndarray]]]
-
-
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
 
@@ -65,9 +62,9 @@ class Estimator(Protocol):
         """Start ``n_robots`` estimates at ``pose0`` (N, 3)."""
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         """Take the frame closing the period of ``cmd_m_s`` (N, 2), and the landmark
-        observations of that period if any; return poses (N, 3)."""
+        observations of that period if any (one per robot); return poses (N, 3)."""
 
 
 def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
@@ -94,7 +91,7 @@ class Odometry:
         self._ticks = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         ticks = np.asarray(frame.ticks, np.int64)
         if self._ticks is None:
             self._ticks = ticks
@@ -143,7 +140,7 @@ class SensorLess:
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         m = self.model
         y = self.z @ m.C.T + cmd_m_s @ m.D.T             # predicted (v, w) over the period
         self.z = self.z @ m.A.T + cmd_m_s @ m.B.T
@@ -172,7 +169,7 @@ class ArxHybrid:
         self._ticks = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         m = self.model
         ticks = np.asarray(frame.ticks, np.int64)
         y_hat = self.z @ m.C.T + cmd_m_s @ m.D.T
@@ -203,7 +200,7 @@ class EkfEstimator:
         self.filters: list[ModelEKF] | None = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         ticks = np.asarray(frame.ticks, np.int64)
         if self.filters is None:            # the first frame anchors the encoder counts
             self.filters = [
@@ -216,17 +213,17 @@ class EkfEstimator:
             ekf.predict(cmd_m_s[i])
             ekf.update_encoders(ticks[i])
             if observations is not None and self.landmarks is not None:
-                for landmark_id, rb in observations[i]:
-                    ekf.update_landmark(landmark_id, rb)
+                ekf.update_landmarks(observations[i])
             self.pose[i] = ekf.x[:3]
         return self.pose
 
 
 def _observe(landmarks: LandmarkMap, true_poses: np.ndarray, k: int, *, stride: int,
-             noise: LandmarkNoise, rng: np.random.Generator) -> Observations:
-    """The landmark sensor of period ``k``: each landmark seen once per ``stride`` periods,
-    the landmarks taking turns, with noise (the physical world's side: it reads the truth)."""
-    out: Observations = [[] for _ in true_poses]
+             noise: LandmarkNoise, rng: np.random.Generator) -> list[RangeBearing]:
+    """The landmark sensor of period ``k``, one :class:`RangeBearing` per robot (``index``
+    = ``k``): each landmark seen once per ``stride`` periods, the landmarks taking turns,
+    with noise (the physical world's side: it reads the truth)."""
+    rows: list[list[tuple[int, float, float]]] = [[] for _ in true_poses]
     ids = landmarks.ids
     for j, landmark_id in enumerate(ids):
         if (k + j * stride // len(ids)) % stride:
@@ -235,10 +232,10 @@ def _observe(landmarks: LandmarkMap, true_poses: np.ndarray, k: int, *, stride: 
         for i, pose in enumerate(true_poses):
             r, b = range_bearing(pose, xy)
             sr = max(noise.range_std_m, noise.range_std_frac * r)
-            rb = np.array([r + sr * rng.standard_normal(),
-                           wrap_angle(b + noise.bearing_std_rad * rng.standard_normal())])
-            out[i].append((landmark_id, rb))
-    return out
+            rows[i].append((landmark_id, r + sr * rng.standard_normal(),
+                            wrap_angle(b + noise.bearing_std_rad * rng.standard_normal())))
+    return [RangeBearing(k, *zip(*seen, strict=True)) if seen else RangeBearing.empty()
+            for seen in rows]
 
 
 @dataclass(frozen=True)

@@ -21,16 +21,16 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from lti_motion.app.route import Observations
+from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import ShapeError
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step
@@ -63,12 +63,14 @@ class SmootherEstimator:
         Known landmarks (integer ids); observations of other ids are dropped and counted
         in :attr:`dropped_observations`. Without a map, observations are ignored.
     landmark_noise : LandmarkNoise, optional
-        The range-bearing sensor's noise (the route's default :class:`LandmarkNoise`).
+        The range-bearing sensor's noise (the route's default :class:`LandmarkNoise`);
+        it replaces ``options.landmark_noise`` when given.
     keyframe_s : float
         Longest time between keyframes [s] (0.5 s: 33 periods of 15 ms, as
         ``examples/factor_graph.py``); periods with observations are keyframes as well.
     options : SmootherOptions, optional
-        Graph and iSAM2 settings (:data:`ROUTE_SMOOTHER_OPTIONS`).
+        Graph and iSAM2 settings (:data:`ROUTE_SMOOTHER_OPTIONS`), the sighting noise
+        included.
 
     Raises
     ------
@@ -134,9 +136,10 @@ class SmootherEstimator:
                              f"{keyframe_s}")
         self.model = model
         self.landmarks = landmarks
-        self.landmark_noise = landmark_noise or LandmarkNoise()
         self.keyframe_every = round(keyframe_s / model.dt_s)
         self.options = options or ROUTE_SMOOTHER_OPTIONS
+        if landmark_noise is not None:
+            self.options = replace(self.options, landmark_noise=landmark_noise)
         self.smoothers: list[IncrementalSmoother] | None = None
 
     def reset(self, n_robots: int, pose0: np.ndarray) -> None:
@@ -150,7 +153,7 @@ class SmootherEstimator:
         self._ticks: np.ndarray | None = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
-             observations: Observations | None = None) -> np.ndarray:
+             observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         """Take the frame closing the period of ``cmd_m_s`` (N, 2) [m/s] and the landmark
         observations of that period; return the poses (N, 3).
 
@@ -185,9 +188,10 @@ class SmootherEstimator:
         # 1 - W = R_enc (R + R_enc)^-1 (about 2e-6 for the create2 model)
         self.pose = pose_step(self.pose, self._cal[:, 0] * y[:, 0], self._cal[:, 1] * y[:, 1],
                               m.dt_s)
+        none = RangeBearing.empty()
         for i in range(n):
-            seen = [] if observations is None or self.landmarks is None else observations[i]
-            if seen or self._n - self._kf_sample[i] >= self.keyframe_every:
+            seen = none if observations is None or self.landmarks is None else observations[i]
+            if len(seen) or self._n - self._kf_sample[i] >= self.keyframe_every:
                 self._keyframe(i, seen)
         return self.pose
 
@@ -203,7 +207,7 @@ class SmootherEstimator:
         self.smoothers = [IncrementalSmoother(initial_pose=p, options=self.options,
                                               landmarks=self.landmarks) for p in self.pose]
 
-    def _keyframe(self, i: int, seen: list[tuple[int, np.ndarray]]) -> None:
+    def _keyframe(self, i: int, seen: RangeBearing) -> None:
         """Close robot ``i``'s interval at the current sample: motion, observations, update."""
         start = int(self._kf_sample[i])
         first = len(self._u) - (self._n - start)
@@ -213,15 +217,10 @@ class SmootherEstimator:
                                  y_measured=y, z0=self._z_kf[i])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
-        for landmark_id, rb in seen:
-            if landmark_id not in self.landmarks:
-                self.dropped_observations += 1
-                continue
-            r, b = float(rb[0]), float(rb[1])
-            sr = math.sqrt(self.landmark_noise.cov(r)[0, 0])
-            sm.add_observations(RangeBearing([k], [landmark_id], [b], [r],
-                                             bearing_sigma_rad=self.landmark_noise.bearing_std_rad,
-                                             range_sigma_m=sr))
+        if len(seen):
+            known = np.array([lid in self.landmarks for lid in seen.landmark_id.tolist()])
+            self.dropped_observations += int(np.count_nonzero(~known))
+            sm.add_observations(seen.select(known).with_index(k))
         sm.update()
         self.pose[i] = sm.pose(k)
         if self.options.calibrate:

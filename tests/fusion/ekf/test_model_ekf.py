@@ -14,7 +14,8 @@ from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, Unscen
 from scipy.stats import chi2
 
 from fusion.ekf import functions as ef
-from fusion.ekf.model_ekf import ModelEKF, UpdateRecord
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
     FilterOptionError,
     MeasurementShapeError,
@@ -221,15 +222,15 @@ def test_pose_nees_is_consistent_when_the_world_follows_the_filters_model(model,
             scales = scales + rng.normal(0.0, fm.scales.walk_per_sqrt_s) * math.sqrt(DT)
         truth = np.array(truth)
         obs = synthetic_observations(np.vstack([start, truth]), LANDMARKS, dt_s=DT, rng=rng)
-        by_frame = obs.by_frame()
+        by_frame = obs.by_index()
         ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
                        landmarks=LANDMARKS, gate_probability=None)
         err = []
         for k in range(n_steps):
             ekf.predict(u[k])
             ekf.update_speeds(y[k])
-            for key, rb in by_frame.get(k + 1, ()):
-                ekf.update_landmark(key, rb)
+            if k + 1 in by_frame:
+                ekf.update_landmarks(by_frame[k + 1])
             e = truth[k] - ekf.pose
             e[2] = wrap_angle(e[2])
             err.append(e @ np.linalg.solve(ekf.pose_cov, e))
@@ -251,7 +252,7 @@ def test_subclass_and_stock_filterpy_ekf_on_the_plain_functions_agree_step_by_st
     u, y = _from_the_model(model, rng, 600)
     pose0 = np.array([1.0, 1.0, 0.3])
     truth = integrate_poses(y, DT, initial_pose=pose0)
-    obs = synthetic_observations(truth, LANDMARKS, dt_s=DT, rng=rng, rate_hz=4.0).by_frame()
+    obs = synthetic_observations(truth, LANDMARKS, dt_s=DT, rng=rng, rate_hz=4.0).by_index()
     ours = ModelEKF(model, initial_pose=pose0, landmarks=LANDMARKS, gate_probability=None)
     stock = _Stock(dim_x=fm.n, dim_z=2, dim_u=2)
     stock.fm = fm
@@ -264,7 +265,7 @@ def test_subclass_and_stock_filterpy_ekf_on_the_plain_functions_agree_step_by_st
         ours.update_speeds(y[k])
         stock.update(y[k], ef.encoder_jacobian, ef.encoder_measurement, R=fm.encoder_cov,
                      args=(fm,), hx_args=(fm,))
-        for key, rb in obs.get(k + 1, ()):
+        for key, rb, _ in obs.get(k + 1, ()):
             ours.update_landmark(key, rb)
             lxy = LANDMARKS.position(key)
             r = noise.cov(ef.landmark_measurement(stock.x, lxy)[0])

@@ -13,8 +13,7 @@ import pytest
 
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
-from fusion.graph.factors import RangeBearing
-from fusion.graph.smoother import smooth_log
+from fusion.graph.smoother import SmootherOptions, smooth_log
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import LandmarkNoise
 from lti_motion.metrics import ate
@@ -38,10 +37,9 @@ def runs(load_example):
                                      rng=np.random.default_rng(700 + i), noise=NOISE)
         ekf = ekf_ex.run_filter(model, log, initial_pose=log.true_pose[0], observations=obs,
                                 landmarks=ekf_ex.LANDMARKS, landmark_noise=NOISE)
-        rb = RangeBearing.from_observations(obs, bearing_sigma_rad=NOISE.bearing_std_rad,
-                                            range_sigma_m=NOISE.range_std_m)
-        sm = smooth_log(model, log, initial_pose=log.true_pose[0], observations=rb,
-                        landmarks=ekf_ex.LANDMARKS, mode="filtered")
+        sm = smooth_log(model, log, initial_pose=log.true_pose[0], observations=obs,
+                        landmarks=ekf_ex.LANDMARKS, mode="filtered",
+                        options=SmootherOptions(landmark_noise=NOISE))
         kf = sm.keyframes
         out.append((ate(log.true_pose[kf], ekf.poses[kf]), ate(log.true_pose[kf], sm.poses)))
     return np.array(out)

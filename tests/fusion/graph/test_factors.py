@@ -17,7 +17,6 @@ from fusion.exceptions import (
 )
 from fusion.graph.calibrated_factors import pose2_log, pose2_log_derivative
 from fusion.graph.factors import (
-    RangeBearing,
     calibrated_motion_error,
     calibrated_motion_factor,
     calibrated_motion_group_factor,
@@ -28,7 +27,7 @@ from fusion.graph.factors import (
     observe_landmarks,
     pose_key,
     predict_range_bearing,
-    range_bearing_factor,
+    range_bearing_factors,
 )
 from fusion.graph.preintegration import (
     Preintegrated,
@@ -40,7 +39,8 @@ from fusion.graph.preintegration import (
     speed_error_covariance,
 )
 from fusion.landmark_map import LandmarkMap
-from fusion.range_bearing import Observations
+from fusion.noise import LandmarkNoise
+from fusion.range_bearing import RangeBearing
 from lti_motion.arx import ArxFit
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import integrate_poses
@@ -252,10 +252,10 @@ def test_graph_errors_are_fusion_errors_and_value_errors(error):
 
 def test_bad_range_bearing_input_raises_fusion_errors():
     with pytest.raises(ShapeError, match="expected") as info:
-        RangeBearing([1, 2], [0], [0.0, 0.0], [1.0, 1.0], 0.01, 0.01)
+        RangeBearing([1, 2], [0], [1.0, 1.0], [0.0, 0.0])
     assert isinstance(info.value, FusionError)
-    with pytest.raises(FusionError, match="ranges must be positive"):
-        RangeBearing([1], [0], [0.0], [-1.0], 0.01, 0.01)
+    with pytest.raises(FusionError, match="range_m must be positive"):
+        RangeBearing([1], [0], [-1.0], [0.0])
 
 
 def test_non_finite_speeds_are_refused():
@@ -351,17 +351,59 @@ def test_calibration_walk_grows_with_the_square_root_of_time():
     np.testing.assert_allclose(f.noiseModel().sigmas(), [2e-3, 4e-3])
 
 
+def _pose_and_point_values(pose: gtsam.Pose2, point: np.ndarray, landmark: int = 3
+                           ) -> gtsam.Values:
+    values = gtsam.Values()
+    values.insert(pose_key(0), pose)
+    values.insert(landmark_key(landmark), point)
+    return values
+
+
 def test_range_bearing_model_agrees_with_gtsam():
     pose, point = gtsam.Pose2(1.0, 2.0, 2.5), np.array([-1.0, 0.5])
     b, r = predict_range_bearing(np.array([1.0, 2.0, 2.5]), point)
     assert float(b) == pytest.approx(pose.bearing(point).theta(), abs=1e-12)
     assert float(r) == pytest.approx(pose.range(point), abs=1e-12)
-    f = range_bearing_factor(float(b), float(r), key_pose=pose_key(0), key_landmark=landmark_key(3),
-                             noise=gtsam.noiseModel.Diagonal.Sigmas([0.01, 0.02]))
-    values = gtsam.Values()
-    values.insert(pose_key(0), pose)
-    values.insert(landmark_key(3), point)
-    np.testing.assert_allclose(f.unwhitenedError(values), 0.0, atol=1e-12)
+    [f] = range_bearing_factors(RangeBearing(0, [3], [float(r)], [float(b)]),
+                                landmark_noise=LandmarkNoise())
+    np.testing.assert_allclose(f.unwhitenedError(_pose_and_point_values(pose, point)), 0.0,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("cov", [
+    [[4e-4, 0.0], [0.0, 1e-4]],                 # diagonal
+    [[4e-4, 1.5e-4], [1.5e-4, 1e-4]],           # correlated
+    [[4e-8, 6e-9], [6e-9, 2e-9]],               # correlated and tiny (ArUco-like): kept
+])
+def test_range_bearing_factor_error_is_the_mahalanobis_distance_in_range_bearing_order(cov):
+    """gtsam orders the measurement (bearing, range); the row's covariance is (range, bearing).
+    The factor's error must be 0.5 d^T C^-1 d with d = (r - r_hat, wrap(b - b_hat))."""
+    cov = np.array(cov)
+    pose, point = gtsam.Pose2(0.3, -0.2, 0.4), np.array([2.0, 1.0])
+    b_hat, r_hat = (float(v) for v in predict_range_bearing(np.array([0.3, -0.2, 0.4]), point))
+    d = np.array([0.7, -1.3]) * np.sqrt(np.diag(cov))         # (range, bearing) errors
+    [f] = range_bearing_factors(RangeBearing(0, [3], [r_hat + d[0]], [b_hat + d[1]], cov=[cov]),
+                                landmark_noise=LandmarkNoise())
+    values = _pose_and_point_values(pose, point)
+    assert f.error(values) == pytest.approx(0.5 * d @ np.linalg.solve(cov, d), rel=1e-7)
+    np.testing.assert_allclose(f.noiseModel().covariance(), cov[::-1, ::-1], rtol=1e-12)
+
+
+def test_range_bearing_factors_use_the_sensor_noise_without_a_covariance():
+    """``cov=None``: the LandmarkNoise at the measured range, as ``Diagonal.Sigmas((b, r))``
+    (exactly the sigmas a diagonal model of the noise has), with a Huber kernel on request."""
+    noise = LandmarkNoise(range_std_frac=0.02, range_std_m=0.005, bearing_std_rad=0.01)
+    obs = RangeBearing([1, 2, 2], [4, 5, 4], [3.0, 0.1, 3.0], [0.1, -0.2, 0.3])
+    factors = range_bearing_factors(obs, landmark_noise=noise)
+    assert [gtsam.Symbol(f.keys()[0]).index() for f in factors] == [1, 2, 2]
+    assert [gtsam.Symbol(f.keys()[1]).index() for f in factors] == [4, 5, 4]
+    assert factors[0].noiseModel().sigmas().tolist() == [0.01, 0.06]
+    assert factors[1].noiseModel().sigmas().tolist() == [0.01, 0.005]
+    assert factors[2].noiseModel() is factors[0].noiseModel()          # shared, same cov
+    robust = range_bearing_factors(obs, landmark_noise=noise, huber_k=1.5)
+    assert isinstance(robust[0].noiseModel(), gtsam.noiseModel.Robust)
+    with pytest.raises(LandmarkIdError, match=r"integer id \(gtsam L\(id\)\); got \['door'\]"):
+        range_bearing_factors(RangeBearing(0, ["door"], [1.0], [0.0]), landmark_noise=noise)
 
 
 def test_observed_landmarks_are_in_range_and_in_view(rng):
@@ -369,8 +411,9 @@ def test_observed_landmarks_are_in_range_and_in_view(rng):
     obs = observe_landmarks(np.zeros((3, 3)), lm, rng=rng, bearing_sigma_rad=1e-3,
                             range_sigma_m=1e-3, max_range_m=3.0, field_of_view_rad=np.pi)
     # only landmark 0: 1 too close, 2 behind, 3 too far
-    assert obs.landmark_id.tolist() == [0, 0, 0] and obs.pose_index.tolist() == [0, 1, 2]
+    assert obs.landmark_id.tolist() == [0, 0, 0] and obs.index.tolist() == [0, 1, 2]
     np.testing.assert_allclose(obs.range_m, 1.0, atol=5e-3)
+    np.testing.assert_array_equal(obs.cov, np.broadcast_to(np.diag([1e-6, 1e-6]), (3, 2, 2)))
 
 
 def test_landmark_map_and_observations_check_their_input():
@@ -385,9 +428,9 @@ def test_landmark_map_and_observations_check_their_input():
                           rng=np.random.default_rng(0), bearing_sigma_rad=0.01,
                           range_sigma_m=0.01, max_range_m=3.0)
     with pytest.raises(ValueError, match="positive"):
-        RangeBearing([0], [1], [0.1], [-1.0], 0.01, 0.01)
+        RangeBearing([0], [1], [-1.0], [0.1])
     with pytest.raises(NonFiniteError, match="bearing_rad"):
-        RangeBearing([0], [1], [np.nan], [1.0], 0.01, 0.01)
+        RangeBearing([0], [1], [1.0], [np.nan])
 
 
 def test_preintegrated_slicing_keeps_the_keyframes_consistent(pre):
@@ -478,17 +521,3 @@ def test_group_factor_jacobians_match_numerical_derivatives(group):
         numeric = numericalDerivative11(error_at, x0)
         np.testing.assert_allclose(analytic[:, 3 * m:3 * m + numeric.shape[1]], numeric,
                                    atol=1e-8)
-
-
-def test_range_bearing_converts_to_and_from_the_ekfs_observations():
-    obs = Observations(np.array([2, 2, 5]), (7, 9, 7), np.array([[1.0, 0.1], [2.0, -0.3],
-                                                                 [1.5, 3.0]]))
-    rb = RangeBearing.from_observations(obs, bearing_sigma_rad=0.02, range_sigma_m=0.05)
-    assert rb.pose_index.tolist() == [2, 2, 5] and rb.landmark_id.tolist() == [7, 9, 7]
-    np.testing.assert_array_equal(rb.bearing_rad, [0.1, -0.3, 3.0])
-    back = rb.to_observations()
-    assert back.landmark_id == obs.landmark_id
-    np.testing.assert_array_equal(back.range_bearing, obs.range_bearing)
-    with pytest.raises(LandmarkIdError, match="'door'"):
-        RangeBearing.from_observations(Observations(np.array([1]), ("door",), np.ones((1, 2))),
-                                       bearing_sigma_rad=0.02, range_sigma_m=0.05)

@@ -28,7 +28,6 @@ from fusion.exceptions import (
     LandmarkIdError,
     UnknownPoseError,
 )
-from fusion.graph.factors import RangeBearing
 from fusion.graph.preintegration import (
     Preintegrated,
     compose_motions,
@@ -46,6 +45,7 @@ from fusion.graph.smoother import (
     smoother_ates,
 )
 from fusion.landmark_map import LandmarkMap
+from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.metrics import ate
 
@@ -300,7 +300,7 @@ def test_incremental_api_reads_poses_covariances_and_calibration(straight):
     lm = LandmarkMap({7: (0.1, 1.0)})
     sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm)
     assert sm.add_motion(straight[0]) == 1
-    sm.add_observations(RangeBearing([1], [7], [np.pi / 2], [1.0], 0.01, 0.01))
+    sm.add_observations(RangeBearing([1], [7], [1.0], [np.pi / 2], cov=[np.eye(2) * 1e-4]))
     sm.update()
     assert sm.add_motion(straight[1]) == 2
     np.testing.assert_allclose(sm.pose(2), [0.2, 0.0, 0.0], atol=1e-6)   # flushes pending
@@ -329,10 +329,11 @@ def _scaled_drive(n_intervals: int, *, scale: float):
                                                                 3 * np.sin(angles)]))
     d = lm.xy_m[None, :, :] - truth[:, None, :2]
     bearing = np.arctan2(d[..., 1], d[..., 0]) - truth[:, 2:3]
-    pose_index = np.repeat(np.arange(len(truth)), 8)
-    obs = RangeBearing(pose_index, np.tile(np.arange(8), len(truth)),
+    index = np.repeat(np.arange(len(truth)), 8)
+    obs = RangeBearing(index, np.tile(np.arange(8), len(truth)),
+                       np.hypot(d[..., 0], d[..., 1]).ravel(),
                        np.arctan2(np.sin(bearing), np.cos(bearing)).ravel(),
-                       np.hypot(d[..., 0], d[..., 1]).ravel(), 0.01, 0.01)
+                       cov=np.broadcast_to(np.eye(2) * 1e-4, (len(index), 2, 2)))
     return pre, obs, lm
 
 
@@ -346,7 +347,7 @@ def test_incremental_groups_end_as_the_batch_graph(read_midway):
     for k in range(len(pre) + 1):
         if k > 0:
             sm.add_motion(pre[k - 1])
-        sm.add_observations(obs.select(obs.pose_index == k))
+        sm.add_observations(obs.select(obs.index == k))
         sm.update()
         if read_midway and k in (5, 13):               # partial group factors, replaced later
             sm.result(covariances=False)
@@ -371,7 +372,7 @@ def test_observation_of_a_missing_pose_raises_unknown_pose_error(straight):
     sm = IncrementalSmoother(initial_pose=np.zeros(3))
     sm.add_motion(straight)
     with pytest.raises(UnknownPoseError, match=r"pose 5, but the graph holds poses 0 \.\. 2"):
-        sm.add_observations(RangeBearing([1, 5], [0, 0], [0.0, 0.0], [1.0, 1.0], 0.01, 0.01))
+        sm.add_observations(RangeBearing([1, 5], [0, 0], [1.0, 1.0], [0.0, 0.0]))
     with pytest.raises(UnknownPoseError):
         sm.pose(3)
     assert issubclass(UnknownPoseError, ValueError)

@@ -60,11 +60,11 @@ def test_sightings_correct_a_wrong_start_when_fused(fuse, rng):
     truth = np.zeros((n + 1, 3))
     truth[2:, 0] = 0.2 * DT * np.arange(1, n)                       # one period of delay
     landmarks = LandmarkMap({1: (1.0, 1.0), 2: (1.0, -1.0), 3: (2.0, 0.5)})
-    seen = synthetic_observations(truth, landmarks, dt_s=DT, rng=rng, rate_hz=4.0).by_frame()
+    seen = synthetic_observations(truth, landmarks, dt_s=DT, rng=rng, rate_hz=4.0).by_index()
     mf = MonitoredFilter(_model(), landmarks=landmarks, fuse_landmarks=fuse,
                          initial_pose=(0.1, -0.05, 0.0), pose_std=(0.1, 0.1, 0.05))
     for k in range(n + 1):
-        result = mf.step(ticks[k], np.array([0.2, 0.2]), sightings=seen.get(k, []))
+        result = mf.step(ticks[k], np.array([0.2, 0.2]), sightings=seen.get(k))
     error = np.hypot(*(result.pose[:2] - truth[-1, :2]))
     landmark_updates = mf.ekf.stats.count("landmark", "fused")
     if fuse:

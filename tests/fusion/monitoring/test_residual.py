@@ -15,7 +15,7 @@ from scipy.stats import chi2
 
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import UpdateRecord
+from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import CovarianceNotPositiveDefiniteError, TimeOrderError
 from fusion.monitoring.cusum import cusum_arl, cusum_threshold
 from fusion.monitoring.monitored_filter import MonitoredFilter

@@ -35,7 +35,7 @@ from fusion.monitoring.scale_odometry import (
     range_bearing_batch,
 )
 from fusion.noise import LandmarkNoise, SlipNoise
-from fusion.range_bearing import range_bearing, range_bearing_jacobian
+from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_jacobian
 from lti_motion.app.route import ROUTE_LANDMARKS
 from lti_motion.kinematics import pose_step
 
@@ -145,13 +145,13 @@ def _straight_drive(ratio_after, *, change_k=400, steps=1000, noise_rng=None):
     noise = LandmarkNoise()
     for k in range(1, steps):
         x_m += (1.0 if k < change_k else ratio_after) * 7.5 * 5e-4
-        seen = []
+        seen = RangeBearing.empty()
         if k % 8 == 0:
             j = 1 + k // 8 % 2
             rb = range_bearing(np.array([x_m, 0.0, 0.0]), LANDMARKS.position(j))
             if noise_rng is not None:
                 rb = rb + noise_rng.normal(0.0, 1.0, 2) * [0.02 * rb[0], noise.bearing_std_rad]
-            seen = [(j, rb)]
+            seen = RangeBearing(k, [j], rb[:1], rb[1:])
         found += mon.update(0.015 * k, np.array([7.5, 7.5]), [seen])
     return mon, found
 
@@ -221,18 +221,51 @@ def test_bad_options_and_shapes_raise_clear_errors():
     with pytest.raises(MeasurementShapeError, match=r"tick deltas \(2, 2\)"):
         mon.update(0.015, np.zeros(2))
     with pytest.raises(MeasurementShapeError, match="observations for 2 robots"):
-        mon.update(0.015, np.zeros((2, 2)), [[]])
-    with pytest.raises(MeasurementShapeError, match=r"shape \(2,\)"):
-        mon.update(0.03, np.zeros((2, 2)), [[(1, np.zeros(3))], []])
+        mon.update(0.015, np.zeros((2, 2)), [RangeBearing.empty()])
+    with pytest.raises(MeasurementShapeError, match=r"observations for 2 robots, got 3"):
+        mon.update(0.03, np.zeros((2, 2)), [RangeBearing.empty()] * 3)
     with pytest.raises(FusionError, match="time order"):
         mon.update(0.01, np.zeros((2, 2)))
 
 
 def test_missing_and_unknown_readings_are_counted_not_fused():
     mon = ScaleMonitor(5e-4, WHEEL_BASE_M, LANDMARKS, initial_pose=(0.0, 0.0, 0.0))
-    mon.update(0.015, [np.nan, 3.0], [[(1, [np.nan, 0.1]), (99, [2.0, 0.1])]])
-    assert mon.counts == {"updates": 0, "gated": 0, "missing": 2, "unknown_landmark": 1}
+    mon.update(0.015, [np.nan, 3.0], [RangeBearing(1, [99, 99], [2.0, 2.5], [0.1, 0.2])])
+    assert mon.counts == {"updates": 0, "gated": 0, "missing": 1, "unknown_landmark": 2}
     assert np.all(np.isfinite(mon.pose))
+    with pytest.raises(FusionError, match="non-finite"):     # a NaN sighting is no sighting
+        RangeBearing(1, [1], [np.nan], [0.1])
+
+
+def test_a_sightings_own_covariance_replaces_the_sensor_noise(rng):
+    """Rows with a covariance use it, rows of NaN (no covariance) the sensor's noise at the
+    predicted range; the monitor passes a RangeBearing's covariances on."""
+    n = 4
+    x = np.column_stack([rng.uniform(0, 3, (n, 2)), rng.uniform(-3, 3, n), np.zeros((n, 2))])
+    P = np.tile(np.eye(5) * 1e-3, (n, 1, 1))
+    lxy = np.tile([-1.0, 3.7], (n, 1))
+    noise = LandmarkNoise()
+    pred, _ = range_bearing_batch(x, lxy)
+    z = pred + 0.01
+    own = np.stack([noise.cov(r) for r in pred[:, 0]])
+    cov = own.copy()
+    cov[1] = np.nan
+    cov[2] *= 4.0
+    plain = landmark_update(x, P, lxy, z, noise, 13.8)
+    mixed = landmark_update(x, P, lxy, z, noise, 13.8, cov=cov)
+    for j in (0, 1, 3):
+        np.testing.assert_allclose(mixed[0][j], plain[0][j], rtol=1e-12, atol=1e-15)
+    assert np.abs(mixed[0][2] - x[2]).max() < np.abs(plain[0][2] - x[2]).max()
+    # through the monitor: a huge covariance leaves the pose where odometry put it
+    mons = [ScaleMonitor(5e-4, WHEEL_BASE_M, LANDMARKS, initial_pose=(0.0, 0.0, 0.0))
+            for _ in range(2)]
+    seen = RangeBearing(1, [1], [2.3], [0.5])
+    mons[0].update(0.015, [7.5, 7.5], [seen])
+    mons[1].update(0.015, [7.5, 7.5], [RangeBearing(1, [1], [2.3], [0.5],
+                                                    cov=[np.eye(2) * 1e6])])
+    assert mons[0].counts["updates"] == mons[1].counts["updates"] == 1
+    moved = [np.abs(m.pose[0, :2] - [7.5 * 5e-4, 0.0]).max() for m in mons]
+    assert moved[1] < 1e-6 < moved[0]
 
 
 # -- ResidualMonitor wiring ------------------------------------------------------------------
@@ -243,10 +276,11 @@ def test_residual_monitor_raises_scale_changed_with_the_new_scale(rng):
     x_m = 0.0
     for k in range(1, 1000):
         x_m += (1.0 if k < 400 else 0.96) * 7.5 * 5e-4
-        seen = []
+        seen = None
         if k % 8 == 0:
             j = 1 + k // 8 % 2
-            seen = [(j, range_bearing(np.array([x_m, 0.0, 0.0]), LANDMARKS.position(j)))]
+            r, b = range_bearing(np.array([x_m, 0.0, 0.0]), LANDMARKS.position(j))
+            seen = RangeBearing(k, [j], [r], [b])
         mon.update_landmarks(0.015 * k, [7.5, 7.5], seen)
     assert [e.kind for e in events] == ["scale_changed"]
     e = events[0]

@@ -41,9 +41,11 @@ def test_gate_sits_between_a_start_from_rest_and_a_spike(model):
 def test_simulated_sensor_sees_each_landmark_at_2_hz():
     rng = np.random.default_rng(1)
     seen = [ms.sightings(np.array([0.5, 1.0, 0.3]), k, rng) for k in range(round(2.0 / 0.015))]
-    ids = [lid for frame in seen for lid, _ in frame]
+    assert all(len(frame) == 0 or frame.index.tolist() == [k] * len(frame)
+               for k, frame in enumerate(seen))
+    ids = [lid for frame in seen for lid, _, _ in frame]
     assert sorted(set(ids)) == [1, 2, 3, 4]
     assert all(ids.count(i) in (4, 5) for i in range(1, 5))          # 2 Hz over 2 s
     r = np.hypot(-1.5 - 0.5, -1.0 - 1.0)
-    ranges = [rb[0] for frame in seen for lid, rb in frame if lid == 1]
+    ranges = [rb[0] for frame in seen for lid, rb, _ in frame if lid == 1]
     assert np.allclose(ranges, r, rtol=0.1)

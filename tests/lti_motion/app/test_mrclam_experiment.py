@@ -181,7 +181,8 @@ def test_model_filter_under_the_rule_is_the_textbook_filter_for_a_pass_through_m
         "own": ModelEKF(model, initial_pose=pose0, pose_std=(0.05, 0.05, 0.05),
                         landmarks={7: landmark}, landmark_noise=noise, history=0)}
     raw = VelocityModelEKF(dt_s=0.1, speed_cov=cov, initial_pose=pose0,
-                           pose_std=(0.05, 0.05, 0.05), landmark_noise=noise)
+                           pose_std=(0.05, 0.05, 0.05), landmarks={7: landmark},
+                           landmark_noise=noise)
     fused = 0
     for k in range(40):
         vw = np.array([0.08, 0.3 * np.sin(0.2 * k)])
@@ -190,7 +191,7 @@ def test_model_filter_under_the_rule_is_the_textbook_filter_for_a_pass_through_m
             ekf.predict(wheel_from_body(vw, wheel_base_m=CREATE1_WHEEL_BASE_M))
         if k % 5 == 4:
             z = range_bearing(raw.x, landmark) + rng.normal(0.0, [0.05, 0.005])
-            fused += raw.update_landmark(landmark, z)
+            fused += raw.update_landmark(7, z).accepted
             for ekf in filters.values():
                 ekf.update_landmark(7, z)
     assert fused == 8

@@ -49,8 +49,9 @@ def sim_log_path(model, tmp_path_factory):
     obs = synthetic_observations(log.true_pose, LANDMARKS, dt_s=log.dt_s,
                                  rng=np.random.default_rng(12))
     meta = {"landmarks": [[k, *LANDMARKS.position(k).tolist()] for k in LANDMARKS.ids],
-            "observations": [[int(f), k, float(r), float(b)] for f, k, (r, b)
-                             in zip(obs.frame, obs.landmark_id, obs.range_bearing, strict=True)]}
+            "observations": [[f, k, r, b] for f, k, r, b
+                             in zip(obs.index.tolist(), obs.landmark_id.tolist(),
+                                    obs.range_m.tolist(), obs.bearing_rad.tolist(), strict=True)]}
     return save_log(tmp_path_factory.mktemp("logs") / "drive.npz",
                     dataclasses.replace(log, meta=meta))
 

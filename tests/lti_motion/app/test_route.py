@@ -107,6 +107,7 @@ def test_smoother_with_landmarks_closes_the_route_like_the_ekf(cal):
 
 
 def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
+    from fusion.range_bearing import RangeBearing
     from lti_motion.app.route import ROUTE_LANDMARKS
     from lti_motion.app.route_smoother import SmootherEstimator
     from lti_motion.exceptions import ShapeError
@@ -131,8 +132,8 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
         est.step(frame, np.zeros((3, 2)))
     est.step(frame, np.zeros((2, 2)))                      # anchors the counts
     with pytest.raises(ShapeError, match="2 robots"):
-        est.step(frame, np.zeros((2, 2)), [[]])
-    seen = [[(99, np.array([1.0, 0.0])), (1, np.array([1.41, -2.36]))], []]
+        est.step(frame, np.zeros((2, 2)), [RangeBearing.empty()])
+    seen = [RangeBearing(1, [99, 1], [1.0, 1.41], [0.0, -2.36]), RangeBearing.empty()]
     est.step(frame, np.zeros((2, 2)), seen)
     assert est.dropped_observations == 1
     assert est.smoothers[0].n_poses == 2 and est.smoothers[1].n_poses == 1
