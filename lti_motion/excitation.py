@@ -22,6 +22,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -47,7 +48,7 @@ _log = logging.getLogger(__name__)
 #: one-motor or collinear commands give more than 1e12.
 DEFAULT_MAX_CONDITION = 1e6
 
-_CHANNELS = {"u": ("L", "R"), "y": ("v", "w")}
+_CHANNELS = MappingProxyType({"u": ("L", "R"), "y": ("v", "w")})
 
 
 def _positive(value: float, name: str) -> float:

@@ -16,6 +16,7 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import MappingProxyType
 
 import matplotlib
 
@@ -43,23 +44,23 @@ from lti_motion.calibration import Calibration, CalibrationPlan
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
 #: Paper Table II: mean and standard deviation of the closure offset [m], 30 runs each.
-PAPER_TABLE_II = {
+PAPER_TABLE_II = MappingProxyType({
     "odometry": (0.068, 0.027),
     "fir_sensorless": (0.332, 0.095),
     "arx_sensorless": (0.258, 0.021),
-}
+})
 
 #: Targets of the main-job issue: estimator -> (closure offset mean [m], what it is);
 #: ``None`` means the odometry row's mean, a row name that row's mean (the smoother's
 #: bar is the EKF's, same landmarks and runs: this brief's, not the issue's).
-TARGETS = {
+TARGETS = MappingProxyType({
     "arx_sensorless": (0.10, "at most 0.10 m (the paper's ARMA: 0.258 m)"),
     "ekf": (None, "at most the odometry row's mean"),
     "ekf_landmarks": (0.03, "at most 0.03 m"),
     "smoother_landmarks": ("ekf_landmarks", "at most the EKF with landmarks' mean"),
-}
+})
 
-LABELS = {
+LABELS = MappingProxyType({
     "odometry": "encoder odometry",
     "fir_sensorless": "FIR, sensor-less",
     "arx_sensorless": "ARX, sensor-less",
@@ -67,10 +68,10 @@ LABELS = {
     "ekf": "EKF, model and encoders",
     "ekf_landmarks": "EKF, model, encoders, landmarks",
     "smoother_landmarks": "iSAM2 smoother, landmarks",
-}
+})
 
 #: Estimators that see the landmark sensor (four landmarks, 2 Hz each, 2% / 1 degree).
-USES_LANDMARKS = {"ekf_landmarks", "smoother_landmarks"}
+USES_LANDMARKS = frozenset({"ekf_landmarks", "smoother_landmarks"})
 
 
 def _estimators(cal: Calibration, wheel_base_m: float) -> dict[str, Estimator]:
