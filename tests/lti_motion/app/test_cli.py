@@ -29,6 +29,33 @@ def test_help_and_bad_choices(capsys):
     assert "invalid choice: 'ice'" in capsys.readouterr().err
 
 
+def _options(parser):
+    """Every option of every sub-command: ``(sub-command, flag, action)``."""
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    for name, sub in commands.items():
+        for action in sub._actions:
+            for flag in action.option_strings:
+                yield name, flag, action
+
+
+def test_preset_and_floor_choices_are_the_simulators():
+    from drivers.sim.config import FLOORS, PRESETS
+
+    seen = set()
+    for command, flag, action in _options(build_parser()):
+        if flag in ("--sim", "--preset"):
+            assert list(action.choices) == list(PRESETS), (command, flag)
+            seen.add((command, flag))
+        elif flag == "--floor" and action.choices is not None:
+            assert list(action.choices) == list(FLOORS), (command, flag)
+            seen.add((command, flag))
+        elif flag == "--floor":                                  # a robot's floor: any name
+            assert all(f in action.help for f in FLOORS), (command, flag)
+    assert seen == {("demo", "--preset"), ("demo", "--floor"), ("calibrate", "--sim"),
+                    ("monitor", "--sim"), ("monitor", "--floor"),
+                    ("virtual-roomba", "--preset"), ("virtual-roomba", "--floor")}
+
+
 def test_calibrate_on_a_missing_port_names_it(capsys):
     assert main(["calibrate", "--port", "/dev/does-not-exist", "--yes"]) == 2
     assert "/dev/does-not-exist" in capsys.readouterr().err
