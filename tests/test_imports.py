@@ -51,7 +51,8 @@ def loaded_after(code: str, watched: tuple[str, ...]) -> list[str]:
     probe = (f"{code}\nimport json, sys\n"
              f"print(json.dumps([m for m in {list(watched)!r} if m in sys.modules]))")
     out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True,
-                         text=True, check=True, timeout=120)
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -86,3 +87,24 @@ except SystemExit:
                          ids=" ".join)
 def test_cli_help_loads_no_numerical_machinery(argv):
     assert loaded_after(HELP.format(argv=argv), ("scipy", *HEAVY)) == []
+
+
+NO_BACKEND = """
+import importlib.util, sys
+import matplotlib
+
+switched = []
+matplotlib.use = lambda *args, **kwargs: switched.append(args)
+import lti_motion.app.demo, lti_motion.app.plots, lti_motion.app.replay_plots
+for name in ("ekf_plugin", "aruco_end_to_end", "factor_graph", "calibrate_sim"):
+    spec = importlib.util.spec_from_file_location(name, f"examples/{name}.py")
+    sys.modules[name] = module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+assert not switched, switched
+"""
+
+
+def test_plots_and_examples_choose_no_backend_at_import():
+    """The application's plots and the examples draw with matplotlib's object-oriented
+    API: importing them neither calls ``matplotlib.use`` nor loads pyplot."""
+    assert loaded_after(NO_BACKEND, ("matplotlib.pyplot",)) == []

@@ -18,11 +18,8 @@ from collections.abc import Callable
 from pathlib import Path
 from types import MappingProxyType
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
 from drivers.sim.config import get_preset
@@ -90,7 +87,8 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
     names = list(results)
     ncols = min(4, len(names))
     nrows = -(-len(names) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4 * ncols, 4 * nrows), squeeze=False)
+    fig = Figure(figsize=(4 * ncols, 4 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax in axes.flat[len(names):]:
         ax.set_axis_off()
     for ax, name in zip(axes.flat, names, strict=False):
@@ -105,11 +103,11 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
     fig.suptitle("The closed route, run 1: true path and the estimate it steered on")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
-    fig, axes = plt.subplots(1, 2, figsize=(12, 6.5))
+    fig = Figure(figsize=(12, 6.5))
+    axes = fig.subplots(1, 2)
     for ax, zoom_cm in zip(axes, (None, 8.0), strict=True):
         for i, (name, res) in enumerate(results.items()):
             end = res.true_poses[:, -1, :2] - ROUTE_M[0]
@@ -129,7 +127,6 @@ def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
                  "runs each)")
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _table(metrics: dict) -> str:
