@@ -1,4 +1,4 @@
-"""Plots of a calibration: step responses, order selection, the calibration sequence, validation.
+"""Plots of a calibration: step responses, order selection, the calibration sequence.
 
 Application layer (matplotlib): used by ``lti-motion calibrate`` and ``lti-motion demo``.
 Figures are drawn with matplotlib's object-oriented API (:class:`~matplotlib.figure.Figure`
@@ -21,7 +21,6 @@ __all__ = [
     "plot_order_selection",
     "plot_sequence",
     "plot_step_responses",
-    "plot_validation",
 ]
 
 
@@ -84,27 +83,6 @@ def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> Non
     axes[2].plot(t, y[:n, 1], lw=0.8)
     axes[2].set(ylabel="w [rad/s]", xlabel="time [s]")
     axes[0].set_title("Calibration sequence: random held normal commands, encoder speeds")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-
-
-def plot_validation(cal: Calibration, u: np.ndarray, y: np.ndarray, path: Path,
-                    *, seconds: float = 20.0) -> None:
-    """Encoder speeds of a fresh drive against the models' free-run (sensor-less) output."""
-    n = min(len(u), round(seconds / cal.arx.dt_s))
-    t = np.arange(n) * cal.arx.dt_s
-    fits = {name: m.fit_percent([(u, y)]) for name, m in (("ARX", cal.arx), ("FIR", cal.fir))}
-    fig = Figure(figsize=(10, 5))
-    axes = fig.subplots(2, 1, sharex=True)
-    for k, label in ((0, "v [m/s]"), (1, "w [rad/s]")):
-        axes[k].plot(t, y[:n, k], color="0.6", lw=0.8, label="encoders")
-        for name, model in (("ARX", cal.arx), ("FIR", cal.fir)):
-            axes[k].plot(t, model.simulate(u)[:n, k], lw=1.2,
-                         label=f"{name} free run, fit {fits[name][k]:.1f}%")
-        axes[k].set(ylabel=label)
-        axes[k].legend(fontsize=8, loc="upper right")
-    axes[1].set(xlabel="time [s]")
-    axes[0].set_title("Validation drive never used for fitting")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
