@@ -19,6 +19,27 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("lti_motion", "fusion", "drivers")
 
 
+def _raised_class(exc: ast.expr) -> str:
+    """The class a raise expression names: ``X``, ``X(...)``, ``mod.X(...)``, or a
+    constructor classmethod's class, ``X.needed_by(...)``."""
+    while True:
+        if isinstance(exc, ast.Call):
+            exc = exc.func
+        elif isinstance(exc, ast.Attribute) and not exc.attr[:1].isupper():
+            exc = exc.value                                   # X.classmethod
+        else:
+            break
+    if isinstance(exc, ast.Attribute):
+        return exc.attr
+    return exc.id if isinstance(exc, ast.Name) else ""
+
+
+def test_a_raise_names_its_class():
+    for code in ("raise X", "raise X('m')", "raise mod.X('m')", "raise X.needed_by('m')",
+                 "raise pkg.mod.X.needed_by('m') from None"):
+        assert _raised_class(ast.parse(code).body[0].exc) == "X", code
+
+
 @functools.cache
 def raised_names() -> frozenset[str]:
     """The class names every ``raise X`` / ``raise X(...)`` / ``raise mod.X(...)`` names."""
@@ -27,11 +48,7 @@ def raised_names() -> frozenset[str]:
         for path in (ROOT / package).rglob("*.py"):
             for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
                 if isinstance(node, ast.Raise) and node.exc is not None:
-                    exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
-                    if isinstance(exc, ast.Name):
-                        names.add(exc.id)
-                    elif isinstance(exc, ast.Attribute):
-                        names.add(exc.attr)
+                    names.add(_raised_class(node.exc))
     return frozenset(names)
 
 

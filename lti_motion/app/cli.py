@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from drivers.sim.config import FLOORS, PRESETS
+from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
 
@@ -325,9 +326,23 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
+    except MissingEncoderScaleError:
+        print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)
+        return 2
     except (ValueError, OSError) as exc:
         print(f"lti-motion {args.command}: error: {exc}", file=sys.stderr)
         return 2
+
+
+def _no_encoder_scale(args: argparse.Namespace) -> str:
+    """What a command-line user can do about a model without an encoder scale."""
+    model = getattr(args, "model", None)
+    what = f"the model {model}" if model else "the model"
+    sim = ("; or leave out --model: --sim then calibrates the simulated robot first"
+           if getattr(args, "sim", None) else "")
+    return (f"{what} has no encoder scale, which turns encoder counts into distances; "
+            "calibrate the robot with 'lti-motion calibrate' (its rotation in place measures "
+            f"the scale) and give the model_arx.json it writes with --model{sim}")
 
 
 if __name__ == "__main__":

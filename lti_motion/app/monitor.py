@@ -51,6 +51,7 @@ from lti_motion.app.monitor_setup import (
     nominal_on_simulator,
     sightings,
 )
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import SensorFrame
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -191,12 +192,11 @@ def monitor_frames(model: MotionModel,
 
     Raises
     ------
-    ValueError
+    MissingEncoderScaleError
         If the model has no encoder scale.
     """
     if model.m_per_tick is None:
-        raise ValueError("the model has no encoder scale (m_per_tick); the monitor needs "
-                         "one: calibrate with the rotation manoeuvre")
+        raise MissingEncoderScaleError.needed_by("the monitor")
     run = MonitorRun()
     if options is None:
         options = (nominal.options(model.dt_s) if nominal is not None

@@ -188,6 +188,29 @@ def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model
     assert message in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("argv", [
+    ["replay", "{log}", "--model", "{model}", "--estimators", "odometry"],
+    ["monitor", "--sim", "create2", "--model", "{model}", "--duration", "1",
+     "--nominal-drives", "0"],
+], ids=lambda argv: argv[0])
+def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, model_file,
+                                                                          tmp_path, capsys):
+    from drivers.sim.simulator import Simulator
+    from lti_motion.logfile import save_log
+    from lti_motion.model import MotionModel
+
+    unscaled = MotionModel.load(model_file).updated(m_per_tick=None).save(
+        tmp_path / "unscaled.json")
+    log = save_log(tmp_path / "short.npz", Simulator("create2", seed=0).run(np.full((50, 2), 0.1)))
+    argv = [a.format(model=unscaled, log=log) for a in argv]
+    assert main([*argv, "--out", str(tmp_path / "out")] if argv[0] == "replay" else argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"lti-motion {argv[0]}: error: the model ")
+    assert "has no encoder scale" in err and "'lti-motion calibrate'" in err and "--model" in err
+    for internal in ("Error", "m_per_tick", "FilterModel", "lti_motion.", "Traceback"):
+        assert internal not in err, internal
+
+
 def test_replay_mrclam_robot_that_does_not_exist(mrclam_path, model_file, capsys):
     assert main(["replay", str(mrclam_path), "--robot", "7", "--fit-first-half"]) == 2
     assert "there is no robot 7" in capsys.readouterr().err
