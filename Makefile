@@ -9,7 +9,6 @@ DATA_DIR := $(abspath ../shared/data)
 ifneq ($(wildcard $(DATA_DIR)/.),)
 export LTI_MOTION_DATA ?= $(DATA_DIR)
 endif
-export MPLBACKEND ?= Agg
 
 .PHONY: demo test bench lint venv clean
 

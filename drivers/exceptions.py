@@ -1,12 +1,17 @@
 """Exceptions of the drivers package.
 
 Each subclasses the matching builtin so callers may catch either.
+
+A stream frame whose checksum fails is not an error: the stream parser drops it,
+resynchronises and counts it (:attr:`drivers.roomba.oi.StreamParser.checksum_failures`,
+``Roomba.counters``), since a few corrupt frames are normal on a serial link (spec G10).
+The Sensors (142) and Query List (149) replies carry no checksum (spec §4); a reply of
+the wrong length raises :class:`ProtocolError`.
 """
 
 from __future__ import annotations
 
 __all__ = [
-    "ChecksumError",
     "DatasetError",
     "PassiveModeError",
     "PortError",
@@ -24,10 +29,6 @@ class SimulatorError(ValueError):
 
 class ProtocolError(ValueError):
     """Bytes or values that break the Roomba Open Interface protocol."""
-
-
-class ChecksumError(ProtocolError):
-    """A stream frame whose bytes do not sum to zero modulo 256."""
 
 
 class PortError(OSError):

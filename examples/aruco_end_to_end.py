@@ -44,11 +44,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
@@ -334,7 +331,8 @@ def plot_run(path: Path, run: EndToEndRun, marker_map: MarkerMap) -> Path:
     """Paths of truth, EKF and smoother, and their position errors, as a PNG."""
     truth, dt = run.log.true_pose, run.log.dt_s
     kf = run.smoother.keyframes
-    fig, (ax, ax_err) = plt.subplots(1, 2, figsize=(12, 5.5))
+    fig = Figure(figsize=(12, 5.5))     # no pyplot: no GUI backend, no global state
+    ax, ax_err = fig.subplots(1, 2)
     ax.plot(truth[:, 0], truth[:, 1], "k-", lw=1.0, label="truth")
     ax.plot(run.ekf.poses[:, 0], run.ekf.poses[:, 1], "C0-", lw=0.7, label="EKF")
     ax.plot(run.smoother.poses[:, 0], run.smoother.poses[:, 1], "C1-", lw=0.7, label="smoother")
@@ -352,7 +350,6 @@ def plot_run(path: Path, run: EndToEndRun, marker_map: MarkerMap) -> Path:
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

@@ -29,11 +29,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room
@@ -247,7 +244,8 @@ def run_filter(model: MotionModel, log: FrameLog, *, initial_pose: Sequence[floa
 def plot_run(path: Path, *, truth: np.ndarray, odometry: np.ndarray, run: FilterRun,
              dt_s: float, landmarks: LandmarkMap | None = None) -> Path:
     """Trajectories and position errors of truth, odometry and filter, as a PNG."""
-    fig, (ax, ax_err) = plt.subplots(1, 2, figsize=(12, 5.5))
+    fig = Figure(figsize=(12, 5.5))     # no pyplot: no GUI backend, no global state
+    ax, ax_err = fig.subplots(1, 2)
     ax.plot(truth[:, 0], truth[:, 1], "k-", lw=1.0, label="truth")
     ax.plot(odometry[:, 0], odometry[:, 1], "C3-", lw=0.8, label="encoders only")
     ax.plot(run.poses[:, 0], run.poses[:, 1], "C0-", lw=0.8, label="EKF")
@@ -267,7 +265,6 @@ def plot_run(path: Path, *, truth: np.ndarray, odometry: np.ndarray, run: Filter
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
 
 

@@ -2,7 +2,9 @@
 
 Each subclasses the matching builtin (and, where one exists, the core
 package's class), so callers may catch the specific class, the core class or
-plain ``ValueError``.
+plain ``ValueError``. A model without an encoder scale raises the core's own
+:class:`lti_motion.exceptions.MissingEncoderScaleError` here too: the model is the
+core's, and one class serves every layer.
 
 Examples
 --------

@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from fusion.exceptions import FilterOptionError
 
@@ -150,6 +149,9 @@ def gate_threshold(probability: float, dof: int) -> float:
     """
     if not 0.0 < probability < 1.0:
         raise FilterOptionError(f"gate probability must be in (0, 1), got {probability}")
+    # imported here: scipy.stats costs 1 s to import, and the rest of the base never needs it
+    from scipy.stats import chi2
+
     return float(chi2.ppf(probability, dof))
 
 

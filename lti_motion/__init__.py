@@ -3,13 +3,17 @@
 The core: sensor frames and logs, encoder odometry, kinematics (paper eq. 11), the
 encoder scale from a rotation (eq. 13), FIR and ARX identification, one state-space
 :class:`MotionModel`, calibration by driving, and trajectory metrics.
+
+Importing the package loads none of its modules: each name below loads with its
+module the first time it is used (:mod:`lti_motion.lazy`), so a program pays only
+for what it uses.
 """
 
-from lti_motion.calibration import Calibration, CalibrationPlan, calibrate, drive
-from lti_motion.frames import FrameLog, SensorFrame
-from lti_motion.kinematics import integrate_poses, pose_step, wrap_angle
-from lti_motion.metrics import ate, fit_percent, rpe
-from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from lti_motion.lazy import lazy_exports
 
 __all__ = [
     "Calibration",
@@ -28,3 +32,18 @@ __all__ = [
     "rpe",
     "wrap_angle",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "lti_motion.calibration": ("Calibration", "CalibrationPlan", "calibrate", "drive"),
+    "lti_motion.frames": ("FrameLog", "SensorFrame"),
+    "lti_motion.kinematics": ("integrate_poses", "pose_step", "wrap_angle"),
+    "lti_motion.metrics": ("ate", "fit_percent", "rpe"),
+    "lti_motion.model": ("MotionModel", "fit_arx", "fit_fir_from_steps"),
+}, __all__)
+
+if TYPE_CHECKING:
+    from lti_motion.calibration import Calibration, CalibrationPlan, calibrate, drive
+    from lti_motion.frames import FrameLog, SensorFrame
+    from lti_motion.kinematics import integrate_poses, pose_step, wrap_angle
+    from lti_motion.metrics import ate, fit_percent, rpe
+    from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps

@@ -11,6 +11,7 @@ __all__ = [
     "CalibrationNonFiniteError",
     "CalibrationShapeError",
     "LogFileError",
+    "MissingEncoderScaleError",
     "ModelFileError",
     "NoSignalError",
     "NonFiniteError",
@@ -64,3 +65,30 @@ class CalibrationNonFiniteError(NonFiniteError, CalibrationError):
 
 class LogFileError(ModelFileError):
     """A log file that is damaged, of another format, or of an unknown version."""
+
+
+class MissingEncoderScaleError(ValueError):
+    """A model without an encoder scale (``m_per_tick`` is None) where counts must become
+    distances: odometry, the encoder update of a filter, the monitor, the smoother.
+
+    Every place that needs the scale raises this one class, with a message that says what
+    needed it and what to do: calibrate with the rotation in place
+    (:func:`lti_motion.calibration.calibrate` measures ``m_per_tick``, paper eq. 13), or
+    pass ``m_per_tick=`` where the function takes it. Build it with :meth:`needed_by`.
+
+    Examples
+    --------
+    >>> raise MissingEncoderScaleError.needed_by("the monitor")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    lti_motion.exceptions.MissingEncoderScaleError: the monitor needs the encoder scale and ...
+    """
+
+    @classmethod
+    def needed_by(cls, what: str, *, keyword: str | None = None) -> MissingEncoderScaleError:
+        """The error for ``what`` needing the scale; ``keyword`` names where a user can give
+        it instead of calibrating (e.g. ``"ModelEKF(m_per_tick=...)"``)."""
+        give = f"pass {keyword}, or " if keyword else ""
+        return cls(f"{what} needs the encoder scale and has none (m_per_tick is None): "
+                   f"{give}calibrate the model with the rotation in place "
+                   "(lti_motion.calibration.calibrate measures m_per_tick, paper eq. 13)")

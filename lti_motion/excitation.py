@@ -22,10 +22,10 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from scipy.signal import lfilter
 
 from lti_motion.exceptions import NonFiniteError, NotExcitedError, ShapeError
 
@@ -47,7 +47,7 @@ _log = logging.getLogger(__name__)
 #: one-motor or collinear commands give more than 1e12.
 DEFAULT_MAX_CONDITION = 1e6
 
-_CHANNELS = {"u": ("L", "R"), "y": ("v", "w")}
+_CHANNELS = MappingProxyType({"u": ("L", "R"), "y": ("v", "w")})
 
 
 def _positive(value: float, name: str) -> float:
@@ -236,6 +236,9 @@ def random_held_normal(
         lengths = rng.integers(lo_n, hi_n + 1, size=n_holds)
         values = rng.normal(0.0, std, size=n_holds)
         if correlation > 0.0:
+            # imported here: scipy.signal costs 0.7 s to import, and only this filter needs it
+            from scipy.signal import lfilter
+
             # stationary AR(1) over the held values (started in its stationary law)
             values[1:] *= math.sqrt(1.0 - correlation**2)
             values = lfilter([1.0], [1.0, -correlation], values)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
+from types import MappingProxyType
 
 import numpy as np
 
@@ -78,7 +79,7 @@ class SensorFrame:
     true_body_m_s: np.ndarray | None = None
 
 
-_PER_SAMPLE = {
+_PER_SAMPLE = MappingProxyType({
     "t_s": (),
     "ticks": (2,),
     "light_bump": (N_LIGHT_BUMPS,),
@@ -87,7 +88,7 @@ _PER_SAMPLE = {
     "valid": (),
     "true_pose": (3,),
     "true_body_m_s": (2,),
-}
+})
 
 
 @dataclass(frozen=True)

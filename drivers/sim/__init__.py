@@ -5,11 +5,16 @@
 - :mod:`drivers.sim.kernel`: the compiled inner loop;
 - :mod:`drivers.sim.calibration`: the simulated robot calibrated as a user calibrates
   a real one.
+
+The names below load with their module on first use (:mod:`lti_motion.lazy`):
+``drivers.sim.config`` (numpy only) does not load numba or the calibration.
 """
 
-from drivers.sim.calibration import calibrate_simulator
-from drivers.sim.config import FLOORS, PRESETS, Fault, FloorMap, RobotParams, Room, get_preset
-from drivers.sim.simulator import Simulator, ground_m_per_tick
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from lti_motion.lazy import lazy_exports
 
 __all__ = [
     "FLOORS",
@@ -23,3 +28,15 @@ __all__ = [
     "get_preset",
     "ground_m_per_tick",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "drivers.sim.calibration": ("calibrate_simulator",),
+    "drivers.sim.config": ("FLOORS", "PRESETS", "Fault", "FloorMap", "RobotParams", "Room",
+                           "get_preset"),
+    "drivers.sim.simulator": ("Simulator", "ground_m_per_tick"),
+}, __all__)
+
+if TYPE_CHECKING:
+    from drivers.sim.calibration import calibrate_simulator
+    from drivers.sim.config import FLOORS, PRESETS, Fault, FloorMap, RobotParams, Room, get_preset
+    from drivers.sim.simulator import Simulator, ground_m_per_tick

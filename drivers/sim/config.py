@@ -16,7 +16,9 @@ Fig. 6).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -70,7 +72,8 @@ class Floor:
     scrub: float
 
 
-FLOORS: dict[str, Floor] = {
+#: The floors by name (read-only).
+FLOORS: Mapping[str, Floor] = MappingProxyType({
     f.name: f
     for f in (
         Floor("hard", friction=0.9, slip_ratio=0.08, rolling_resistance=0.015,
@@ -80,7 +83,7 @@ FLOORS: dict[str, Floor] = {
         Floor("carpet", friction=0.8, slip_ratio=0.15, rolling_resistance=0.05,
               compression=0.03, roughness_n=0.3, scrub=0.012),
     )
-}
+})
 
 
 def get_floor(name: str) -> Floor:
@@ -346,7 +349,8 @@ class RobotParams:
         return dataclasses.replace(self, **changes)
 
 
-PRESETS: dict[str, RobotParams] = {
+#: The robot presets by name (read-only: :func:`get_preset` with overrides makes a variant).
+PRESETS: Mapping[str, RobotParams] = MappingProxyType({
     "create2": RobotParams(),
     "paper": RobotParams(
         name="paper",
@@ -358,7 +362,7 @@ PRESETS: dict[str, RobotParams] = {
         delay_periods=4.5,
         settling_time_s=0.27,      # 15 samples of 18 ms
     ),
-}
+})
 
 
 def get_preset(name: str, **overrides: object) -> RobotParams:

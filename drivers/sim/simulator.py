@@ -42,11 +42,7 @@ __all__ = ["Simulator", "ground_m_per_tick"]
 
 log = logging.getLogger(__name__)
 
-_FLOOR_NAMES = list(FLOORS)
-_FLOOR_TABLE = np.array(
-    [[f.friction, f.slip_ratio, f.rolling_resistance, f.compression, f.roughness_n, f.scrub]
-     for f in FLOORS.values()]
-)
+_FLOOR_NAMES = tuple(FLOORS)
 _BLOCK = 1024           # periods per block of pre-drawn noise
 _N_EVENT = 6            # per-period event draws: spike L/R, spike size L/R, lost, latency
 
@@ -203,6 +199,10 @@ class Simulator:
             dtype=float,
         ).reshape(-1, 5)
         self._walls = np.ascontiguousarray(self.room.segments)
+        # the kernel's floor table, one row per floor of _FLOOR_NAMES
+        self._floors = np.array(
+            [[f.friction, f.slip_ratio, f.rolling_resistance, f.compression, f.roughness_n,
+              f.scrub] for f in FLOORS.values()])
         pose0 = np.broadcast_to(
             np.asarray((2.5, 2.5, 0.0) if initial_pose is None else initial_pose, float),
             (self.n, 3),
@@ -360,7 +360,7 @@ class Simulator:
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
         latency = self._noise.draw(1, k0, n)[..., 5]
         ticks, light, bumps, pose, body = K.empty_outputs(self.n, n)
-        K.run_periods(self._state, self._queue, self._qinfo, self._params, _FLOOR_TABLE,
+        K.run_periods(self._state, self._queue, self._qinfo, self._params, self._floors,
                       self._regions, self._walls, np.ascontiguousarray(cmd), per, noise,
                       ticks, light, bumps, pose, body)
         ticks = (ticks + np.round(spikes).astype(np.int64)) % 65536

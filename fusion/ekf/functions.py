@@ -147,6 +147,7 @@ import numpy as np
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
 from fusion.noise import ScaleErrors, SlipNoise
 from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import body_from_wheel, sinc_and_derivative, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -516,11 +517,13 @@ def encoder_speeds(ticks: np.ndarray, fm: FilterModel) -> np.ndarray:
 
     Raises
     ------
-    FilterOptionError
-        If the model has no encoder scale (pass ``m_per_tick``).
+    MissingEncoderScaleError
+        If the model has no encoder scale and ``fm`` was given none (``m_per_tick``).
     """
     if fm.ticks_to_speeds is None:
-        raise FilterOptionError("the model has no encoder scale; give FilterModel(m_per_tick=...)")
+        raise MissingEncoderScaleError.needed_by(
+            "turning encoder counts into speeds", keyword="m_per_tick=... to the filter "
+            "(ModelEKF or FilterModel)")
     return fm.ticks_to_speeds @ tick_deltas(ticks, axis=0)[0]
 
 

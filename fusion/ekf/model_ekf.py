@@ -343,8 +343,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         ------
         MeasurementShapeError
             If ``ticks`` is not (2,).
-        FilterOptionError
-            If there is no encoder scale.
+        lti_motion.exceptions.MissingEncoderScaleError
+            If neither the model nor ``m_per_tick`` gives an encoder scale.
         """
         ticks = self._check_ticks(ticks)
         t = self.t_s if t_s is None else float(t_s)

@@ -39,6 +39,7 @@ from fusion.graph.transient_noise import TransientSpeedCovariance
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import FrameLog
 from lti_motion.metrics import ate
 from lti_motion.model import MotionModel
@@ -345,13 +346,15 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
 
     Raises
     ------
+    MissingEncoderScaleError
+        If the model has no encoder scale.
     ValueError
-        If the model has no encoder scale or ``method`` is unknown.
+        If ``method`` is unknown.
     UnknownPoseError
         If an observation's frame is beyond the log.
     """
     if model.m_per_tick is None:
-        raise ValueError("the model has no encoder scale (m_per_tick); calibrate it first")
+        raise MissingEncoderScaleError.needed_by("smoothing a log (speeds from its counts)")
     if method not in ("isam2", "batch"):
         raise ValueError(f"method must be 'isam2' or 'batch', got {method!r}")
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)

@@ -94,6 +94,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import KW_ONLY, dataclass, field
+from types import MappingProxyType
 from typing import Literal, NamedTuple
 
 import cv2
@@ -126,15 +127,18 @@ _log = logging.getLogger(__name__)
 #: Below this range [m] the bearing is undefined.
 _MIN_RANGE_M = 1e-6
 #: Detected corner index for each of the object points of :func:`marker_object_points`.
-_IPPE_FROM_ARUCO = [3, 2, 1, 0]
-_NEXT = [1, 2, 3, 0]
+_IPPE_FROM_ARUCO = np.array([3, 2, 1, 0])
+_IPPE_FROM_ARUCO.flags.writeable = False
+_NEXT = np.array([1, 2, 3, 0])
+_NEXT.flags.writeable = False
 #: Translation within about 1e-5 m of the converged pose, at half the default's cost.
 _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 1e-6)
 #: Sub-pixel refinement window relative to the marker cell (OpenCV's default is 0.3).
 _RELATIVE_REFINE_WINDOW = 0.5
-_REFINEMENT = {"none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
-               "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
-               "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG}
+_REFINEMENT = MappingProxyType({"none": cv2.aruco.CORNER_REFINE_NONE,
+                                "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
+                                "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
+                                "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG})
 
 
 

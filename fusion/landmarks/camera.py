@@ -69,6 +69,7 @@ __all__ = [
 
 #: ``R0``: columns are the optical x (right), y (down), z (forward) axes in the robot frame.
 OPTICAL_TO_ROBOT = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+OPTICAL_TO_ROBOT.flags.writeable = False
 #: Lengths of a distortion vector OpenCV accepts (0 means none).
 _DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Width of the white quiet zone around a rendered marker, in marker cells.

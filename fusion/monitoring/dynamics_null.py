@@ -66,6 +66,7 @@ from fusion.monitoring.dynamics_start import (
     fit_start_null,
     start_evidence,
 )
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 
 __all__ = [
@@ -207,7 +208,7 @@ class WindowIntegrator:
     def __init__(self, model: MotionModel, *, n_robots: int = 1, window_periods: int = 30,
                  glitch_ticks: float = 25.0) -> None:
         if model.m_per_tick is None:
-            raise FilterOptionError("integrated residuals need a model with m_per_tick")
+            raise MissingEncoderScaleError.needed_by("the dynamics tests' integrated residuals")
         if not (window_periods >= 2 and n_robots >= 1 and glitch_ticks > 0):
             raise FilterOptionError(f"need window_periods >= 2, n_robots >= 1, glitch_ticks > 0;"
                                     f" got {window_periods}, {n_robots}, {glitch_ticks}")

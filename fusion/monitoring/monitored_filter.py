@@ -35,7 +35,7 @@ import numpy as np
 
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.updates import UpdateRecord
-from fusion.exceptions import FilterOptionError, MeasurementShapeError
+from fusion.exceptions import MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.dynamics import DynamicsMonitor
 from fusion.monitoring.phase_one import NominalFit
@@ -43,6 +43,7 @@ from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonit
 from fusion.monitoring.scale import ScaleMonitor
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -127,7 +128,7 @@ class MonitoredFilter:
 
     Raises
     ------
-    FilterOptionError
+    MissingEncoderScaleError
         If the model has no encoder scale.
 
     Examples
@@ -157,8 +158,7 @@ class MonitoredFilter:
                  initial_ticks: np.ndarray | Sequence[int] | None = None, t0_s: float = 0.0,
                  on_alarm: Callable[[AlarmEvent], None] | None = None) -> None:
         if model.m_per_tick is None:
-            raise FilterOptionError("the model has no encoder scale (m_per_tick); the monitor "
-                                    "needs one: calibrate with the rotation manoeuvre")
+            raise MissingEncoderScaleError.needed_by("the monitor")
         self.model = model
         if options is None:
             options = (nominal.options(model.dt_s) if nominal is not None

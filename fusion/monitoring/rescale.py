@@ -38,6 +38,7 @@ import math
 import numpy as np
 
 from fusion.exceptions import FilterOptionError
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 
 __all__ = ["output_scaling", "rescaled_model"]
@@ -62,8 +63,10 @@ def output_scaling(model: MotionModel, *, m_per_tick: float, wheel_base_m: float
 
     Raises
     ------
+    MissingEncoderScaleError
+        If the model has no encoder scale.
     FilterOptionError
-        If the model has no encoder scale, or the new values are not positive and finite.
+        If the new values are not positive and finite.
 
     Examples
     --------
@@ -80,8 +83,7 @@ def output_scaling(model: MotionModel, *, m_per_tick: float, wheel_base_m: float
     array([0.965, 0.95 ])
     """
     if model.m_per_tick is None:
-        raise FilterOptionError("the model has no encoder scale (m_per_tick): calibrate it with "
-                                "the rotation manoeuvre before rescaling")
+        raise MissingEncoderScaleError.needed_by("rescaling the model to a new encoder scale")
     if not (math.isfinite(m_per_tick) and m_per_tick > 0 and math.isfinite(wheel_base_m)
             and wheel_base_m > 0):
         raise FilterOptionError(f"m_per_tick and wheel_base_m must be positive and finite, got "

@@ -101,6 +101,7 @@ from fusion.monitoring.cusum import cusum_threshold
 from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
 from fusion.range_bearing import RangeBearing
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 
 __all__ = [
@@ -625,6 +626,11 @@ class ResidualMonitor:
             the evidence reached ``stuck_ticks`` over at least
             ``stuck_periods`` periods.
 
+        Raises
+        ------
+        MissingEncoderScaleError
+            If the monitor was given no ``m_per_tick``.
+
         Notes
         -----
         A wheel servo without overshoot moves its speed monotonically from
@@ -639,7 +645,8 @@ class ResidualMonitor:
         model says).
         """
         if self.m_per_tick is None:
-            raise FilterOptionError("update_counts needs the encoder scale: pass m_per_tick=...")
+            raise MissingEncoderScaleError.needed_by(
+                "update_counts", keyword="ResidualMonitor(m_per_tick=...)")
         t = self._check_time(t_s)
         d = np.asarray(tick_deltas, dtype=float)
         v = np.asarray(predicted_wheel_m_s, dtype=float)

@@ -19,6 +19,9 @@ virtual-roomba
 
 This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
+
+Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
+and a mistyped option cost only the parser (and numpy, for the simulator's presets).
 """
 
 from __future__ import annotations
@@ -29,7 +32,14 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from drivers.sim.config import FLOORS, PRESETS
+from lti_motion.exceptions import MissingEncoderScaleError
+
 __all__ = ["main"]
+
+#: The simulator's robot presets and floors, the choices of --sim, --preset and --floor.
+PRESET_NAMES = tuple(PRESETS)
+FLOOR_NAMES = tuple(FLOORS)
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
@@ -188,9 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "estimator; writes report.md, metrics.json and plots.")
     demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
     demo.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
-    demo.add_argument("--preset", default="create2", choices=["create2", "paper"],
+    demo.add_argument("--preset", default="create2", choices=PRESET_NAMES,
                       help="robot preset (default: create2)")
-    demo.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"],
+    demo.add_argument("--floor", default="hard", choices=FLOOR_NAMES,
                       help="floor (default: hard)")
     demo.add_argument("--runs", type=int, default=30, help="route runs per estimator (30)")
     demo.add_argument("--excitation-s", type=float, default=180.0,
@@ -203,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "random excitation) on the simulator or a robot, fits the models, and "
                     "writes model_arx.json, model_fir.json and plots.")
     where = cal.add_mutually_exclusive_group(required=True)
-    where.add_argument("--sim", choices=["create2", "paper"], help="calibrate the simulator")
+    where.add_argument("--sim", choices=PRESET_NAMES, help="calibrate the simulator")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
@@ -212,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--wheel-base", type=float, default=0.235,
                      help="nominal wheel base [m] (default 0.235, the Create 2)")
     cal.add_argument("--floor", default="hard", help="floor name recorded in the model "
-                     "(and simulated with --sim: hard, tile, carpet)")
+                     f"(and simulated with --sim: {', '.join(FLOOR_NAMES)})")
     cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
     cal.add_argument("--excitation-s", type=float, default=180.0,
                      help="length of the random excitation [s] (default 180)")
@@ -263,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "--sim calibrates the simulated robot first; --port needs --model. See "
                     "docs/guide_alarms.md.")
     mwhere = mo.add_mutually_exclusive_group(required=True)
-    mwhere.add_argument("--sim", choices=["create2", "paper"], help="monitor the simulator")
+    mwhere.add_argument("--sim", choices=PRESET_NAMES, help="monitor the simulator")
     mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
@@ -280,7 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--fault-at", type=float, default=None,
                     help="onset of --fault [s] (default: half the duration)")
     mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")
-    mo.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"],
+    mo.add_argument("--floor", default="hard", choices=FLOOR_NAMES,
                     help="simulated floor (default hard)")
     mo.add_argument("--excitation-s", type=float, default=60.0,
                     help="--sim without --model: calibration excitation [s] (default 60)")
@@ -298,11 +308,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Starts the simulator behind the Roomba Open Interface on a "
                     "pseudo-terminal and prints its device path; connect with "
                     "'lti-motion calibrate --port PATH'. Ctrl-C stops it.")
-    vr.add_argument("--preset", default="create2", choices=["create2", "paper"])
+    vr.add_argument("--preset", default="create2", choices=PRESET_NAMES)
     vr.add_argument("--seed", type=int, default=0)
     vr.add_argument("--speed", type=float, default=1.0,
                     help="simulated seconds per wall-clock second (default 1: real time)")
-    vr.add_argument("--floor", default="hard", choices=["hard", "tile", "carpet"])
+    vr.add_argument("--floor", default="hard", choices=FLOOR_NAMES)
     vr.add_argument("--duration", type=float, default=None,
                     help="stop after this many wall-clock seconds (default: run until Ctrl-C)")
     vr.set_defaults(func=_cmd_virtual_roomba)
@@ -316,10 +326,24 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
+    except MissingEncoderScaleError:
+        print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)
+        return 2
     except (ValueError, OSError) as exc:
         one_line = " ".join(str(exc).split())             # the README promises one line
         print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
         return 2
+
+
+def _no_encoder_scale(args: argparse.Namespace) -> str:
+    """What a command-line user can do about a model without an encoder scale."""
+    model = getattr(args, "model", None)
+    what = f"the model {model}" if model else "the model"
+    sim = ("; or leave out --model: --sim then calibrates the simulated robot first"
+           if getattr(args, "sim", None) else "")
+    return (f"{what} has no encoder scale, which turns encoder counts into distances; "
+            "calibrate the robot with 'lti-motion calibrate' (its rotation in place measures "
+            f"the scale) and give the model_arx.json it writes with --model{sim}")
 
 
 if __name__ == "__main__":

@@ -16,12 +16,10 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import MappingProxyType
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
 from drivers.sim.config import get_preset
@@ -43,23 +41,23 @@ from lti_motion.calibration import Calibration, CalibrationPlan
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
 #: Paper Table II: mean and standard deviation of the closure offset [m], 30 runs each.
-PAPER_TABLE_II = {
+PAPER_TABLE_II = MappingProxyType({
     "odometry": (0.068, 0.027),
     "fir_sensorless": (0.332, 0.095),
     "arx_sensorless": (0.258, 0.021),
-}
+})
 
 #: Targets of the main-job issue: estimator -> (closure offset mean [m], what it is);
 #: ``None`` means the odometry row's mean, a row name that row's mean (the smoother's
 #: bar is the EKF's, same landmarks and runs: this brief's, not the issue's).
-TARGETS = {
+TARGETS = MappingProxyType({
     "arx_sensorless": (0.10, "at most 0.10 m (the paper's ARMA: 0.258 m)"),
     "ekf": (None, "at most the odometry row's mean"),
     "ekf_landmarks": (0.03, "at most 0.03 m"),
     "smoother_landmarks": ("ekf_landmarks", "at most the EKF with landmarks' mean"),
-}
+})
 
-LABELS = {
+LABELS = MappingProxyType({
     "odometry": "encoder odometry",
     "fir_sensorless": "FIR, sensor-less",
     "arx_sensorless": "ARX, sensor-less",
@@ -67,10 +65,10 @@ LABELS = {
     "ekf": "EKF, model and encoders",
     "ekf_landmarks": "EKF, model, encoders, landmarks",
     "smoother_landmarks": "iSAM2 smoother, landmarks",
-}
+})
 
 #: Estimators that see the landmark sensor (four landmarks, 2 Hz each, 2% / 1 degree).
-USES_LANDMARKS = {"ekf_landmarks", "smoother_landmarks"}
+USES_LANDMARKS = frozenset({"ekf_landmarks", "smoother_landmarks"})
 
 
 def _estimators(cal: Calibration, wheel_base_m: float) -> dict[str, Estimator]:
@@ -89,7 +87,8 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
     names = list(results)
     ncols = min(4, len(names))
     nrows = -(-len(names) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4 * ncols, 4 * nrows), squeeze=False)
+    fig = Figure(figsize=(4 * ncols, 4 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax in axes.flat[len(names):]:
         ax.set_axis_off()
     for ax, name in zip(axes.flat, names, strict=False):
@@ -104,11 +103,11 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
     fig.suptitle("The closed route, run 1: true path and the estimate it steered on")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
-    fig, axes = plt.subplots(1, 2, figsize=(12, 6.5))
+    fig = Figure(figsize=(12, 6.5))
+    axes = fig.subplots(1, 2)
     for ax, zoom_cm in zip(axes, (None, 8.0), strict=True):
         for i, (name, res) in enumerate(results.items()):
             end = res.true_poses[:, -1, :2] - ROUTE_M[0]
@@ -128,7 +127,6 @@ def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
                  "runs each)")
     fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _table(metrics: dict) -> str:

@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -51,16 +52,17 @@ __all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames"
            "run_on_simulator"]
 
 #: ``--fault`` choices -> (simulator fault kind, its parameters, the alarm expected).
-FAULTS: dict[str, tuple[str, dict, str | None]] = {
-    "stuck-encoder": ("stuck_encoder", {"wheel": "left"}, "stuck_encoder"),
-    "spikes": ("encoder_spikes", {"rate_hz": 20.0, "duration_s": 1.0}, "glitch_burst"),
-    "payload": ("payload", {"payload_kg": 1.8}, "dynamics_changed"),
-    "motor": ("motor", {"weakening": 0.2}, "dynamics_changed"),
-    "delay": ("delay", {"extra_periods": 3.0}, "dynamics_changed"),
-    "carpet": ("floor", {"floor": "carpet"}, "scale_changed"),
-}
+FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProxyType({
+    "stuck-encoder": ("stuck_encoder", MappingProxyType({"wheel": "left"}), "stuck_encoder"),
+    "spikes": ("encoder_spikes", MappingProxyType({"rate_hz": 20.0, "duration_s": 1.0}),
+               "glitch_burst"),
+    "payload": ("payload", MappingProxyType({"payload_kg": 1.8}), "dynamics_changed"),
+    "motor": ("motor", MappingProxyType({"weakening": 0.2}), "dynamics_changed"),
+    "delay": ("delay", MappingProxyType({"extra_periods": 3.0}), "dynamics_changed"),
+    "carpet": ("floor", MappingProxyType({"floor": "carpet"}), "scale_changed"),
+})
 
-_WHEEL = {0: "left wheel", 1: "right wheel"}
+_WHEEL = MappingProxyType({0: "left wheel", 1: "right wheel"})
 
 
 def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
@@ -181,6 +183,11 @@ def monitor_frames(model: MotionModel,
     Returns
     -------
     MonitorRun
+
+    Raises
+    ------
+    MissingEncoderScaleError
+        If the model has no encoder scale.
     """
 
     def relay(event: AlarmEvent) -> None:

@@ -1,6 +1,8 @@
-"""Plots of a calibration: step responses, order selection, the calibration sequence, validation.
+"""Plots of a calibration: step responses, order selection, the calibration sequence.
 
-Application layer (matplotlib): used by ``lti-motion calibrate`` and the examples.
+Application layer (matplotlib): used by ``lti-motion calibrate`` and ``lti-motion demo``.
+Figures are drawn with matplotlib's object-oriented API (:class:`~matplotlib.figure.Figure`
+and ``savefig``): no pyplot, so no backend is chosen or switched, and nothing global.
 """
 
 from __future__ import annotations
@@ -8,10 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from lti_motion.calibration import Calibration, speeds_from_log
 from lti_motion.model import MotionModel
@@ -21,14 +21,14 @@ __all__ = [
     "plot_order_selection",
     "plot_sequence",
     "plot_step_responses",
-    "plot_validation",
 ]
 
 
 def plot_step_responses(fir: MotionModel, path: Path) -> None:
     """Step responses of the FIR model (cumulative impulse responses)."""
     n = 40
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharex=True)
+    fig = Figure(figsize=(10, 3.5))
+    axes = fig.subplots(1, 2, sharex=True)
     for motor, name in ((0, "left"), (1, "right")):
         u = np.zeros((n, 2))
         u[:, motor] = 1.0
@@ -43,16 +43,17 @@ def plot_step_responses(fir: MotionModel, path: Path) -> None:
         ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_order_selection(arx: MotionModel, path: Path) -> None:
     """Free-run validation NRMSE against order, one line per delay, the choice marked."""
     sel = arx.selection
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    viridis = matplotlib.colormaps["viridis"]
+    fig = Figure(figsize=(6.5, 4))
+    ax = fig.subplots()
     for j, delay in enumerate(sel.delays):
         ax.plot(sel.orders, np.where(sel.stable[:, j], sel.nrmse[:, j], np.nan), lw=0.8,
-                color=plt.cm.viridis(j / max(1, len(sel.delays) - 1)), label=f"delay {delay}")
+                color=viridis(j / max(1, len(sel.delays) - 1)), label=f"delay {delay}")
     ax.plot(sel.orders, sel.curve, "k-", lw=2, label="best over delays")
     i = int(np.flatnonzero(sel.orders == sel.order)[0])
     ax.plot(sel.order, sel.curve[i], "ro", ms=9,
@@ -63,7 +64,6 @@ def plot_order_selection(arx: MotionModel, path: Path) -> None:
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> None:
@@ -72,7 +72,8 @@ def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> Non
     u, y = speeds_from_log(log, m_per_tick=cal.m_per_tick, wheel_base_m=cal.arx.wheel_base_m)
     n = round(seconds / log.dt_s)
     t = np.arange(n) * log.dt_s
-    fig, axes = plt.subplots(3, 1, figsize=(10, 6), sharex=True)
+    fig = Figure(figsize=(10, 6))
+    axes = fig.subplots(3, 1, sharex=True)
     axes[0].step(t, u[:n, 0], where="post", label="left")
     axes[0].step(t, u[:n, 1], where="post", label="right")
     axes[0].set(ylabel="command [m/s]")
@@ -84,28 +85,6 @@ def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> Non
     axes[0].set_title("Calibration sequence: random held normal commands, encoder speeds")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def plot_validation(cal: Calibration, u: np.ndarray, y: np.ndarray, path: Path,
-                    *, seconds: float = 20.0) -> None:
-    """Encoder speeds of a fresh drive against the models' free-run (sensor-less) output."""
-    n = min(len(u), round(seconds / cal.arx.dt_s))
-    t = np.arange(n) * cal.arx.dt_s
-    fits = {name: m.fit_percent([(u, y)]) for name, m in (("ARX", cal.arx), ("FIR", cal.fir))}
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
-    for k, label in ((0, "v [m/s]"), (1, "w [rad/s]")):
-        axes[k].plot(t, y[:n, k], color="0.6", lw=0.8, label="encoders")
-        for name, model in (("ARX", cal.arx), ("FIR", cal.fir)):
-            axes[k].plot(t, model.simulate(u)[:n, k], lw=1.2,
-                         label=f"{name} free run, fit {fits[name][k]:.1f}%")
-        axes[k].set(ylabel=label)
-        axes[k].legend(fontsize=8, loc="upper right")
-    axes[1].set(xlabel="time [s]")
-    axes[0].set_title("Validation drive never used for fitting")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_calibration(cal: Calibration, out_dir: Path) -> list[Path]:

@@ -42,6 +42,7 @@ from lti_motion.app.replay_sources import (
     source_from_log,
     source_from_mrclam,
 )
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import body_from_wheel, integrate_poses
 from lti_motion.metrics import ate_stats, rpe
 from lti_motion.model import MotionModel
@@ -72,8 +73,7 @@ def _expand(src: ReplaySource) -> tuple[np.ndarray, np.ndarray]:
 
 def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
     if model.m_per_tick is None:
-        raise ValueError("the model file has no encoder scale (m_per_tick); odometry and the "
-                         "EKF with encoders need one: calibrate with the rotation manoeuvre")
+        raise MissingEncoderScaleError.needed_by("encoder odometry")
     rows = np.flatnonzero(src.valid)
     d = tick_deltas(src.ticks[rows], axis=0) * model.m_per_tick      # wheel travel [m]
     # displacement and turn over each interval, integrated with unit steps (paper eq. 11)

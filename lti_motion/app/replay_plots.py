@@ -1,4 +1,7 @@
-"""Plots of ``lti-motion replay``: trajectories, and position error against time."""
+"""Plots of ``lti-motion replay``: trajectories, and position error against time.
+
+Drawn with matplotlib's object-oriented API (no pyplot: no backend is chosen or switched).
+"""
 
 from __future__ import annotations
 
@@ -6,11 +9,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 
 if TYPE_CHECKING:
     from lti_motion.app.replay_sources import ReplaySource
@@ -21,7 +22,8 @@ __all__ = ["plot_errors", "plot_trajectories"]
 def plot_trajectories(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]
                       ) -> Path:
     """Every estimate in the plane, with the truth and the landmarks when known; a PNG."""
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig = Figure(figsize=(7, 6))
+    ax = fig.subplots()
     if src.has_truth:
         ax.plot(src.truth[:, 0], src.truth[:, 1], "k-", lw=1.5, label="ground truth")
     for i, (name, p) in enumerate(poses.items()):
@@ -37,7 +39,8 @@ def plot_trajectories(path: Path, src: ReplaySource, poses: Mapping[str, np.ndar
 
 def plot_errors(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]) -> Path:
     """Position error against the ground truth over time, per estimator; a PNG."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
     t = src.t_s - src.t_s[0]
     for i, (name, p) in enumerate(poses.items()):
         err = np.hypot(*(p[:, :2] - src.truth[:, :2]).T)        # NaN where no truth
@@ -47,12 +50,11 @@ def plot_errors(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]) 
     return _finish(fig, ax, path)
 
 
-def _finish(fig: plt.Figure, ax: plt.Axes, path: Path) -> Path:
+def _finish(fig: Figure, ax: Axes, path: Path) -> Path:
     """Grid, legend, and the figure written to ``path`` (folders made) and closed."""
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path

@@ -11,6 +11,7 @@ import os
 from collections.abc import Hashable
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
@@ -36,13 +37,13 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-ESTIMATORS = {
+ESTIMATORS = MappingProxyType({
     "odometry": "encoder odometry",
     "commands": "commands at face value",
     "sensorless": "model, sensor-less",
     "ekf": "EKF, model and encoders",
     "ekf_landmarks": "EKF, model, encoders (if any), landmarks",
-}
+})
 
 #: Sighting noise for MRCLAM: the spread of set 6's sightings against Vicon
 #: (median range error 7-13 cm at 3.7 m, bearing 0.4-1.4 degrees; 90% within

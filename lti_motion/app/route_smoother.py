@@ -31,7 +31,7 @@ from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
-from lti_motion.exceptions import ShapeError
+from lti_motion.exceptions import MissingEncoderScaleError, ShapeError
 from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import pose_step
 from lti_motion.model import MotionModel
@@ -74,8 +74,10 @@ class SmootherEstimator:
 
     Raises
     ------
+    MissingEncoderScaleError
+        If the model has no encoder scale.
     ValueError
-        If the model has no encoder scale, or ``keyframe_s`` is shorter than one period.
+        If ``keyframe_s`` is shorter than one period.
     TypeError
         If ``landmarks`` or ``landmark_noise`` has the wrong type.
 
@@ -124,7 +126,7 @@ class SmootherEstimator:
         if not isinstance(model, MotionModel):
             raise TypeError(f"model must be a MotionModel, got {type(model).__name__}")
         if model.m_per_tick is None:
-            raise ValueError("the model has no encoder scale (m_per_tick); calibrate it first")
+            raise MissingEncoderScaleError.needed_by("the smoother's encoder keyframes")
         if landmarks is not None and not isinstance(landmarks, LandmarkMap):
             raise TypeError(f"landmarks must be a fusion.landmark_map.LandmarkMap, got "
                             f"{type(landmarks).__name__}")

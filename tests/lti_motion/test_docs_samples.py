@@ -1,17 +1,15 @@
 """The ```python samples of the user guide pages run, as a reader would run them.
 
 Each page's blocks run in order in one namespace (a later block uses what an earlier one
-made), in a temporary working folder, with matplotlib's Agg backend. Blocks fenced as
-```text or ```sh are not run.
+made), in a temporary working folder. Blocks fenced as ```text or ```sh are not run. No
+backend is chosen here: what the samples plot, they draw with matplotlib's
+object-oriented API, which needs none.
 """
 
 import re
 from pathlib import Path
 
-import matplotlib
 import pytest
-
-matplotlib.use("Agg")
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 PAGES = ["log_format.md", "guide_calibrate_real_robot.md", "guide_filterpy.md",

@@ -5,11 +5,12 @@ import pytest
 
 from benchmarks.bench_monitor import route_drives
 from drivers.sim.config import Fault
-from fusion.exceptions import FilterOptionError, MeasurementShapeError
+from fusion.exceptions import MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.fir import FirFit
 from lti_motion.model import MotionModel
 from lti_motion.odometry import TICK_MODULUS
@@ -94,7 +95,7 @@ def test_phase_one_runs_the_dynamics_tests_with_its_gate(route_model, route_null
 
 
 def test_bad_input_is_a_clear_error():
-    with pytest.raises(FilterOptionError, match="encoder scale"):
+    with pytest.raises(MissingEncoderScaleError, match="the monitor needs the encoder scale"):
         MonitoredFilter(_model(m_per_tick=None))
     mf = MonitoredFilter(_model())
     with pytest.raises(MeasurementShapeError, match=r"shape \(2,\)"):

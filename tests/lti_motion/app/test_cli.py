@@ -29,6 +29,33 @@ def test_help_and_bad_choices(capsys):
     assert "invalid choice: 'ice'" in capsys.readouterr().err
 
 
+def _options(parser):
+    """Every option of every sub-command: ``(sub-command, flag, action)``."""
+    commands = next(a for a in parser._actions if a.dest == "command").choices
+    for name, sub in commands.items():
+        for action in sub._actions:
+            for flag in action.option_strings:
+                yield name, flag, action
+
+
+def test_preset_and_floor_choices_are_the_simulators():
+    from drivers.sim.config import FLOORS, PRESETS
+
+    seen = set()
+    for command, flag, action in _options(build_parser()):
+        if flag in ("--sim", "--preset"):
+            assert list(action.choices) == list(PRESETS), (command, flag)
+            seen.add((command, flag))
+        elif flag == "--floor" and action.choices is not None:
+            assert list(action.choices) == list(FLOORS), (command, flag)
+            seen.add((command, flag))
+        elif flag == "--floor":                                  # a robot's floor: any name
+            assert all(f in action.help for f in FLOORS), (command, flag)
+    assert seen == {("demo", "--preset"), ("demo", "--floor"), ("calibrate", "--sim"),
+                    ("monitor", "--sim"), ("monitor", "--floor"),
+                    ("virtual-roomba", "--preset"), ("virtual-roomba", "--floor")}
+
+
 def test_calibrate_on_a_missing_port_names_it(capsys):
     assert main(["calibrate", "--port", "/dev/does-not-exist", "--yes"]) == 2
     assert "/dev/does-not-exist" in capsys.readouterr().err
@@ -159,6 +186,29 @@ def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [
+    ["replay", "{log}", "--model", "{model}", "--estimators", "odometry"],
+    ["monitor", "--sim", "create2", "--model", "{model}", "--duration", "1",
+     "--nominal-drives", "0"],
+], ids=lambda argv: argv[0])
+def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, model_file,
+                                                                          tmp_path, capsys):
+    from drivers.sim.simulator import Simulator
+    from lti_motion.logfile import save_log
+    from lti_motion.model import MotionModel
+
+    unscaled = MotionModel.load(model_file).updated(m_per_tick=None).save(
+        tmp_path / "unscaled.json")
+    log = save_log(tmp_path / "short.npz", Simulator("create2", seed=0).run(np.full((50, 2), 0.1)))
+    argv = [a.format(model=unscaled, log=log) for a in argv]
+    assert main([*argv, "--out", str(tmp_path / "out")] if argv[0] == "replay" else argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"lti-motion {argv[0]}: error: the model ")
+    assert "has no encoder scale" in err and "'lti-motion calibrate'" in err and "--model" in err
+    for internal in ("Error", "m_per_tick", "FilterModel", "lti_motion.", "Traceback"):
+        assert internal not in err, internal
 
 
 def test_replay_mrclam_robot_that_does_not_exist(mrclam_path, model_file, capsys):
