@@ -37,13 +37,14 @@ detector fallback never rescued a valid record, and it returned wrong periods
 ``min_confidence`` across its period, and the record must span two periods.
 
 A recording of under two turns in surroundings that look alike after half a
-turn can still alias to a fraction of the period (8 of 300 synthetic cluttered
-rooms); ``period_range_ticks`` (the datasheet value +- 30 %) leaves 1 in 300.
+turn can still alias to a fraction of the period; ``period_range_ticks`` (the
+datasheet value +- 30 %) rules most such aliases out.
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -59,7 +60,7 @@ from lti_motion.exceptions import (
 
 __all__ = ["RotationPeriod", "encoder_scale_m_per_tick", "rotation_period_ticks"]
 
-logger = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 #: A single narrow bump per turn stays above its lower threshold for less than this
 #: fraction of the record.
@@ -234,7 +235,7 @@ def _autocorr_period(
         m += 1
     lags_arr, mults_arr = np.asarray(lags), np.asarray(mults)
     period = float(mults_arr @ lags_arr / (mults_arr @ mults_arr))  # least squares lag_m = m P
-    logger.debug("autocorr peaks at lags %s (multiples %s) -> period %.3f", lags, mults, period)
+    _log.debug("autocorr peaks at lags %s (multiples %s) -> period %.3f", lags, mults, period)
     return period, candidates
 
 
@@ -294,6 +295,57 @@ def _peaks_period(grid: np.ndarray, min_swing: float) -> tuple[float, bool, tupl
     return num / den, all(v[2] for v in used.values()), tuple(sorted(used))
 
 
+def _lag_range(period_range_ticks: tuple[float, float] | None, step: float
+               ) -> tuple[float, float]:
+    """The plausible period in grid steps, from ``period_range_ticks`` [ticks]."""
+    if period_range_ticks is None:
+        return (1.0, np.inf)
+    lo, hi = (float(v) for v in period_range_ticks)
+    if not 0 < lo < hi:
+        raise ValueError(
+            f"period_range_ticks must be (low, high) with 0 < low < high, got "
+            f"{period_range_ticks}"
+        )
+    return (lo / step, hi / step)
+
+
+def _peak_period(grid: np.ndarray, channels: np.ndarray, *, lag_range: tuple[float, float],
+                 step: float, period_range_ticks: tuple[float, float] | None,
+                 min_swing_counts: float, strict: bool
+                 ) -> tuple[float, bool, tuple[int, ...]] | None:
+    """The peak detector's period [grid steps], whether its bumps are isolated, and the
+    channels it used; None when it finds no period (raises instead when ``strict``)."""
+    try:
+        p_pk, isolated, used = _peaks_period(grid, min_swing_counts)
+        if not lag_range[0] <= p_pk <= lag_range[1]:
+            raise NotPeriodicError(
+                f"the peak detector's period {p_pk * step:.1f} ticks lies outside "
+                f"period_range_ticks {period_range_ticks}; check the range, or rotate "
+                "near a single obstacle"
+            )
+    except NotPeriodicError:
+        if strict:
+            raise
+        return None
+    return p_pk, isolated, tuple(int(channels[c]) for c in used)
+
+
+def _peaks_preferred(p_pk: float, isolated: bool, used: tuple[int, ...],
+                     autocorr_channels: tuple[int, ...], candidates: Sequence[float]) -> bool:
+    """``method="auto"``: take the peak detector's period over the autocorrelation's."""
+    agrees = [abs(p_pk - c) <= _AGREE * c for c in candidates]
+    if isolated and used == autocorr_channels and agrees[0]:
+        return True         # one narrow isolated bump per turn in every channel
+    return any(agrees[1:]) and not agrees[0]   # it resolves an ambiguous autocorrelation
+
+
+def _interpolated(rho: np.ndarray, lag_steps: float) -> float:
+    """The autocorrelation at a fractional lag (linear interpolation), clipped to [0, 1]."""
+    k = int(np.clip(np.floor(lag_steps), 0, rho.size - 2))
+    frac = lag_steps - k
+    return float(np.clip((1 - frac) * rho[k] + frac * rho[k + 1], 0.0, 1.0))
+
+
 def rotation_period_ticks(
     signals: np.ndarray,
     tick_diff: np.ndarray,
@@ -324,9 +376,9 @@ def rotation_period_ticks(
         Spacing of the uniform resampling grid [ticks].
     min_confidence : float
         Lowest acceptable autocorrelation at the period, for either method.
-        Synthetic recordings of two to three turns score above 0.98; with 0.3,
-        11 % of synthetic cluttered records of under two turns passed with a
-        wrong period, with 0.5 about 3 %.
+        Clean recordings of two to three turns score close to 1; a low value
+        lets records of under two turns in look-alike surroundings pass with a
+        wrong period.
     min_swing_counts : float
         A channel whose 1-99 percentile range is below this sees nothing and is dropped [counts].
     period_range_ticks : (float, float), optional
@@ -377,15 +429,7 @@ def rotation_period_ticks(
     step = float(grid_step_ticks)
     if not (np.isfinite(step) and step > 0):
         raise ValueError(f"grid_step_ticks must be positive, got {grid_step_ticks}")
-    lag_range = (1.0, np.inf)
-    if period_range_ticks is not None:
-        lo, hi = (float(v) for v in period_range_ticks)
-        if not 0 < lo < hi:
-            raise ValueError(
-                f"period_range_ticks must be (low, high) with 0 < low < high, got "
-                f"{period_range_ticks}"
-            )
-        lag_range = (lo / step, hi / step)
+    lag_range = _lag_range(period_range_ticks, step)
     sig, x = _prepare(signals, tick_diff)
     span = float(x[-1] - x[0])
     swing = np.ptp(np.percentile(sig, [1.0, 99.0], axis=0), axis=0)
@@ -406,43 +450,27 @@ def rotation_period_ticks(
         )
         used_channels = tuple(int(c) for c in channels)
     if method != "autocorr":
-        try:
-            p_pk, isolated, used = _peaks_period(grid, min_swing_counts)
-            if not lag_range[0] <= p_pk <= lag_range[1]:
-                raise NotPeriodicError(
-                    f"the peak detector's period {p_pk * step:.1f} ticks lies outside "
-                    f"period_range_ticks {period_range_ticks}; check the range, or rotate "
-                    "near a single obstacle"
-                )
-        except NotPeriodicError:
-            if method == "peaks":
-                raise
-        else:
-            used = tuple(int(channels[c]) for c in used)
-            if method == "auto":
-                agrees = [abs(p_pk - c) <= _AGREE * c for c in candidates]
-                if isolated and used == used_channels and agrees[0]:
-                    chosen = "peaks"  # one narrow isolated bump per turn in every channel
-                elif any(agrees[1:]) and not agrees[0]:
-                    chosen = "peaks"  # the peak detector resolves an ambiguous autocorrelation
-            if chosen == "peaks":
-                period_steps, used_channels = p_pk, used
+        found = _peak_period(grid, channels, lag_range=lag_range, step=step,
+                             period_range_ticks=period_range_ticks,
+                             min_swing_counts=min_swing_counts, strict=method == "peaks")
+        if found is not None and (method == "peaks" or _peaks_preferred(*found, used_channels,
+                                                                        candidates)):
+            chosen = "peaks"
+            period_steps, _, used_channels = found
     period_ticks = period_steps * step
     if span < 2.0 * period_ticks:
         raise NotPeriodicError(
             f"the record spans {span:.0f} ticks, fewer than two turns of the detected period "
             f"{period_ticks:.1f} ticks; rotate at least two full turns"
         )
-    k = int(np.clip(np.floor(period_steps), 0, rho.size - 2))
-    frac = period_steps - k
-    confidence = float(np.clip((1 - frac) * rho[k] + frac * rho[k + 1], 0.0, 1.0))
+    confidence = _interpolated(rho, period_steps)
     if confidence < min_confidence:
         raise NotPeriodicError(
             f"the signals correlate only {confidence:.2f} (< {min_confidence}) across the "
             f"detected period of {period_ticks:.1f} ticks ({chosen}): no clear repetition; "
             "rotate at least two full turns near stationary surroundings"
         )
-    logger.info(
+    _log.info(
         "rotation period %.2f ticks by %s (confidence %.3f, %.2f turns, channels %s)",
         period_ticks,
         chosen,

@@ -1,7 +1,8 @@
 """Lazy re-exports for a package's door (PEP 562): a name loads with its module on first use.
 
 A package ``__init__`` that imports every module it re-exports makes ``import pkg``
-pay for all of them (``scipy.signal`` alone costs the core 0.7 s), and so does any
+pay for all of them (``scipy.signal`` alone costs more than the rest of the core,
+``docs/benchmarks.md``), and so does any
 program that needs one small module of the package, such as the command line for its
 ``--help``. With :func:`lazy_exports` the door lists its names in ``__all__`` as
 before, and each one is imported from its module the first time it is read.

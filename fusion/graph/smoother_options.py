@@ -37,10 +37,9 @@ class SmootherOptions:
         robot may have changed since calibration.
     calibration_walk_sigmas : (float, float)
         Random-walk diffusion of ``(s, g)`` [1/sqrt(s)]: ``1e-3`` lets them
-        move by 0.8% (1 sigma) a minute. On the simulator with landmarks this
-        follows a floor change (4%) within about a minute and still pins a
-        constant scale to 0.5% in a minute; ``3e-3`` follows faster but
-        forgets faster (about 1% scatter at 60 s).
+        move by ``1e-3 sqrt(60)``, about 0.8% (1 sigma), a minute; a larger
+        value follows a floor change faster and forgets a constant scale
+        faster (the trade-off is measured in ``docs/factor_graph.md``).
     calibration_every : int
         Consecutive keyframe intervals that share one calibration variable
         (at 0.5 s keyframes, 10 means a new calibration every 5 s, far

@@ -40,7 +40,7 @@ taken from the data, a Phase-I estimate). The monitor runs a CUSUM of
 ``mu1`` standard deviations (Basseville & Nikiforov 1993, section 2.2).
 
 **Threshold.** The nominal ``Z`` is near N(0, 1) but its tail is heavier
-(measured 99.9% quantile 3.7, normal 3.1), so the textbook threshold alarms too
+(``docs/monitor.md``), so the textbook threshold alarms too
 often. :func:`start_threshold_from_maxima` sets it from nominal driving
 instead: the per-run maxima of the CUSUM above their ``1 - tail_fraction``
 quantile ``u`` are fitted with a generalised Pareto distribution (peaks over

@@ -142,45 +142,10 @@ def _table(metrics: dict) -> str:
     return "\n".join(lines)
 
 
-def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: str = "hard",
-             runs: int = 30, excitation_s: float = 180.0,
-             print_fn: Callable[[str], object] = print) -> dict:
-    """Calibrate on the simulator, run the route for every estimator, write the report.
-
-    Returns
-    -------
-    dict
-        The metrics written to ``out_dir / "metrics.json"``.
-    """
-    t_start = time.perf_counter()
-    params = get_preset(preset)
-    out_dir.mkdir(parents=True, exist_ok=True)
-
-    print_fn(f"1. calibrating the simulated {preset} robot on {floor} floor (seed {seed})")
-    cal = calibrate_simulator(params, seed=seed, floor=floor,
-                              plan=CalibrationPlan(seed=seed, excitation_s=excitation_s),
-                              progress=print_progress)
-    cal.arx.save(out_dir / "model_arx.json")
-    plots = plot_calibration(cal, out_dir)
+def _metrics(cal: Calibration, results: dict[str, RouteResult], seconds: dict[str, float], *,
+             preset: str, floor: str, seed: int, runs: int) -> dict:
+    """The demo's metrics: closure and stop error per estimator, and the targets missed."""
     sel = cal.arx.selection
-    for line in summarize(cal):
-        print_fn(f"   {line}")
-
-    print_fn(f"2. the closed route ({np.linalg.norm(np.diff(ROUTE_M, axis=0), axis=1).sum():.1f}"
-             f" m), {runs} runs per estimator in lock step")
-    seeds = [1000 + seed * runs + i for i in range(runs)]
-    results: dict[str, RouteResult] = {}
-    seconds: dict[str, float] = {}
-    for name, est in _estimators(cal, params.wheel_base_m).items():
-        t0 = time.perf_counter()
-        results[name] = drive_route(params, est, seeds=seeds, floor=floor,
-                                    landmarks=ROUTE_LANDMARKS if name in USES_LANDMARKS
-                                    else None)
-        res = results[name]
-        seconds[name] = time.perf_counter() - t0
-        print_fn(f"   {LABELS.get(name, name):34s} closure {res.closure_offset_m.mean():.3f} "
-                 f"+- {res.closure_offset_m.std():.3f} m  ({seconds[name]:.1f} s)")
-
     metrics = {
         "preset": preset, "floor": floor, "seed": seed, "runs": runs,
         "route_length_m": float(np.linalg.norm(np.diff(ROUTE_M, axis=0), axis=1).sum()),
@@ -212,13 +177,16 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
             misses.append(f"{LABELS[name]}: target {text}; measured {got:.4f} m against "
                           f"{target:.4f} m, missed by {1000 * (got - target):.2g} mm")
     metrics["targets_missed"] = misses
-    _plot_trajectories(results, out_dir / "trajectories.png")
-    _plot_closure(results, out_dir / "closure.png")
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-    table = _table(metrics)
+    return metrics
+
+
+def _write_report(path: Path, metrics: dict, table: str, plots: list[Path]) -> None:
+    """``report.md``: the closure table, the targets missed, the plots."""
+    misses = metrics["targets_missed"]
     report = [
         "# lti-motion demo", "",
-        f"Simulated {preset} robot on {floor} floor; calibration seed {seed}; {runs} route "
+        f"Simulated {metrics['preset']} robot on {metrics['floor']} floor; calibration seed "
+        f"{metrics['seed']}; {metrics['runs']} route "
         "runs per estimator. Closure offset: true distance between start and stop after "
         "driving the closed route on the estimator's own position (paper Table II). "
         "Estimate error at stop: distance between where the estimator put the robot when "
@@ -230,10 +198,56 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
         "## Calibration", "",
         *[f"![{p.stem}]({p.name})" for p in plots], "",
     ]
-    (out_dir / "report.md").write_text("\n".join(report))
+    path.write_text("\n".join(report))
+
+
+def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: str = "hard",
+             runs: int = 30, excitation_s: float = 180.0,
+             print_fn: Callable[[str], object] = print) -> dict:
+    """Calibrate on the simulator, run the route for every estimator, write the report.
+
+    Returns
+    -------
+    dict
+        The metrics written to ``out_dir / "metrics.json"``.
+    """
+    t_start = time.perf_counter()
+    params = get_preset(preset)
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    print_fn(f"1. calibrating the simulated {preset} robot on {floor} floor (seed {seed})")
+    cal = calibrate_simulator(params, seed=seed, floor=floor,
+                              plan=CalibrationPlan(seed=seed, excitation_s=excitation_s),
+                              progress=print_progress)
+    cal.arx.save(out_dir / "model_arx.json")
+    plots = plot_calibration(cal, out_dir)
+    for line in summarize(cal):
+        print_fn(f"   {line}")
+
+    print_fn(f"2. the closed route ({np.linalg.norm(np.diff(ROUTE_M, axis=0), axis=1).sum():.1f}"
+             f" m), {runs} runs per estimator in lock step")
+    seeds = [1000 + seed * runs + i for i in range(runs)]
+    results: dict[str, RouteResult] = {}
+    seconds: dict[str, float] = {}
+    for name, est in _estimators(cal, params.wheel_base_m).items():
+        t0 = time.perf_counter()
+        results[name] = drive_route(params, est, seeds=seeds, floor=floor,
+                                    landmarks=ROUTE_LANDMARKS if name in USES_LANDMARKS
+                                    else None)
+        res = results[name]
+        seconds[name] = time.perf_counter() - t0
+        print_fn(f"   {LABELS.get(name, name):34s} closure {res.closure_offset_m.mean():.3f} "
+                 f"+- {res.closure_offset_m.std():.3f} m  ({seconds[name]:.1f} s)")
+
+    metrics = _metrics(cal, results, seconds, preset=preset, floor=floor, seed=seed, runs=runs)
+    _plot_trajectories(results, out_dir / "trajectories.png")
+    _plot_closure(results, out_dir / "closure.png")
+    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    table = _table(metrics)
+    _write_report(out_dir / "report.md", metrics, table, plots)
     print_fn("3. closure offset, as the paper's Table II:")
     print_fn(table)
-    for miss in misses:
+    for miss in metrics["targets_missed"]:
         print_fn(f"   target missed: {miss}")
     print_fn(f"wrote {out_dir}/report.md, metrics.json and plots "
              f"({time.perf_counter() - t_start:.0f} s)")
