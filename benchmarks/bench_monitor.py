@@ -71,6 +71,7 @@ from fusion.monitoring.residual import MonitorOptions, ResidualMonitor
 from lti_motion.app.route import RecordingOdometry, drive_route
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
+from lti_motion.kinematics import body_from_wheel
 from lti_motion.model import MotionModel
 
 NOMINAL_H = 10.0
@@ -278,9 +279,8 @@ def excitation_speeds(model: MotionModel, faults: Sequence[Fault], *, seed: int,
 
 def _route_speeds(model: MotionModel, deltas: np.ndarray) -> np.ndarray:
     """Encoder body speeds ``(v, w)`` [m/s, rad/s] from count changes ``(n, 2)``."""
-    wheel = deltas * model.m_per_tick / model.dt_s
-    return np.stack([wheel.mean(axis=1), (wheel[:, 1] - wheel[:, 0]) / model.wheel_base_m],
-                    axis=1)
+    return body_from_wheel(deltas * model.m_per_tick / model.dt_s,
+                           wheel_base_m=model.wheel_base_m)
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ from fusion.monitoring.recalibration import Recalibrator
 from fusion.monitoring.residual import AlarmEvent
 from fusion.monitoring.scale import ScaleMonitor
 from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M
+from lti_motion.kinematics import body_from_wheel
 from lti_motion.model import MotionModel
 
 
@@ -48,7 +49,7 @@ def true_turn_ratio(model: MotionModel, drives: Drives, robot: int, from_s: floa
     heading = np.unwrap(drives.true_poses[robot, :, 2])
     d_true = np.diff(heading[k0:])
     d = drives.deltas[robot, k0:k0 + len(d_true)]
-    d_enc = model.m_per_tick * (d[:, 1] - d[:, 0]) / model.wheel_base_m
+    d_enc = model.m_per_tick * body_from_wheel(d, wheel_base_m=model.wheel_base_m)[:, 1]
     turning = np.abs(d_enc) > 0.4 * dt
     return float(d_true[: len(d_enc)][turning].sum() / d_enc[turning].sum())
 

@@ -257,7 +257,7 @@ def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
     """
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=keyframe_every, extra=detections.frames)
-    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y)
+    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y)
     landmarks = marker_map.to_landmark_map()
     sightings = diagonal(detections.sightings)
     at = sightings.with_index(np.searchsorted(kf, sightings.index)).by_index()

@@ -67,6 +67,7 @@ from lti_motion.app.route import (
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
 from lti_motion.frames import FrameLog
+from lti_motion.kinematics import body_from_wheel
 from lti_motion.model import MotionModel
 
 #: Which fault each alarm kind answers (for the delay column).
@@ -148,7 +149,7 @@ class MonitoredDrive(Odometry):
         # the policy's data: commands and encoder speeds in the model in use's scale
         rm = self.recal.model
         wheel = d * rm.m_per_tick / rm.dt_s
-        self.recal.add(t, cmd, np.array([wheel.mean(), (wheel[1] - wheel[0]) / rm.wheel_base_m]))
+        self.recal.add(t, cmd, body_from_wheel(wheel, wheel_base_m=rm.wheel_base_m))
         if self.recal.scale_waiting:
             sc = self.scale
             self.recal.update_scale(t, sc.scale_ratio[0], sc.scale_ratio_std[0],

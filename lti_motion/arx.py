@@ -717,8 +717,8 @@ class RecursiveARX:
         """Current ``P`` (copy)."""
         return self._p.copy()
 
-    def update(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """One sample: returns the a-priori prediction of ``y`` (2,).
+    def update(self, cmd_m_s: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+        """One sample: returns the a-priori prediction of ``speeds`` (2,).
 
         The same update as :meth:`update_many` on one row, with the regressor
         taken straight from the stored history (no regression matrix built).
@@ -726,50 +726,52 @@ class RecursiveARX:
         Raises
         ------
         ShapeError
-            If ``u`` or ``y`` is not of shape (2,).
+            If ``cmd_m_s`` or ``speeds`` is not of shape (2,).
         NonFiniteError
             If either holds NaN or inf.
         """
-        u = np.asarray(u, dtype=float)
-        y = np.asarray(y, dtype=float)
-        if u.shape != (2,) or y.shape != (2,):
-            raise ShapeError(f"update() expects u and y of shape (2,), got {u.shape} and {y.shape}")
-        if not (np.isfinite(u).all() and np.isfinite(y).all()):
-            raise NonFiniteError(f"update() got non-finite samples u={u}, y={y}")
+        cmd_m_s = np.asarray(cmd_m_s, dtype=float)
+        speeds = np.asarray(speeds, dtype=float)
+        if cmd_m_s.shape != (2,) or speeds.shape != (2,):
+            raise ShapeError(f"update() expects cmd_m_s and speeds of shape (2,), got "
+                             f"{cmd_m_s.shape} and {speeds.shape}")
+        if not (np.isfinite(cmd_m_s).all() and np.isfinite(speeds).all()):
+            raise NonFiniteError(f"update() got non-finite samples cmd_m_s={cmd_m_s}, "
+                                 f"speeds={speeds}")
         u_now = self._u_now
         u_now[:-1] = self._u
-        u_now[-1] = u
+        u_now[-1] = cmd_m_s
         phi = np.concatenate([u_now[self._u_rows].ravel(), self._y[self._y_rows].ravel()])
-        self._theta, self._p, err = _rls_step(self._theta, self._p, phi, y, self.lam)
+        self._theta, self._p, err = _rls_step(self._theta, self._p, phi, speeds, self.lam)
         self._sum_ee = self.lam * self._sum_ee + np.outer(err, err)
         self._weight = self.lam * self._weight + 1.0
         self._u[:-1] = self._u[1:]
-        self._u[-1] = u
+        self._u[-1] = cmd_m_s
         self._y[:-1] = self._y[1:]
-        self._y[-1] = y
+        self._y[-1] = speeds
         self.n_updates += 1
-        return y - err
+        return speeds - err
 
-    def update_many(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def update_many(self, cmd_m_s: np.ndarray, speeds: np.ndarray) -> np.ndarray:
         """Update with consecutive samples ``u, y`` (n, 2); returns the a-priori predictions."""
-        ((u, y),) = check_runs([(u, y)])
+        ((cmd_m_s, speeds),) = check_runs([(cmd_m_s, speeds)])
         h = self._hist
-        uu, yy = np.concatenate([self._u, u]), np.concatenate([self._y, y])
+        uu, yy = np.concatenate([self._u, cmd_m_s]), np.concatenate([self._y, speeds])
         phi = np.ascontiguousarray(regression_matrix(
             [(uu, yy)], u_lags=range(self.delay, self.delay + self.nb),
             y_lags=range(1, self.na + 1), start=h)[:, :-2])
         theta, p, lam = self._theta, self._p, self.lam
-        err = np.empty((len(u), 2))
-        for k in range(len(u)):  # inherently sequential; the body is one small update
-            theta, p, err[k] = _rls_step(theta, p, phi[k], y[k], lam)
+        err = np.empty((len(cmd_m_s), 2))
+        for k in range(len(cmd_m_s)):  # inherently sequential; the body is one small update
+            theta, p, err[k] = _rls_step(theta, p, phi[k], speeds[k], lam)
         self._theta, self._p = theta, p
-        w = lam ** np.arange(len(u) - 1, -1, -1.0)
-        decay = lam ** len(u)
+        w = lam ** np.arange(len(cmd_m_s) - 1, -1, -1.0)
+        decay = lam ** len(cmd_m_s)
         self._sum_ee = decay * self._sum_ee + (err * w[:, None]).T @ err
         self._weight = decay * self._weight + w.sum()
         self._u, self._y = uu[len(uu) - h :], yy[len(yy) - h :]
-        self.n_updates += len(u)
-        return y - err
+        self.n_updates += len(cmd_m_s)
+        return speeds - err
 
     def to_fit(self) -> ArxFit:
         """The current estimate as an :class:`ArxFit` (rank and conditioning from ``P``)."""

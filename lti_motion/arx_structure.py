@@ -38,13 +38,13 @@ import numpy as np
 
 from lti_motion.arx import ArxFit, _split_theta
 from lti_motion.exceptions import ShapeError
+from lti_motion.kinematics import body_from_wheel_matrix
 
 __all__ = [
     "dc_gain",
     "nearest_servo_gain",
     "restrict_dc_gain",
     "servo_dc_gain",
-    "wheel_to_body_matrix",
 ]
 
 
@@ -71,19 +71,6 @@ def dc_gain(fit: ArxFit) -> np.ndarray:
     [[0.5, 0.0], [0.0, 0.5]]
     """
     return np.linalg.solve(np.eye(2) - fit.a.sum(axis=0), fit.b.sum(axis=0))
-
-
-def wheel_to_body_matrix(wheel_base_m: float) -> np.ndarray:
-    """``M`` with ``(v, w) = M (L, R)`` (READING-NOTES, Signals; paper section II.A).
-
-    Examples
-    --------
-    >>> wheel_to_body_matrix(0.25).tolist()
-    [[0.5, 0.5], [-4.0, 4.0]]
-    """
-    if not wheel_base_m > 0:
-        raise ValueError(f"wheel_base_m must be positive, got {wheel_base_m}")
-    return np.array([[0.5, 0.5], [-1.0 / wheel_base_m, 1.0 / wheel_base_m]])
 
 
 def servo_dc_gain(fit: ArxFit, *, wheel_base_m: float) -> tuple[np.ndarray, float]:
@@ -152,7 +139,7 @@ def nearest_servo_gain(gain: np.ndarray, *, wheel_base_m: float) -> tuple[np.nda
     g = np.asarray(gain, float)
     if g.shape != (2, 2):
         raise ShapeError(f"gain must have shape (2, 2), got {g.shape}")
-    m = wheel_to_body_matrix(wheel_base_m)
+    m = body_from_wheel_matrix(wheel_base_m)
     c = float(np.trace(np.linalg.solve(m, g)) / 2.0)
     return c * m, c
 

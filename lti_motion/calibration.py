@@ -37,7 +37,7 @@ __all__ = [
     "speeds_from_log",
 ]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 
 class Robot(Protocol):
@@ -128,7 +128,7 @@ class Calibration:
     logs: dict[str, FrameLog] = field(repr=False)
 
 
-def drive(robot: Robot, commands_m_s: np.ndarray, *,
+def drive(robot: Robot, cmd_m_s: np.ndarray, *,
           progress: Callable[[int, int], None] | None = None) -> FrameLog:
     """Send one command pair per sensor period and collect the frames.
 
@@ -139,7 +139,7 @@ def drive(robot: Robot, commands_m_s: np.ndarray, *,
         ``run`` is used when it has one (the same frames, faster). A robot
         with a ``log_meta()`` method adds what it returns to the log's meta
         (the serial driver: port, baud, link counters).
-    commands_m_s : array_like, shape (n, 2)
+    cmd_m_s : array_like, shape (n, 2)
         Wheel commands (left, right) [m/s], ``n >= 1``.
     progress : callable, optional
         Called as ``progress(done, total)`` every 100 periods and at the end.
@@ -161,24 +161,24 @@ def drive(robot: Robot, commands_m_s: np.ndarray, *,
     >>> len(log), bool(log.ticks[-1, 0] > 0)
     (10, True)
     """
-    commands_m_s = np.asarray(commands_m_s, dtype=float)
-    if commands_m_s.ndim != 2 or commands_m_s.shape[1] != 2 or len(commands_m_s) == 0:
+    cmd_m_s = np.asarray(cmd_m_s, dtype=float)
+    if cmd_m_s.ndim != 2 or cmd_m_s.shape[1] != 2 or len(cmd_m_s) == 0:
         raise ValueError(
-            f"commands must have shape (n, 2) with n >= 1, got {commands_m_s.shape}")
-    if not np.all(np.isfinite(commands_m_s)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(commands_m_s))[0])
+            f"commands must have shape (n, 2) with n >= 1, got {cmd_m_s.shape}")
+    if not np.all(np.isfinite(cmd_m_s)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(cmd_m_s))[0])
         raise ValueError(f"commands must be finite; first bad value at index {bad}")
-    n = len(commands_m_s)
+    n = len(cmd_m_s)
     meta = {"source": type(robot).__name__, "n_commands": n}
     if hasattr(robot, "log_meta"):
         meta.update(robot.log_meta())
     if hasattr(robot, "run") and not getattr(robot, "batch", False):
-        out = robot.run(commands_m_s)
+        out = robot.run(cmd_m_s)
         if progress is not None:
             progress(n, n)
         return replace(out, meta={**out.meta, **meta})
     frames = []
-    for k, cmd in enumerate(commands_m_s):
+    for k, cmd in enumerate(cmd_m_s):
         frames.append(robot.step(cmd))
         if progress is not None and (k % 100 == 99 or k == n - 1):
             progress(k + 1, n)
@@ -200,9 +200,9 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
 
     Returns
     -------
-    u : ndarray, shape (n - 1, 2)
+    cmd_m_s : ndarray, shape (n - 1, 2)
         Wheel commands (left, right) [m/s] of periods ``1 .. n - 1``.
-    y : ndarray, shape (n - 1, 2)
+    speeds : ndarray, shape (n - 1, 2)
         Body speeds (v [m/s], w [rad/s]) over the same periods.
     """
     t_s = stream_clock(log.t_s, log.dt_s)
@@ -263,14 +263,14 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     rotation = rotation_period_ticks(rot_log.light_bump[rot_log.valid],
                                      ticks[:, 1] - ticks[:, 0])
     scale = encoder_scale_m_per_tick(rotation.period_ticks, wheel_base_m=wheel_base_m)
-    log.info("encoder scale %.6g m/tick from a period of %.1f ticks (confidence %.3f)",
+    _log.info("encoder scale %.6g m/tick from a period of %.1f ticks (confidence %.3f)",
              scale, rotation.period_ticks, rotation.confidence)
 
     steps = step_sequence(amplitude_m_s=plan.step_amplitude_m_s, hold_s=plan.step_hold_s,
                           rest_s=plan.step_rest_s, dt_s=dt)
     if before_stage is not None:
         before_stage("steps")
-    step_log = drive(robot, np.concatenate([rest, steps.commands_m_s]), progress=stage("steps"))
+    step_log = drive(robot, np.concatenate([rest, steps.cmd_m_s]), progress=stage("steps"))
     u_s, y_s = speeds_from_log(step_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
     lead = len(rest) - 1        # speeds_from_log drops the first frame
     u_s, y_s = u_s[lead:], y_s[lead:]

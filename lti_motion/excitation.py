@@ -68,11 +68,11 @@ class StepSequence:
 
     Attributes
     ----------
-    commands_m_s : ndarray, shape (n, 2)
+    cmd_m_s : ndarray, shape (n, 2)
         Wheel-speed commands ``(L, R)`` [m/s].
     left_on, left_off, right_on, right_off : slice
         Sample ranges of the four phases: left motor on, left off (robot comes
-        to rest), right motor on, right off. ``commands_m_s[seq.left_on]``
+        to rest), right motor on, right off. ``cmd_m_s[seq.left_on]``
         selects a phase.
     amplitude_m_s : float
         Step size [m/s].
@@ -80,7 +80,7 @@ class StepSequence:
         Sample period [s].
     """
 
-    commands_m_s: np.ndarray
+    cmd_m_s: np.ndarray
     left_on: slice
     left_off: slice
     right_on: slice
@@ -131,7 +131,7 @@ def step_sequence(
     Examples
     --------
     >>> seq = step_sequence(amplitude_m_s=0.2, hold_s=0.06, rest_s=0.03, dt_s=0.015)
-    >>> seq.commands_m_s[:, 0].tolist()
+    >>> seq.cmd_m_s[:, 0].tolist()
     [0.2, 0.2, 0.2, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     >>> seq.right_on
     slice(6, 10, None)
@@ -146,7 +146,7 @@ def step_sequence(
     commands[:n_on, 0] = amp
     commands[n_on + n_off : 2 * n_on + n_off, 1] = amp
     return StepSequence(
-        commands_m_s=commands,
+        cmd_m_s=commands,
         left_on=slice(0, n_on),
         left_off=slice(n_on, n_on + n_off),
         right_on=slice(n_on + n_off, 2 * n_on + n_off),

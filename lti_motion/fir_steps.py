@@ -104,7 +104,7 @@ def fir_from_steps(
     Parameters
     ----------
     u : ndarray, shape (n, 2)
-        Commands actually sent [m/s] (for example ``sequence.commands_m_s``).
+        Commands actually sent [m/s] (for example ``sequence.cmd_m_s``).
     y : ndarray, shape (n, 2)
         Measured body speeds ``(v, w)`` [m/s, rad/s].
     phases : StepSequence or four slices
@@ -191,7 +191,7 @@ def fir_from_steps(
     --------
     >>> from lti_motion.excitation import step_sequence
     >>> seq = step_sequence(amplitude_m_s=0.2, hold_s=0.3, rest_s=0.3, dt_s=0.015)
-    >>> u = seq.commands_m_s
+    >>> u = seq.cmd_m_s
     >>> y = np.zeros_like(u)
     >>> y[3:, 0] = 0.5 * (u[:-3, 0] + u[:-3, 1]); y[3:, 1] = (u[:-3, 1] - u[:-3, 0]) / 0.235
     >>> fit = fir_from_steps(u, y, phases=seq)

@@ -33,11 +33,13 @@ from lti_motion.exceptions import NonFiniteError, ShapeError
 
 __all__ = [
     "body_from_wheel",
+    "body_from_wheel_matrix",
     "integrate_poses",
     "pose_step",
     "pose_step_jacobians",
     "sinc_and_derivative",
     "wheel_from_body",
+    "wheel_from_body_matrix",
     "wrap_angle",
 ]
 
@@ -123,12 +125,12 @@ def body_from_wheel(wheel_m_s: np.ndarray, *, wheel_base_m: float) -> np.ndarray
     return np.stack([0.5 * (right + left), (right - left) / b], axis=-1)
 
 
-def wheel_from_body(body: np.ndarray, *, wheel_base_m: float) -> np.ndarray:
+def wheel_from_body(speeds: np.ndarray, *, wheel_base_m: float) -> np.ndarray:
     """Wheel speeds from body speeds; the inverse of :func:`body_from_wheel`.
 
     Parameters
     ----------
-    body : array_like, shape (..., 2)
+    speeds : array_like, shape (..., 2)
         Body speeds ``(v [m/s], w [rad/s])``.
     wheel_base_m : float
         Distance between the wheels' contact points ``b`` [m].
@@ -151,9 +153,38 @@ def wheel_from_body(body: np.ndarray, *, wheel_base_m: float) -> np.ndarray:
     [0.1, 0.3]
     """
     b = _check_wheel_base(wheel_base_m)
-    body = _last_axis(np.asarray(body, dtype=float), 2, "body", "(v, w)")
-    v, w = body[..., 0], body[..., 1]
+    speeds = _last_axis(np.asarray(speeds, dtype=float), 2, "body", "(v, w)")
+    v, w = speeds[..., 0], speeds[..., 1]
     return np.stack([v - 0.5 * b * w, v + 0.5 * b * w], axis=-1)
+
+
+def body_from_wheel_matrix(wheel_base_m: float) -> np.ndarray:
+    """``M`` with ``(v, w) = M (L, R)``: :func:`body_from_wheel` as a matrix, shape (2, 2).
+
+    Raises
+    ------
+    ValueError
+        If ``wheel_base_m`` is not positive.
+
+    Examples
+    --------
+    >>> body_from_wheel_matrix(0.25).tolist()
+    [[0.5, 0.5], [-4.0, 4.0]]
+    """
+    b = _check_wheel_base(wheel_base_m)
+    return np.array([[0.5, 0.5], [-1.0 / b, 1.0 / b]])
+
+
+def wheel_from_body_matrix(wheel_base_m: float) -> np.ndarray:
+    """``M^-1`` with ``(L, R) = M^-1 (v, w)``: :func:`wheel_from_body` as a matrix, (2, 2).
+
+    Examples
+    --------
+    >>> wheel_from_body_matrix(0.25).tolist()
+    [[1.0, -0.125], [1.0, 0.125]]
+    """
+    b = _check_wheel_base(wheel_base_m)
+    return np.array([[1.0, -0.5 * b], [1.0, 0.5 * b]])
 
 
 def _sinc_half(h: np.ndarray) -> np.ndarray:

@@ -341,17 +341,17 @@ class MotionModel:
         return dataclasses.replace(self, **changes)
 
     # -- prediction ------------------------------------------------------------------------
-    def propagate(self, u: np.ndarray, *, z0: np.ndarray | None = None
+    def propagate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Free run from ``z0``: outputs ``(..., n, 2)`` and the state after the last command."""
-        return simulate_state_space(self.A, self.B, self.C, self.D, _commands(u), z0=z0)
+        return simulate_state_space(self.A, self.B, self.C, self.D, _commands(cmd_m_s), z0=z0)
 
-    def simulate(self, u: np.ndarray, *, z0: np.ndarray | None = None) -> np.ndarray:
+    def simulate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None) -> np.ndarray:
         """Sensor-less prediction: body speeds from commands only.
 
         Parameters
         ----------
-        u : ndarray, shape (..., n, 2)
+        cmd_m_s : ndarray, shape (..., n, 2)
             Commands ``(L, R)`` [m/s]; leading axes are independent sequences.
         z0 : ndarray, shape (nz,) or (..., nz), optional
             Initial state (zeros: robot at rest); see :meth:`state_from_data`.
@@ -375,9 +375,9 @@ class MotionModel:
         >>> (model.simulate(np.tile([0.2, 0.2], (3, 1))).round(12) + 0.0).tolist()
         [[0.0, 0.0], [0.2, 0.0], [0.2, 0.0]]
         """
-        return self.propagate(u, z0=z0)[0]
+        return self.propagate(cmd_m_s, z0=z0)[0]
 
-    def predict_poses(self, u: np.ndarray, *, initial_pose: np.ndarray | None = None,
+    def predict_poses(self, cmd_m_s: np.ndarray, *, initial_pose: np.ndarray | None = None,
                       z0: np.ndarray | None = None) -> np.ndarray:
         """Sensor-less poses: :meth:`simulate`, then paper eq. 11 (``integrate_poses``).
 
@@ -386,26 +386,27 @@ class MotionModel:
         ndarray, shape (..., n + 1, 3)
             ``(x [m], y [m], theta [rad])``, starting at ``initial_pose``.
         """
-        return integrate_poses(self.simulate(u, z0=z0), self.dt_s, initial_pose=initial_pose)
+        return integrate_poses(self.simulate(cmd_m_s, z0=z0), self.dt_s,
+                               initial_pose=initial_pose)
 
-    def _predictor(self, u: np.ndarray, y_measured: np.ndarray, z0: np.ndarray | None):
-        u, y = _commands(u), np.asarray(y_measured, dtype=float)
+    def _predictor(self, cmd_m_s: np.ndarray, speeds: np.ndarray, z0: np.ndarray | None):
+        u, y = _commands(cmd_m_s), np.asarray(speeds, dtype=float)
         if y.shape != u.shape:
-            raise ShapeError(f"u has shape {u.shape} but y_measured has shape {y.shape}; they "
+            raise ShapeError(f"cmd_m_s has shape {u.shape} but speeds has shape {y.shape}; they "
                              "must match")
-        _finite(y, "y_measured")
+        _finite(y, "speeds")
         pa, pb, pc, pd = one_step_predictor(self.state_space)
         return simulate_state_space(pa, pb, pc, pd, np.concatenate([u, y], axis=-1), z0=z0)
 
-    def predict_one_step(self, u: np.ndarray, y_measured: np.ndarray, *,
+    def predict_one_step(self, cmd_m_s: np.ndarray, speeds: np.ndarray, *,
                          z0: np.ndarray | None = None) -> np.ndarray:
         """Hybrid (filter) mode: each prediction uses the measured past outputs.
 
         Parameters
         ----------
-        u : ndarray, shape (..., n, 2)
+        cmd_m_s : ndarray, shape (..., n, 2)
             Commands [m/s].
-        y_measured : ndarray, same shape
+        speeds : ndarray, same shape
             Measured body speeds (encoders) [m/s, rad/s].
         z0 : ndarray, optional
             State before the first sample (zeros: at rest); forgotten after
@@ -418,16 +419,16 @@ class MotionModel:
             ``z[n+1] = (A - K C) z + (B - K D) u + K y_meas`` (Ljung 1999,
             section 4.3). Readings far from it are suspect.
         """
-        return self._predictor(u, y_measured, z0)[0]
+        return self._predictor(cmd_m_s, speeds, z0)[0]
 
-    def state_from_data(self, u: np.ndarray, y_measured: np.ndarray, *,
+    def state_from_data(self, cmd_m_s: np.ndarray, speeds: np.ndarray, *,
                         z0: np.ndarray | None = None) -> np.ndarray:
         """The state after measured data (predictor run), to start a free run from.
 
         Exact (independent of ``z0``) once the data is at least
         ``n_states // 2`` samples long.
         """
-        return self._predictor(u, y_measured, z0)[1]
+        return self._predictor(cmd_m_s, speeds, z0)[1]
 
     def output_error_covariance(self, n_steps: int) -> np.ndarray:
         """Predicted covariance of the free-run speed error, ``(n_steps, 2, 2)``.

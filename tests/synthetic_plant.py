@@ -3,11 +3,11 @@
 
 Shared by tests/lti_motion/test_arx.py, test_fir.py and test_model.py.
 """
-
 import numpy as np
 from scipy.signal import lfilter
 
 from lti_motion.excitation import random_held_normal
+from lti_motion.kinematics import body_from_wheel
 
 DT, BASE, DELAY = 0.015, 0.235, 4
 NOISE = (0.003, 0.02)  # std of v [m/s] and w [rad/s]
@@ -33,7 +33,7 @@ def plant(u, rng=None, *, saturation=None, dead_zone=None):
     delayed[DELAY:] = u[:-DELAY]
     wheels = np.column_stack([lfilter(b, a, delayed[:, i]) for i, (b, a) in
                               enumerate(wheel_filters())])
-    y = np.column_stack([(wheels[:, 1] + wheels[:, 0]) / 2, (wheels[:, 1] - wheels[:, 0]) / BASE])
+    y = body_from_wheel(wheels, wheel_base_m=BASE)
     return y if rng is None else y + rng.normal(size=y.shape) * NOISE
 
 

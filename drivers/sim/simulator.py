@@ -40,7 +40,7 @@ from lti_motion.frames import FrameLog, SensorFrame
 
 __all__ = ["Simulator", "ground_m_per_tick"]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 _FLOOR_NAMES = tuple(FLOORS)
 _BLOCK = 1024           # periods per block of pre-drawn noise

@@ -51,9 +51,9 @@ ground speeds are::
     p[k] = pose_step(p[k-1], g[k])                      (paper eq. 11)
     c[k] = c[k-1] + b[k],                                b ~ N(0, diag(q_c) dt)
 
-``c = (k_v, k_w)`` are what a scale calibration leaves behind (on the
-simulator's hard floor 0.45% of ``v`` and -0.25% of ``w``: wheel base, creep
-on turns); being systematic they grow the pose error linearly in distance, not
+``c = (k_v, k_w)`` are what a scale calibration leaves behind (a few tenths
+of a percent on the simulator, ``docs/ekf.md``: wheel base, creep on turns);
+being systematic they grow the pose error linearly in distance, not
 as a random walk, so they are states (odometry auto-calibration, Larsen et al.
 1998), slow random walks with a prior of 1% (:class:`ScaleErrors`). Encoders
 cannot observe them: without absolute measurements their estimate stays 0
@@ -339,7 +339,7 @@ def _check_command(u: np.ndarray) -> np.ndarray:
     return u
 
 
-def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: bool = False,
+def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumulate: bool = False,
                   out_F: np.ndarray | None = None, out_Q: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One prediction: the next state, the transition Jacobian and the process noise.
@@ -348,7 +348,7 @@ def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: 
     ----------
     x : ndarray, shape (n,)
         State after period ``k-1`` (``(n, 1)`` is accepted).
-    u : ndarray, shape (2,)
+    cmd_m_s : ndarray, shape (2,)
         Wheel commands ``(left, right)`` [m/s] of period ``k``.
     fm : FilterModel
         The model's filter layout.
@@ -361,7 +361,7 @@ def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: 
         Buffers to write ``F`` and ``Q`` into, with no allocation. ``out_F``
         must hold an earlier ``F`` for the same ``fm`` (or a copy of
         ``fm.F_template``): only its first three rows, which depend on ``x``
-        and ``u``, are written. ``out_Q`` is overwritten entirely.
+        and ``cmd_m_s``, are written. ``out_Q`` is overwritten entirely.
 
     Returns
     -------
@@ -387,11 +387,11 @@ def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: 
     arithmetic (per-step cost).
     """
     x = _check_state(x, fm)
-    u = _check_command(u)
+    cmd_m_s = _check_command(cmd_m_s)
     nz, n, dt = fm.nz, fm.n, fm.dt_s
     x_new = np.empty(n)
     tail = fm.ACD @ x[_Z0:_Z0 + nz]
-    tail += fm.BD @ u                       # (A z + B u, C z + D u)
+    tail += fm.BD @ cmd_m_s                       # (A z + B u, C z + D u)
     x_new[_Z0:] = tail
     v, w = tail[nz:].tolist()
     if accumulate:
@@ -426,19 +426,19 @@ def predict_terms(x: np.ndarray, u: np.ndarray, fm: FilterModel, *, accumulate: 
     return x_new, F, Q
 
 
-def state_transition(x: np.ndarray, u: np.ndarray, fm: FilterModel) -> np.ndarray:
+def state_transition(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel) -> np.ndarray:
     """The next state ``f(x, u)``, shape (n,); see :func:`predict_terms`."""
-    return predict_terms(x, u, fm)[0]
+    return predict_terms(x, cmd_m_s, fm)[0]
 
 
-def transition_jacobian(x: np.ndarray, u: np.ndarray, fm: FilterModel) -> np.ndarray:
+def transition_jacobian(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel) -> np.ndarray:
     """``F = df/dx``, shape (n, n); see :func:`predict_terms`."""
-    return predict_terms(x, u, fm)[1]
+    return predict_terms(x, cmd_m_s, fm)[1]
 
 
-def process_noise(x: np.ndarray, u: np.ndarray, fm: FilterModel) -> np.ndarray:
+def process_noise(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel) -> np.ndarray:
     """Process-noise covariance ``Q``, shape (n, n); see :func:`predict_terms`."""
-    return predict_terms(x, u, fm)[2]
+    return predict_terms(x, cmd_m_s, fm)[2]
 
 
 def propagate_covariance(P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndarray:

@@ -268,11 +268,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         return self.x[SCALES].copy()
 
     # -- predict ---------------------------------------------------------------------------------
-    def predict_x(self, u: np.ndarray = 0) -> None:
+    def predict_x(self, cmd_m_s: np.ndarray = 0) -> None:
         """filterpy's hook: ``x = f(x, u)`` (:func:`~fusion.ekf.functions.state_transition`)."""
-        self.x = state_transition(self.x, u, self.fm)
+        self.x = state_transition(self.x, cmd_m_s, self.fm)
 
-    def predict(self, u: np.ndarray) -> None:
+    def predict(self, cmd_m_s: np.ndarray) -> None:
         """Advance one sensor period with wheel commands ``u = (L, R)`` [m/s], shape (2,).
 
         Sets ``x``, ``P``, ``F``, ``Q``, ``x_prior``, ``P_prior`` and adds
@@ -282,13 +282,13 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         Raises
         ------
         MeasurementShapeError, NonFiniteInputError
-            If ``u`` is not two finite numbers.
+            If ``cmd_m_s`` is not two finite numbers.
         """
         f_buf, q_buf = self._buffers
         # after a gated or missing encoder reading the speed state sums the periods since the
         # last fused counts (fusion.ekf.functions, "Gated readings")
         accumulate = self._have_ref and self._periods_since_ref > 0
-        x, F, Q = predict_terms(self.x, u, self.fm, accumulate=accumulate, out_F=f_buf,
+        x, F, Q = predict_terms(self.x, cmd_m_s, self.fm, accumulate=accumulate, out_F=f_buf,
                                 out_Q=q_buf)
         P = propagate_covariance(self.P, F, Q)
         # swap buffers so self.F / self.Q keep this step's matrices
@@ -397,7 +397,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._last_delta = (dl, dr)
         return jump
 
-    def update_speeds(self, y_m_s: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
+    def update_speeds(self, speeds: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
         """Fuse measured body speeds ``(v [m/s], w [rad/s])`` of the period just predicted.
 
         The linear measurement ``y = s = C z + D u + e`` (gated; NaN skipped),
@@ -407,14 +407,14 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         Raises
         ------
         MeasurementShapeError
-            If ``y_m_s`` is not (2,).
+            If ``speeds`` is not (2,).
         FilterOptionError
             If the filter already fuses encoder counts.
         """
         if self._have_ref:
             raise FilterOptionError("this filter fuses encoder counts (update_encoders); "
                                     "use one of update_encoders and update_speeds, not both")
-        y = np.array(y_m_s, dtype=float)
+        y = np.array(speeds, dtype=float)
         if y.shape != (2,):
             raise MeasurementShapeError(f"expected body speeds of shape (2,) (v, w), got "
                                         f"{y.shape}")

@@ -100,19 +100,19 @@ class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.x = np.array(initial_pose, float)
         self.P = np.diag(np.square(pose_std))
 
-    def predict_x(self, u: np.ndarray = 0) -> None:
+    def predict_x(self, speeds: np.ndarray = 0) -> None:
         """The arc of one period (filterpy's hook for a non-linear ``f``)."""
-        self.x = pose_step(self.x, u[0], u[1], self.dt_s)
+        self.x = pose_step(self.x, speeds[0], speeds[1], self.dt_s)
 
-    def predict(self, u: np.ndarray = 0, B: None = None, F: None = None,
+    def predict(self, speeds: np.ndarray = 0, B: None = None, F: None = None,
                 Q: None = None) -> None:
-        """One period with commanded ``u = (v [m/s], w [rad/s])``; adds ``dt_s`` to ``t_s``.
+        """One period at body speeds ``speeds = (v [m/s], w [rad/s])``; adds ``dt_s`` to ``t_s``.
 
         ``F = d pose' / d pose`` and ``Q = V M V^T`` with ``V = d pose' / d (v, w)``
         (Thrun et al. 2005, table 7.2, lines 3-7).
         """
-        f_pose, f_speed = pose_step_jacobians(self.x, u[0], u[1], self.dt_s)
+        f_pose, f_speed = pose_step_jacobians(self.x, speeds[0], speeds[1], self.dt_s)
         self.F = f_pose
         self.Q = f_speed @ self.speed_cov @ f_speed.T
-        super().predict(u=u)
+        super().predict(u=speeds)
         self.t_s += self.dt_s

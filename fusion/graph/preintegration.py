@@ -398,8 +398,8 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     )
 
 
-def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarray,
-                       mode: SpeedMode = "free_run", y_measured: np.ndarray | None = None,
+def preintegrate_model(model: MotionModel, cmd_m_s: np.ndarray, *, keyframes: np.ndarray,
+                       mode: SpeedMode = "free_run", measured_speeds: np.ndarray | None = None,
                        z0: np.ndarray | None = None, covariance_scale: float = 1.0,
                        speed_covariance: np.ndarray | TransientSpeedCovariance | None = None,
                        calibration: tuple[float, float] | np.ndarray = (1.0, 1.0),
@@ -411,7 +411,7 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
     ----------
     model : MotionModel
         The calibrated model (``dt_s`` is its sample period).
-    u : array_like, shape (n, 2)
+    cmd_m_s : array_like, shape (n, 2)
         Wheel commands ``(L, R)`` [m/s], one per sample.
     keyframes : array_like of int, shape (m + 1,)
         Strictly increasing sample indices in ``[0, n]``.
@@ -420,8 +420,8 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
         encoders (:meth:`MotionModel.predict_one_step`), or the model's
         Kalman-filtered speeds given the encoders
         (:func:`fusion.graph.speed_noise.filtered_speeds`, with their per-sample
-        error covariance, slip included). The last two need ``y_measured``.
-    y_measured : array_like, shape (n, 2), optional
+        error covariance, slip included). The last two need ``measured_speeds``.
+    measured_speeds : array_like, shape (n, 2), optional
         Encoder body speeds, for ``mode="one_step"`` and ``"filtered"``.
     z0 : array_like, shape (nz,), optional
         Model state before sample 0 (zeros: at rest).
@@ -450,19 +450,20 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
     Raises
     ------
     GraphInputError
-        For an unknown mode, a missing ``y_measured``, a non-positive
+        For an unknown mode, a missing ``measured_speeds``, a non-positive
         ``covariance_scale``; and as :func:`preintegrate`.
     """
-    if mode in ("one_step", "filtered") and y_measured is None:
-        raise GraphInputError(f"mode={mode!r} needs y_measured (encoder speeds, shape (n, 2))")
+    if mode in ("one_step", "filtered") and measured_speeds is None:
+        raise GraphInputError(f"mode={mode!r} needs measured_speeds (encoder body speeds, "
+                              "shape (n, 2))")
     if mode == "free_run":
-        speeds = model.simulate(u, z0=z0)
+        speeds = model.simulate(cmd_m_s, z0=z0)
         phi = speed_error_covariance(model, mode=mode)
     elif mode == "one_step":
-        speeds = model.predict_one_step(u, y_measured, z0=z0)
+        speeds = model.predict_one_step(cmd_m_s, measured_speeds, z0=z0)
         phi = speed_error_covariance(model, mode=mode)
     elif mode == "filtered":
-        speeds, phi = filtered_speeds(model, u, y_measured, z0=z0)
+        speeds, phi = filtered_speeds(model, cmd_m_s, measured_speeds, z0=z0)
     else:
         raise GraphInputError(f"mode must be 'free_run', 'one_step' or 'filtered', got {mode!r}")
     scale = float(covariance_scale)
@@ -470,7 +471,7 @@ def preintegrate_model(model: MotionModel, u: np.ndarray, *, keyframes: np.ndarr
         raise GraphInputError(f"covariance_scale must be positive and finite, got "
                               f"{covariance_scale}")
     if isinstance(speed_covariance, TransientSpeedCovariance):
-        phi = speed_covariance.per_sample(u, speeds, wheel_base_m=model.wheel_base_m,
+        phi = speed_covariance.per_sample(cmd_m_s, speeds, wheel_base_m=model.wheel_base_m,
                                           dt_s=model.dt_s)
     elif speed_covariance is not None:
         phi = np.asarray(speed_covariance, dtype=float)

@@ -360,7 +360,7 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     frames = np.zeros(0, np.int64) if observations is None else observations.index
     kf = log_keyframes(len(u), every=keyframe_every, extra=frames)
-    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, y_measured=y,
+    pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y,
                              covariance_scale=covariance_scale,
                              speed_covariance=speed_covariance)
     obs = None if observations is None else observations.with_index(

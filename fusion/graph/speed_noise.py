@@ -332,7 +332,7 @@ def slip_covariance(speeds: np.ndarray, *, slip: SlipNoise | None = None) -> np.
     return out
 
 
-def filtered_speeds(model: MotionModel, u: np.ndarray, y_measured: np.ndarray, *,
+def filtered_speeds(model: MotionModel, cmd_m_s: np.ndarray, speeds: np.ndarray, *,
                     encoder_std: tuple[float, float] = DEFAULT_ENCODER_STD,
                     slip: SlipNoise | None = None,
                     z0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -342,9 +342,9 @@ def filtered_speeds(model: MotionModel, u: np.ndarray, y_measured: np.ndarray, *
     ----------
     model : MotionModel
         The calibrated model (innovations form).
-    u : array_like, shape (n, 2)
+    cmd_m_s : array_like, shape (n, 2)
         Wheel commands [m/s].
-    y_measured : array_like, shape (n, 2)
+    speeds : array_like, shape (n, 2)
         Encoder body speeds [m/s, rad/s].
     encoder_std : (float, float)
         Noise of a reading beyond the model's ``R`` (:data:`DEFAULT_ENCODER_STD`).
@@ -373,9 +373,9 @@ def filtered_speeds(model: MotionModel, u: np.ndarray, y_measured: np.ndarray, *
     reading, up to ``R_enc``), so the smoother's motion factors carry the
     same information as the EKF's encoder updates.
     """
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y_measured, dtype=float)
-    prior = model.predict_one_step(u, y, z0=z0)
+    cmd_m_s = np.asarray(cmd_m_s, dtype=float)
+    y = np.asarray(speeds, dtype=float)
+    prior = model.predict_one_step(cmd_m_s, y, z0=z0)
     r = np.asarray(model.R)
     r_enc = np.diag(np.square(np.asarray(encoder_std, dtype=float)))
     gain = np.linalg.solve((r + r_enc).T, r.T).T                      # R (R + R_enc)^-1

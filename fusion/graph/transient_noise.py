@@ -92,13 +92,13 @@ def _window_samples(window_s: float, dt_s: float) -> int:
     return max(1, round(window_s / dt_s))
 
 
-def mean_squared_tracking_error(u: np.ndarray, speeds: np.ndarray, *, wheel_base_m: float,
+def mean_squared_tracking_error(cmd_m_s: np.ndarray, speeds: np.ndarray, *, wheel_base_m: float,
                                 window: int) -> np.ndarray:
     """Causal moving mean of the squared distance of predicted wheel speeds from commands.
 
     Parameters
     ----------
-    u : array_like, shape (n, 2)
+    cmd_m_s : array_like, shape (n, 2)
         Wheel commands ``(L, R)`` [m/s].
     speeds : array_like, shape (n, 2)
         The model's predicted body speeds ``(v [m/s], w [rad/s])`` for the same samples.
@@ -126,17 +126,17 @@ def mean_squared_tracking_error(u: np.ndarray, speeds: np.ndarray, *, wheel_base
     >>> (e2.round(3) + 0.0).tolist()
     [0.0, 0.045, 0.09]
     """
-    u = np.asarray(u, dtype=float)
+    cmd_m_s = np.asarray(cmd_m_s, dtype=float)
     sp = np.asarray(speeds, dtype=float)
-    if u.ndim != 2 or u.shape[1] != 2 or sp.shape != u.shape:
+    if cmd_m_s.ndim != 2 or cmd_m_s.shape[1] != 2 or sp.shape != cmd_m_s.shape:
         raise MeasurementShapeError(f"expected u and speeds of the same shape (n, 2), got "
-                                    f"{u.shape} and {sp.shape}")
-    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(sp))):
+                                    f"{cmd_m_s.shape} and {sp.shape}")
+    if not (np.all(np.isfinite(cmd_m_s)) and np.all(np.isfinite(sp))):
         raise NonFiniteInputError("u or speeds hold NaN or infinite values")
     if not (np.isfinite(wheel_base_m) and wheel_base_m > 0) or int(window) < 1:
         raise ValueError(f"need a positive wheel base and window, got {wheel_base_m} and {window}")
     half = 0.5 * wheel_base_m * sp[:, 1]                       # wheels: v -+ w b / 2
-    d2 = (u[:, 0] - (sp[:, 0] - half)) ** 2 + (u[:, 1] - (sp[:, 0] + half)) ** 2
+    d2 = (cmd_m_s[:, 0] - (sp[:, 0] - half)) ** 2 + (cmd_m_s[:, 1] - (sp[:, 0] + half)) ** 2
     c = np.concatenate([[0.0], np.cumsum(d2)])
     k = np.arange(1, len(d2) + 1)
     lo = np.maximum(k - int(window), 0)
@@ -214,13 +214,13 @@ class TransientSpeedCovariance:
         """``Phi`` at the mean ``f`` of the fitting data (no slip), shape (2, 2)."""
         return self.base + self.mean_squared_tracking_m2_s2 * self.per_squared_tracking
 
-    def per_sample(self, u: np.ndarray, speeds: np.ndarray, *, wheel_base_m: float,
+    def per_sample(self, cmd_m_s: np.ndarray, speeds: np.ndarray, *, wheel_base_m: float,
                    dt_s: float) -> np.ndarray:
         """``Phi(f_k)`` plus the slip covariance for each sample, shape (n, 2, 2).
 
         Parameters
         ----------
-        u : array_like, shape (n, 2)
+        cmd_m_s : array_like, shape (n, 2)
             Wheel commands [m/s].
         speeds : array_like, shape (n, 2)
             The model's predicted body speeds for them (as in the fit: free run
@@ -230,7 +230,7 @@ class TransientSpeedCovariance:
         dt_s : float
             Sample period [s] (sets the window in samples).
         """
-        f = mean_squared_tracking_error(u, speeds, wheel_base_m=wheel_base_m,
+        f = mean_squared_tracking_error(cmd_m_s, speeds, wheel_base_m=wheel_base_m,
                                         window=_window_samples(self.window_s, dt_s))
         out = self.base + f[:, None, None] * self.per_squared_tracking
         if self.slip is not None:

@@ -67,6 +67,7 @@ from fusion.monitoring.dynamics_start import (
     start_evidence,
 )
 from lti_motion.exceptions import MissingEncoderScaleError
+from lti_motion.kinematics import body_from_wheel_matrix, wheel_from_body_matrix
 from lti_motion.model import MotionModel
 
 __all__ = [
@@ -183,11 +184,6 @@ class DynamicsNull:
     skip_windows: int = 0
 
 
-def _wheel_matrix(wheel_base_m: float) -> np.ndarray:
-    # wheel speeds (left, right) from body speeds (v, w): v -/+ w b / 2
-    return np.array([[1.0, -0.5 * wheel_base_m], [1.0, 0.5 * wheel_base_m]])
-
-
 class WindowIntegrator:
     """Window residuals of ``n_robots`` robots fed one period at a time (module docstring).
 
@@ -216,10 +212,9 @@ class WindowIntegrator:
         self.window_periods = int(window_periods)
         self.glitch_ticks = float(glitch_ticks)
         n, nz = int(n_robots), model.n_states
-        self._to_ticks = model.dt_s / model.m_per_tick * _wheel_matrix(model.wheel_base_m)
-        # (v, w) from wheel ticks: mean over 2, difference over the wheel base
-        self._from_ticks = (model.m_per_tick / model.dt_s) * np.array(
-            [[0.5, 0.5], [-1.0 / model.wheel_base_m, 1.0 / model.wheel_base_m]])
+        self._to_ticks = model.dt_s / model.m_per_tick * wheel_from_body_matrix(model.wheel_base_m)
+        self._from_ticks = (model.m_per_tick / model.dt_s) * body_from_wheel_matrix(
+            model.wheel_base_m)
         self._pa = model.A - model.K @ model.C
         self._pb = model.B - model.K @ model.D
         self._z = np.zeros((n, nz))

@@ -242,17 +242,18 @@ class Recalibrator:
         self._scale_pending: AlarmEvent | None = None
         self.history: list[RecalibrationRecord] = []
 
-    def add(self, t_s: float, u: np.ndarray, y: np.ndarray) -> None:
-        """Buffer one period: commands ``u`` (2,) [m/s], measured speeds ``y`` (2,) [m/s, rad/s].
+    def add(self, t_s: float, cmd_m_s: np.ndarray, speeds: np.ndarray) -> None:
+        """Buffer one period: wheel commands ``cmd_m_s`` (2,) [m/s] and measured body speeds
+        ``speeds`` (2,) [m/s, rad/s].
 
-        ``y`` are the encoder body speeds computed with the model in use's
+        ``speeds`` are the encoder body speeds computed with the model in use's
         ``m_per_tick`` and wheel base (:attr:`model`; after a scale
         adoption the buffered ones are rescaled to the new values). Periods
-        with NaN in ``y`` are dropped (a refit needs contiguous data; the gap
+        with NaN in ``speeds`` are dropped (a refit needs contiguous data; the gap
         is short next to the buffer). A scale alarm that has waited
         ``scale_settle_s`` ends in a rotation request here too.
         """
-        u_arr, y_arr = np.asarray(u, float), np.asarray(y, float)
+        u_arr, y_arr = np.asarray(cmd_m_s, float), np.asarray(speeds, float)
         if u_arr.shape != (2,) or y_arr.shape != (2,):
             raise MeasurementShapeError(f"expected u (2,) and y (2,), got {u_arr.shape} and "
                                         f"{y_arr.shape}")

@@ -344,15 +344,15 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
     return np.linalg.solve(L, nu)
 
 
-def one_step_innovations(model: MotionModel, u: np.ndarray, y_measured: np.ndarray
+def one_step_innovations(model: MotionModel, cmd_m_s: np.ndarray, speeds: np.ndarray
                          ) -> np.ndarray:
     """Standalone residuals ``y - yhat[n | n-1]`` of the model's hybrid predictor, (n, 2).
 
     Their covariance is the model's ``R`` (:class:`~lti_motion.model.MotionModel`, Notes);
     feed them to :meth:`ResidualMonitor.update_innovation` with ``model.R``.
     """
-    y = np.asarray(y_measured, dtype=float)
-    return y - model.predict_one_step(u, y)
+    y = np.asarray(speeds, dtype=float)
+    return y - model.predict_one_step(cmd_m_s, y)
 
 
 @dataclass

@@ -45,7 +45,7 @@ import numpy as np
 
 from fusion.noise import LandmarkNoise, SlipNoise
 from fusion.range_bearing import MIN_RANGE_M
-from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
+from lti_motion.kinematics import body_from_wheel, pose_step, pose_step_jacobians, wrap_angle
 
 __all__ = [
     "KV",
@@ -90,8 +90,7 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     """
     missing = ~np.all(np.isfinite(tick_deltas), axis=1)
     d = np.where(missing[:, None], 0.0, tick_deltas)
-    ds = m_per_tick * 0.5 * (d[:, 0] + d[:, 1])                   # [m]
-    dth = m_per_tick * (d[:, 1] - d[:, 0]) / wheel_base_m         # [rad]
+    ds, dth = m_per_tick * body_from_wheel(d, wheel_base_m=wheel_base_m).T      # [m], [rad]
     gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth
     f_pose, f_speed = pose_step_jacobians(x[:, :3], gs, gth, 1.0)
     x_new = x.copy()

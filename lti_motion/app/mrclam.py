@@ -29,7 +29,7 @@ from lti_motion.model import MotionModel, fit_arx
 
 __all__ = ["RobotResult", "evaluate_robot", "split_halves"]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 WARMUP_S = 2.0          # the start of each validation stretch only sets a model's state
 WINDOW_S = 30.0
@@ -123,7 +123,7 @@ def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1,
                 pos.append(np.linalg.norm(poses[-1, :2] - true_end[:2]))
                 head.append(abs(float(wrap_angle(poses[-1, 2] - true_end[2]))))
         end_pos[name], end_head[name] = np.array(pos), np.array(head)
-    log.info("robot %d: fit raw %s arx %s", robot.robot, fit["raw"], fit["arx"])
+    _log.info("robot %d: fit raw %s arx %s", robot.robot, fit["raw"], fit["arx"])
     return RobotResult(robot=robot.robot, fit=fit, end_position_m=end_pos,
                        end_heading_rad=end_head, arx=arx,
                        n_train_s=sum(len(s.t_s) for s in train) * dt_s,

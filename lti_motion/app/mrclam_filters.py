@@ -83,7 +83,7 @@ from lti_motion.model import COVARIANCE_JITTER, MotionModel
 __all__ = ["GATE_PROBABILITY", "FilterResult", "MotionNoise", "evaluate_filters",
            "landmark_noise_from_truth", "main", "output_error_model", "sightings_in"]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 POSE_STD = (0.05, 0.05, 0.05)   # initial (x [m], y [m], theta [rad]) standard deviations
 #: Chi-square gate probability of both filters' landmark updates (2 degrees of freedom).
@@ -290,7 +290,7 @@ def evaluate_filters(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: 
         for name, ekf in filters.items():
             gated[name] += ekf.stats.count("landmark", "gated")
     rms = {name: float(np.sqrt(np.mean(v))) for name, v in sq.items()}
-    log.info("robot %d (%s): landmark EKF RMS model %.3f m, raw %.3f m", robot.robot,
+    _log.info("robot %d (%s): landmark EKF RMS model %.3f m, raw %.3f m", robot.robot,
              motion_noise, rms["model"], rms["raw"])
     return FilterResult(robot=robot.robot, motion_noise=motion_noise, rms_m=rms,
                         nees_mean={n: float(np.mean(v)) for n, v in nees.items()},

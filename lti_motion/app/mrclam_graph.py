@@ -74,7 +74,7 @@ from lti_motion.model import MotionModel, fit_arx
 __all__ = ["GATE_PROBABILITY", "HUBER_K", "GraphResult", "evaluate_graph", "main",
            "speed_covariances"]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 #: Huber threshold [whitened sigmas]: the EKFs' gate as a distance, sqrt(chi2_2(0.999)) = 3.72.
 HUBER_K = float(np.sqrt(scipy.stats.chi2.ppf(GATE_PROBABILITY, df=2)))
@@ -217,7 +217,7 @@ def evaluate_graph(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: Mo
                 sq["online"][name].append(_rms(online, truth))
     rms = {kind: {name: float(np.sqrt(np.mean(np.concatenate(v)))) for name, v in d.items()}
            for kind, d in sq.items() if all(d.values())}
-    log.info("robot %d: graph RMS model %.3f m, raw %.3f m", robot.robot,
+    _log.info("robot %d: graph RMS model %.3f m, raw %.3f m", robot.robot,
              rms["batch"]["model"], rms["batch"]["raw"])
     return GraphResult(robot=robot.robot, rms_m=rms["batch"], rms_isam2_m=rms.get("isam2"),
                        rms_online_m=rms.get("online"), rms_dead_reckoning_m=rms["dr"],

@@ -6,7 +6,7 @@ the estimator's pose, never on the truth; at the last checkpoint (the start) it 
 where it *believes* it started. The closure offset is the true distance between the
 true start and the true stop (paper III.D). Thirty seeded runs per estimator.
 
-An *estimator* here is anything with ``reset(n_robots, pose0)`` and
+An *estimator* here is anything with ``reset(n_robots, initial_pose)`` and
 ``step(frame, cmd, observations) -> poses (N, 3)``: it sees the frame the robot reports
 (encoder counts, timestamps), the command just executed, and the landmark sensor's noisy
 range-bearing observations (one :class:`fusion.range_bearing.RangeBearing` per robot,
@@ -29,7 +29,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.frames import SensorFrame
-from lti_motion.kinematics import pose_step, wheel_from_body, wrap_angle
+from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -46,7 +46,7 @@ __all__ = [
     "drive_route",
 ]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 #: Checkpoints (x m, y m) of the closed route, starting and ending at the first;
 #: 10.3 m in all (the paper's route is "about 10 m"; its geometry is not given).
@@ -59,8 +59,8 @@ ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        """Start ``n_robots`` estimates at ``pose0`` (N, 3)."""
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        """Start ``n_robots`` estimates at ``initial_pose`` (N, 3)."""
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
              observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
@@ -87,8 +87,8 @@ class Odometry:
         self.m_per_tick = m_per_tick
         self.wheel_base_m = wheel_base_m
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
         self._ticks = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
@@ -99,8 +99,8 @@ class Odometry:
             return self.pose
         d = _tick_step(self._ticks, ticks) * self.m_per_tick
         self._ticks = ticks
-        v = 0.5 * (d[:, 0] + d[:, 1])            # displacement over the period [m]
-        w = (d[:, 1] - d[:, 0]) / self.wheel_base_m
+        # displacement [m] and turn [rad] over the period
+        v, w = body_from_wheel(d, wheel_base_m=self.wheel_base_m).T
         self.pose = pose_step(self.pose, v, w, 1.0)
         return self.pose
 
@@ -113,8 +113,8 @@ class RecordingOdometry(Odometry):
     period, and :meth:`tick_deltas` the unwrapped count changes.
     """
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        super().reset(n_robots, pose0)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        super().reset(n_robots, initial_pose)
         self.cmd: list[np.ndarray] = []
         self.ticks: list[np.ndarray] = []
         self.sightings: list = []
@@ -136,8 +136,8 @@ class SensorLess:
     def __init__(self, model: MotionModel) -> None:
         self.model = model
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
@@ -164,8 +164,8 @@ class ArxHybrid:
         self._a = m.A - m.K @ m.C
         self._b = m.B - m.K @ m.D
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
         self._ticks = None
 
@@ -178,8 +178,7 @@ class ArxHybrid:
             y_meas = y_hat
         else:
             d = _tick_step(self._ticks, ticks) * (m.m_per_tick / m.dt_s)
-            y_meas = np.stack([0.5 * (d[:, 0] + d[:, 1]),
-                               (d[:, 1] - d[:, 0]) / m.wheel_base_m], axis=1)
+            y_meas = body_from_wheel(d, wheel_base_m=m.wheel_base_m)
         self._ticks = ticks
         self.z = self.z @ self._a.T + cmd_m_s @ self._b.T + y_meas @ m.K.T
         self.pose = pose_step(self.pose, y_hat[:, 0], y_hat[:, 1], m.dt_s)
@@ -196,8 +195,8 @@ class EkfEstimator:
         self.landmarks = landmarks
         self.landmark_noise = landmark_noise
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        self.pose = np.array(pose0, dtype=float).reshape(n_robots, 3)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
         self.filters: list[ModelEKF] | None = None
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
@@ -299,14 +298,14 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     n = len(seeds)
     dt = params.period_s
     heading0 = 0.0
-    pose0 = np.tile([*ROUTE_M[0], heading0], (n, 1))
+    initial_pose = np.tile([*ROUTE_M[0], heading0], (n, 1))
     sim = Simulator(params, seed=list(seeds), floor=floor, room=Room.empty(),
-                    initial_pose=pose0, faults=faults)
-    estimator.reset(n, pose0)
+                    initial_pose=initial_pose, faults=faults)
+    estimator.reset(n, initial_pose)
     noise = landmark_noise or LandmarkNoise()
     stride = max(1, round(1.0 / (landmark_rate_hz * dt)))
     sensor_rng = np.random.default_rng([int(x) for x in seeds] + [0x5E45])
-    est = pose0.copy()
+    est = initial_pose.copy()
     target = np.ones(n, int)           # index of the checkpoint being approached
     phase = np.zeros(n, int)           # 0 stop, 1 turn, 2 drive, 3 done
     hold = np.full(n, round(0.4 / dt))  # periods left in a stop

@@ -33,13 +33,13 @@ from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError, ShapeError
 from lti_motion.frames import SensorFrame
-from lti_motion.kinematics import pose_step
+from lti_motion.kinematics import body_from_wheel, pose_step
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
 __all__ = ["ROUTE_SMOOTHER_OPTIONS", "SmootherEstimator"]
 
-log = logging.getLogger(__name__)
+_log = logging.getLogger(__name__)
 
 #: Graph settings, like for like with the route's EKF (:class:`fusion.ekf.ModelEKF`
 #: defaults): start pose prior 5 mm / 5 mm / 5 mrad (the EKF's ``pose_std``), a calibration
@@ -144,11 +144,12 @@ class SmootherEstimator:
             self.options = replace(self.options, landmark_noise=landmark_noise)
         self.smoothers: list[IncrementalSmoother] | None = None
 
-    def reset(self, n_robots: int, pose0: np.ndarray) -> None:
-        """Start ``n_robots`` estimates at ``pose0`` (N, 3); the first frame anchors the counts."""
-        pose = np.array(pose0, dtype=float)
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        """Start ``n_robots`` estimates at ``initial_pose`` (N, 3); the first frame anchors
+        the counts."""
+        pose = np.array(initial_pose, dtype=float)
         if pose.shape != (n_robots, 3):
-            raise ShapeError(f"expected pose0 of shape ({n_robots}, 3), got {pose.shape}")
+            raise ShapeError(f"expected initial_pose of shape ({n_robots}, 3), got {pose.shape}")
         self.pose = pose
         self.smoothers = None
         self.dropped_observations = 0
@@ -167,7 +168,7 @@ class SmootherEstimator:
             If the commands, counts or observations do not match the robots.
         """
         if not hasattr(self, "pose"):
-            raise RuntimeError("call reset(n_robots, pose0) before step()")
+            raise RuntimeError("call reset(n_robots, initial_pose) before step()")
         n = len(self.pose)
         ticks = np.asarray(frame.ticks, np.int64).reshape(-1, 2)
         cmd = np.asarray(cmd_m_s, dtype=float)
@@ -182,7 +183,7 @@ class SmootherEstimator:
         m = self.model
         d = tick_deltas(np.stack([self._ticks, ticks]))[0] * (m.m_per_tick / m.dt_s)
         self._ticks = ticks
-        y = np.stack([0.5 * (d[:, 0] + d[:, 1]), (d[:, 1] - d[:, 0]) / m.wheel_base_m], axis=1)
+        y = body_from_wheel(d, wheel_base_m=m.wheel_base_m)
         self._u.append(cmd)
         self._y.append(y)
         self._n += 1
@@ -216,7 +217,7 @@ class SmootherEstimator:
         u = np.array([c[i] for c in self._u[first:]])
         y = np.array([c[i] for c in self._y[first:]])
         pre = preintegrate_model(self.model, u, keyframes=[0, len(u)], mode="filtered",
-                                 y_measured=y, z0=self._z_kf[i])
+                                 measured_speeds=y, z0=self._z_kf[i])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
         if len(seen):

@@ -1,5 +1,4 @@
 """Steady-state gain of ARX fits and least squares restricted to it (lti_motion.arx_structure)."""
-
 import dataclasses
 
 import numpy as np
@@ -12,9 +11,9 @@ from lti_motion.arx_structure import (
     nearest_servo_gain,
     restrict_dc_gain,
     servo_dc_gain,
-    wheel_to_body_matrix,
 )
 from lti_motion.exceptions import ShapeError
+from lti_motion.kinematics import body_from_wheel_matrix
 
 ORDER = 2
 
@@ -39,12 +38,12 @@ def _rss(fit, runs):
 
 def test_free_fit_finds_the_plants_gain(free):
     # wheel gains 1.0 (left) and 0.95 (right): G = M diag(1, 0.95)
-    truth = wheel_to_body_matrix(BASE) @ np.diag([1.0, 0.95])
+    truth = body_from_wheel_matrix(BASE) @ np.diag([1.0, 0.95])
     np.testing.assert_allclose(dc_gain(free), truth, atol=0.01)
 
 
 def test_restricted_fit_has_the_required_gain_and_is_least_squares_under_it(runs, free):
-    truth = wheel_to_body_matrix(BASE) @ np.diag([1.0, 0.95])
+    truth = body_from_wheel_matrix(BASE) @ np.diag([1.0, 0.95])
     fit = restrict_dc_gain(free, truth)
     np.testing.assert_allclose(dc_gain(fit), truth, atol=1e-10)
     rss_free, rss_r = _rss(free, runs), _rss(fit, runs)
@@ -74,15 +73,15 @@ def test_restricted_fit_has_the_required_gain_and_is_least_squares_under_it(runs
 def test_servo_gain_is_one_scale_times_the_wheel_matrix(free):
     gain, c = servo_dc_gain(free, wheel_base_m=BASE)
     assert c == pytest.approx(0.975, abs=1e-3)    # mean of the wheel gains 1.0 and 0.95
-    np.testing.assert_allclose(gain, c * wheel_to_body_matrix(BASE))
+    np.testing.assert_allclose(gain, c * body_from_wheel_matrix(BASE))
     # straight-line yaw rate per m/s of forward command is zero
     assert abs(gain[1].sum()) < 1e-12
 
 
 def test_nearest_servo_gain_is_the_least_squares_projection_in_wheel_coordinates(rng, free):
-    g = wheel_to_body_matrix(BASE) @ rng.normal(1.0, 0.05, size=(2, 2))
+    g = body_from_wheel_matrix(BASE) @ rng.normal(1.0, 0.05, size=(2, 2))
     gain, c = nearest_servo_gain(g, wheel_base_m=BASE)
-    m = wheel_to_body_matrix(BASE)
+    m = body_from_wheel_matrix(BASE)
     np.testing.assert_allclose(gain, c * m, rtol=0, atol=1e-15)
     wheel = np.linalg.solve(m, g)
     assert c == pytest.approx(np.trace(wheel) / 2, rel=1e-12)
@@ -101,4 +100,4 @@ def test_bad_gain_shape_and_wheel_base(free):
     with pytest.raises(ShapeError, match=r"\(2, 2\)"):
         restrict_dc_gain(free, np.eye(3))
     with pytest.raises(ValueError, match="wheel_base_m"):
-        wheel_to_body_matrix(0.0)
+        body_from_wheel_matrix(0.0)

@@ -20,7 +20,7 @@ DT = 0.015
 
 def test_step_sequence_phases_hold_one_motor_at_a_time():
     seq = step_sequence(amplitude_m_s=0.3, hold_s=0.6, rest_s=0.9, dt_s=DT)
-    u = seq.commands_m_s
+    u = seq.cmd_m_s
     assert u.shape == (2 * (40 + 60), 2)
     assert [(s.start, s.stop) for s in seq.phases] == [(0, 40), (40, 100), (100, 140), (140, 200)]
     np.testing.assert_array_equal(u[seq.left_on], np.tile([0.3, 0.0], (40, 1)))

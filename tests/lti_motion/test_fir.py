@@ -4,7 +4,6 @@ state-space simulation.
 The synthetic plant is the one of test_arx.py (second-order wheels, 4-sample
 delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
 """
-
 import numpy as np
 import pytest
 from synthetic_plant import BASE, DELAY, DT, plant
@@ -19,6 +18,7 @@ from lti_motion.fir import (
     simulate_state_space_loop,
 )
 from lti_motion.fir_steps import fir_from_steps
+from lti_motion.kinematics import body_from_wheel, wheel_from_body
 from lti_motion.metrics import fit_percent
 
 
@@ -36,8 +36,8 @@ SEQ = step_sequence(amplitude_m_s=0.3, hold_s=1.0, rest_s=1.0, dt_s=DT)
 
 
 def test_noise_free_steps_give_the_true_impulse_response():
-    y = plant(SEQ.commands_m_s)
-    fit = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ)
+    y = plant(SEQ.cmd_m_s)
+    fit = fir_from_steps(SEQ.cmd_m_s, y, phases=SEQ)
     truth = true_impulse_response(80)
     # exact up to the not-quite-settled level before each falling edge (0.83^66 ~ 5e-6)
     np.testing.assert_allclose(fit.taps, truth[: fit.n_taps], atol=2e-5)
@@ -54,7 +54,7 @@ def test_noise_free_steps_give_the_true_impulse_response():
 
 
 def test_noisy_steps_give_a_fir_that_free_runs_above_90_percent(rng):
-    u, y = SEQ.commands_m_s, plant(SEQ.commands_m_s, rng)
+    u, y = SEQ.cmd_m_s, plant(SEQ.cmd_m_s, rng)
     both = fir_from_steps(u, y, phases=SEQ)
     rising = fir_from_steps(u, y, phases=SEQ, edges="rising", max_taps=both.n_taps)
     assert 10 <= both.n_taps <= 30
@@ -72,7 +72,7 @@ def test_noisy_steps_give_a_fir_that_free_runs_above_90_percent(rng):
 
 
 def test_steps_that_do_not_match_the_phases_raise():
-    u = SEQ.commands_m_s.copy()
+    u = SEQ.cmd_m_s.copy()
     y = plant(u)
     with pytest.raises(CalibrationError, match="no step of wheel R"):
         fir_from_steps(u, y, phases=(SEQ.left_on, SEQ.left_off, SEQ.left_off, SEQ.right_off))
@@ -145,11 +145,10 @@ def servo_plant(u, rng, *, gain=0.99):
     right wheel, gain 0.95, is given its command / 0.95), and the body speeds come from
     quantised encoder counts, one count in 10 per period at 0.3 m/s."""
     y = plant(u * np.array([1.0, 1.0 / 0.95])) * gain
-    wheels = np.column_stack([y[:, 0] - y[:, 1] * BASE / 2, y[:, 0] + y[:, 1] * BASE / 2])
+    wheels = wheel_from_body(y, wheel_base_m=BASE)
     counts = np.floor((np.cumsum(wheels * DT, axis=0) + rng.uniform(0, TICK_M, 2)) / TICK_M)
     speeds = np.diff(counts, axis=0, prepend=counts[:1]) * TICK_M / DT
-    return np.column_stack([(speeds[:, 1] + speeds[:, 0]) / 2,
-                            (speeds[:, 1] - speeds[:, 0]) / BASE])
+    return body_from_wheel(speeds, wheel_base_m=BASE)
 
 
 def _free_run(fit, u):
@@ -159,9 +158,9 @@ def _free_run(fit, u):
 
 @pytest.mark.parametrize("dc_gain", ["settled", "wheel_servo"])
 def test_noise_free_steps_keep_the_transient_and_hold_the_settled_level(dc_gain):
-    y = plant(SEQ.commands_m_s)
-    free = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ)
-    fit = fir_from_steps(SEQ.commands_m_s, y, phases=SEQ, dc_gain=dc_gain, wheel_base_m=BASE)
+    y = plant(SEQ.cmd_m_s)
+    free = fir_from_steps(SEQ.cmd_m_s, y, phases=SEQ)
+    fit = fir_from_steps(SEQ.cmd_m_s, y, phases=SEQ, dc_gain=dc_gain, wheel_base_m=BASE)
     assert fit.n_taps == free.n_taps
     step = np.cumsum(fit.taps, axis=0)
     peak = np.abs(free.step_responses).max(axis=0)
@@ -180,7 +179,7 @@ def test_noise_free_steps_keep_the_transient_and_hold_the_settled_level(dc_gain)
 
 
 def test_wheel_servo_restriction_holds_exactly_straight_commands_give_no_yaw(rng):
-    u = SEQ.commands_m_s
+    u = SEQ.cmd_m_s
     fit = fir_from_steps(u, servo_plant(u, rng), phases=SEQ, dc_gain="wheel_servo",
                          wheel_base_m=BASE)
     g = fit.taps.sum(axis=0)
@@ -198,7 +197,7 @@ def test_settled_level_and_servo_gain_beat_one_quantised_sample():
     """Over 20 step calibrations of a quantised servo plant, the paper's one-sample DC
     gain has a straight-line yaw bias of centiradians per second; the settled mean shrinks
     it, the wheel-servo restriction removes it; the held-out free-run fit is not worse."""
-    u, straight = SEQ.commands_m_s, np.array([0.25, 0.25])
+    u, straight = SEQ.cmd_m_s, np.array([0.25, 0.25])
     yaw = {k: [] for k in ("free", "settled", "wheel_servo")}
     fits = {k: [] for k in yaw}
     for seed in range(20):
@@ -221,19 +220,19 @@ def test_settled_level_and_servo_gain_beat_one_quantised_sample():
 def test_quantised_plateaus_settle():
     """Quantised counts leave most of a plateau on one level (median absolute deviation
     zero): the settling band then uses the standard deviation, not 5 % of the peak only."""
-    u = SEQ.commands_m_s
+    u = SEQ.cmd_m_s
     fit = fir_from_steps(u, servo_plant(u, np.random.default_rng(0)), phases=SEQ,
                          edges="rising")
     assert fit.n_taps <= 25
 
 
 def test_bad_dc_gain_options_raise():
-    u, y = SEQ.commands_m_s, plant(SEQ.commands_m_s)
+    u, y = SEQ.cmd_m_s, plant(SEQ.cmd_m_s)
     with pytest.raises(ValueError, match="dc_gain must be one of"):
         fir_from_steps(u, y, phases=SEQ, dc_gain="servo")
     with pytest.raises(ValueError, match="needs wheel_base_m"):
         fir_from_steps(u, y, phases=SEQ, dc_gain="wheel_servo")
-    with pytest.raises(ValueError, match="wheel_base_m must be positive"):
+    with pytest.raises(ValueError, match="wheel_base_m must be a positive"):
         fir_from_steps(u, y, phases=SEQ, dc_gain="wheel_servo", wheel_base_m=-0.2)
     with pytest.raises(ValueError, match="edges must be"):
         fir_from_steps(u, y, phases=SEQ, edges="falling")

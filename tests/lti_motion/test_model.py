@@ -46,8 +46,8 @@ def arx_model(runs):
 def fir_model(runs):
     rng = np.random.default_rng(22)
     seq = step_sequence(amplitude_m_s=0.3, hold_s=1.0, rest_s=1.0, dt_s=DT)
-    y = plant(seq.commands_m_s, rng)
-    return fit_fir_from_steps(seq.commands_m_s, y, phases=seq, dt_s=DT, wheel_base_m=BASE,
+    y = plant(seq.cmd_m_s, rng)
+    return fit_fir_from_steps(seq.cmd_m_s, y, phases=seq, dt_s=DT, wheel_base_m=BASE,
                               noise_runs=runs, calibrated_at=WHEN, m_per_tick=4.45e-4)
 
 
@@ -285,5 +285,5 @@ def test_bad_inputs_raise_clear_errors(runs, arx_model):
         arx_model.simulate(np.full((10, 2), np.nan))
     with pytest.raises(ShapeError, match=r"\(\.\.\., n, 2\)"):
         arx_model.simulate(np.zeros((10, 3)))
-    with pytest.raises(ShapeError, match="y_measured"):
+    with pytest.raises(ShapeError, match="speeds has shape"):
         arx_model.predict_one_step(u, y[:-1])

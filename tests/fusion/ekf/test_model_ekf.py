@@ -3,7 +3,6 @@
 Unit tests on a small synthetic ARX model (known, fast); the Monte Carlo acceptance
 runs on the simulator are in ``test_ekf_montecarlo.py``.
 """
-
 import dataclasses
 import math
 
@@ -28,7 +27,13 @@ from fusion.noise import LandmarkNoise
 from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
 from lti_motion.arx import estimate_arx
 from lti_motion.exceptions import ShapeError
-from lti_motion.kinematics import integrate_poses, pose_step, pose_step_jacobians, wrap_angle
+from lti_motion.kinematics import (
+    body_from_wheel,
+    integrate_poses,
+    pose_step,
+    pose_step_jacobians,
+    wrap_angle,
+)
 from lti_motion.model import MotionModel
 
 DT, B = 0.015, 0.235
@@ -284,8 +289,7 @@ def test_encoder_counts_and_speeds_give_the_same_filter(model):
     counts = np.vstack([[0, 0], np.round(np.cumsum(wheel * DT / M_PER_TICK, 0))])
     ticks = (counts + np.array([65000, 100])).astype(np.int64) % 65536    # both roll over
     inc = np.diff(counts, axis=0)
-    y_q = np.stack([0.5 * (inc[:, 0] + inc[:, 1]), (inc[:, 1] - inc[:, 0]) / B], 1) * (
-        M_PER_TICK / DT)
+    y_q = body_from_wheel(inc, wheel_base_m=B) * (M_PER_TICK / DT)
     a = ModelEKF(model, initial_ticks=ticks[0], gate_probability=None)
     b = ModelEKF(model, gate_probability=None)
     for k in range(len(u)):

@@ -205,13 +205,13 @@ def test_preintegrate_model_uses_the_models_speeds_and_covariance(arx_model, rng
     kf = [0, 100, 200]
     for mode, speeds in (("free_run", arx_model.simulate(u)),
                          ("one_step", arx_model.predict_one_step(u, y))):
-        pre = preintegrate_model(arx_model, u, keyframes=kf, mode=mode, y_measured=y,
+        pre = preintegrate_model(arx_model, u, keyframes=kf, mode=mode, measured_speeds=y,
                                  covariance_scale=2.0)
         ref = preintegrate(speeds, DT, keyframes=kf,
                            speed_covariance=2.0 * speed_error_covariance(arx_model, mode=mode))
         np.testing.assert_allclose(pre.delta_pose, ref.delta_pose)
         np.testing.assert_allclose(pre.covariance, ref.covariance)
-    with pytest.raises(ValueError, match="y_measured"):
+    with pytest.raises(ValueError, match="measured_speeds"):
         preintegrate_model(arx_model, u, keyframes=kf, mode="one_step")
     with pytest.raises(ValueError, match="mode"):
         preintegrate_model(arx_model, u, keyframes=kf, mode="psychic")

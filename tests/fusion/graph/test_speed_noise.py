@@ -104,7 +104,7 @@ def test_per_sample_speed_covariance_equals_a_constant_one(rng):
 
 
 def test_filtered_mode_needs_encoders(static_model):
-    with pytest.raises(ValueError, match="y_measured"):
+    with pytest.raises(ValueError, match="measured_speeds"):
         preintegrate_model(static_model, np.zeros((10, 2)), keyframes=[0, 10], mode="filtered")
 
 

@@ -6,7 +6,6 @@ retries, the refit's steady-state gain), then a short form of the benchmark
 a fault, the monitor's first alarm after the onset, an excitation manoeuvre on request,
 and the fit of the model in use on fresh faulty data against the nominal fit.
 """
-
 import numpy as np
 import pytest
 
@@ -20,6 +19,7 @@ from benchmarks.bench_monitor import (
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.recalibration import Recalibrator
 from fusion.monitoring.residual import AlarmEvent
+from lti_motion.kinematics import wheel_from_body
 
 
 @pytest.fixture(scope="module")
@@ -116,9 +116,7 @@ def test_rescaled_model_predicts_the_same_counts(model):
     new = rescaled_model(model, m_per_tick=m_new, wheel_base_m=b_new)
 
     def ticks(m, yy):          # wheel count changes a model's speeds stand for (paper eq. 11)
-        wheel = np.stack([yy[:, 0] - yy[:, 1] * m.wheel_base_m / 2,
-                          yy[:, 0] + yy[:, 1] * m.wheel_base_m / 2], axis=1)
-        return wheel * m.dt_s / m.m_per_tick
+        return wheel_from_body(yy, wheel_base_m=m.wheel_base_m) * m.dt_s / m.m_per_tick
 
     np.testing.assert_allclose(ticks(new, new.simulate(u)), ticks(model, model.simulate(u)),
                                rtol=1e-9, atol=1e-9)

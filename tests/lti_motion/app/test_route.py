@@ -49,8 +49,8 @@ def test_model_estimators_complete_the_route(cal, kind):
 class _Peeking:
     """An estimator that fails if it is shown the simulator's truth."""
 
-    def reset(self, n_robots, pose0):
-        self.pose = np.array(pose0, dtype=float)
+    def reset(self, n_robots, initial_pose):
+        self.pose = np.array(initial_pose, dtype=float)
 
     def step(self, frame, cmd_m_s, observations=None):
         assert frame.true_pose is None and frame.true_body_m_s is None
