@@ -22,6 +22,7 @@ import struct
 import zipfile
 import zlib
 from pathlib import Path
+from types import MappingProxyType
 
 import numpy as np
 
@@ -126,8 +127,9 @@ _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, OverflowError, NotImple
                 RuntimeError, zipfile.BadZipFile, zlib.error, struct.error)
 
 #: The shape of one frame of each array, format version 1 (``docs/log_format.md``).
-_FRAME_SHAPES = {"t_s": (), "ticks": (2,), "light_bump": (6,), "bumps": (2,), "cmd_m_s": (2,),
-                 "valid": (), "true_pose": (3,), "true_body_m_s": (2,)}
+_FRAME_SHAPES = MappingProxyType({
+    "t_s": (), "ticks": (2,), "light_bump": (6,), "bumps": (2,), "cmd_m_s": (2,), "valid": (),
+    "true_pose": (3,), "true_body_m_s": (2,)})
 _FLAGS = ("bumps", "valid")
 
 
