@@ -3,8 +3,9 @@
 - the core (``lti_motion`` outside ``lti_motion.app``) imports numpy, scipy and itself:
   neither ``fusion`` nor ``drivers``, nor an adapter's library;
 - ``fusion`` and ``drivers`` never import each other;
-- nothing in the three packages imports ``lti_motion.app``, the application, and
-  the examples (what users copy) do not either;
+- nothing in the three packages imports ``lti_motion.app``, the application; the
+  examples (what users copy) import from it only the route harness
+  ``lti_motion.app.route``, the public evaluation on the simulator (``docs/route.md``);
 - no package holds an import cycle among its modules (deferred imports included).
 """
 
@@ -73,6 +74,19 @@ def test_nothing_outside_the_application_imports_it(where):
     offenders = [str(p.relative_to(ROOT)) for p in sorted((ROOT / where).rglob("*.py"))
                  if not _in_app(_module_name(p)) and any(map(_in_app, _imports(p)))]
     assert not offenders, f"these import lti_motion.app: {offenders}"
+
+
+EXAMPLE_APP_IMPORTS = {"lti_motion.app", "lti_motion.app.route"}
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "examples").glob("*.py")),
+                         ids=lambda p: p.name)
+def test_examples_import_from_the_application_only_the_route_harness(path):
+    app = {name for name in _imports(path) if _in_app(name)}
+    # ``from lti_motion.app.route import X`` also names ``lti_motion.app.route.X``
+    outside = {name for name in app if name not in EXAMPLE_APP_IMPORTS
+               and not name.startswith("lti_motion.app.route.")}
+    assert not outside, f"{path.name} imports application modules {sorted(outside)}"
 
 
 def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
