@@ -1,4 +1,4 @@
-"""The ```python samples of the user guide pages run, as a reader would run them.
+"""The ```python samples of the README and the user guide pages run, as a reader would run them.
 
 Each page's blocks run in order in one namespace (a later block uses what an earlier one
 made), in a temporary working folder. Blocks fenced as ```text or ```sh are not run. No
@@ -17,6 +17,9 @@ PAGES = ["log_format.md", "guide_calibrate_real_robot.md", "guide_filterpy.md",
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.MULTILINE | re.DOTALL)
 
 
+README = "../README.md"
+
+
 def python_blocks(page: str) -> list[str]:
     """The ```python blocks of ``docs/page``, in order."""
     return BLOCK.findall((DOCS / page).read_text())
@@ -29,7 +32,7 @@ def test_the_guide_pages_exist_and_link_from_the_readme():
         assert f"docs/{page}" in readme, page
 
 
-@pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p)])
+@pytest.mark.parametrize("page", [README] + [p for p in PAGES if python_blocks(p)])
 def test_python_samples_run(page, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     namespace = {"__name__": f"docs_{page}"}
