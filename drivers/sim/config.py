@@ -19,16 +19,16 @@ Fig. 6).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from drivers.exceptions import RobotFileError, SimulatorError
-from drivers.sim.robot_file import preset_names, read_robot_file
 
 __all__ = [
     "FLOORS",
@@ -466,6 +466,10 @@ def load_robot(name_or_path: str | os.PathLike[str]) -> RobotParams:
     >>> load_robot("paper").period_s
     0.018
     """
+    # the reader (tomllib, importlib.resources) loads with the first robot, not with
+    # this module: the command line's start-up imports this module for its floor names
+    from drivers.sim.robot_file import read_robot_file
+
     spec = read_robot_file(name_or_path)
     try:
         floor = (FloorMap(spec.floor_default, spec.floor_regions) if spec.floor_regions
@@ -484,10 +488,24 @@ def load_robot(name_or_path: str | os.PathLike[str]) -> RobotParams:
         raise RobotFileError(f"{spec.source}: {exc}") from None
 
 
-#: The robot presets by name, read from the shipped robot files (read-only:
-#: :func:`get_preset` with overrides makes a variant).
-PRESETS: Mapping[str, RobotParams] = MappingProxyType(
-    {name: load_robot(name) for name in preset_names()})
+@functools.cache
+def _shipped_presets() -> Mapping[str, RobotParams]:
+    from drivers.sim.robot_file import preset_names
+
+    return MappingProxyType({name: load_robot(name) for name in preset_names()})
+
+
+def __getattr__(name: str) -> object:
+    """``PRESETS``, read from the shipped robot files on first use (PEP 562)."""
+    if name == "PRESETS":
+        return _shipped_presets()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+if TYPE_CHECKING:
+    #: The robot presets by name, read from the shipped robot files on first use
+    #: (read-only: :func:`get_preset` with overrides makes a variant).
+    PRESETS: Mapping[str, RobotParams]
 
 
 def get_preset(name: str, **overrides: object) -> RobotParams:
@@ -498,8 +516,9 @@ def get_preset(name: str, **overrides: object) -> RobotParams:
     SimulatorError
         If there is no such preset; the message lists the known ones.
     """
+    presets = _shipped_presets()
     try:
-        base = PRESETS[name]
+        base = presets[name]
     except (KeyError, TypeError):
-        raise SimulatorError(f"unknown preset {name!r}; known presets: {sorted(PRESETS)}") from None
+        raise SimulatorError(f"unknown preset {name!r}; known presets: {sorted(presets)}") from None
     return base.replace(**overrides) if overrides else base

@@ -18,8 +18,6 @@ error is one line that names the file, the section and the field::
 
 from __future__ import annotations
 
-import difflib
-import json
 import math
 import os
 import tomllib
@@ -264,6 +262,8 @@ def _section(doc: Mapping, section: str, label: str) -> dict:
             known = [*fields, *extra] if section else [
                 *fields, *(f"[{s}]" for s in SCHEMA if s), "[[faults]]"]
             what = "field" if section else "field or section"
+            import difflib  # only for a message: not at every start-up
+
             close = difflib.get_close_matches(key, [k.strip("[]") for k in known], n=1)
             hint = f" (did you mean {close[0]}?)" if close else ""
             raise RobotFileError(f"{where}unknown {what} {key!r}{hint}; known: "
@@ -353,6 +353,8 @@ def read_robot_file(name_or_path: str | os.PathLike[str]) -> RobotSpec:
     FileNotFoundError
         No such file.
     """
+    import json  # the shipped presets are TOML: not at every start-up
+
     label, fmt, text = robot_source(name_or_path)
     try:
         doc = tomllib.loads(text) if fmt == "toml" else json.loads(text)

@@ -21,7 +21,8 @@ This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
 
 Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
-and a mistyped option cost only the parser (and numpy, for the simulator's presets).
+and a mistyped option cost only the parser (and numpy, for the simulator's floor names;
+robot files are read when a sub-command names a robot).
 """
 
 from __future__ import annotations
@@ -32,17 +33,18 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from drivers.sim.config import FLOORS, PRESETS, load_robot
+from drivers.sim.config import FLOORS, load_robot
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
 
-#: The simulator's robot presets (or a robot file: --robot) and floors (--floor's choices).
-PRESET_NAMES = tuple(PRESETS)
+#: The simulator's floors, the choices of --floor.
 FLOOR_NAMES = tuple(FLOORS)
 #: --robot of demo, calibrate, monitor and virtual-roomba (old spellings --preset, --sim
 #: kept as aliases, same dest); replay's --robot is a robot index (docs/robot_file.md).
-ROBOT_HELP = (f"the simulated robot: a preset ({', '.join(PRESET_NAMES)}) or a robot file "
+#: The preset names are written out, not read from the robot files, so that start-up
+#: reads no file (tests/lti_motion/app/test_cli.py checks they are all named).
+ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
               "(.toml or .json, docs/robot_file.md)")
 FLOOR_HELP = "simulated floor (default: the robot's)"
 

@@ -41,12 +41,14 @@ def _options(parser):
 
 def test_robot_option_takes_a_name_or_file_and_the_old_spellings_still_parse():
     from drivers.sim.config import FLOORS
+    from drivers.sim.robot_file import preset_names
 
     seen = set()
     for command, flag, action in _options(build_parser()):
         if flag == "--robot" and command != "replay":
             assert action.choices is None and action.metavar == "NAME_OR_FILE", command
-            assert "robot file" in action.help and "create2" in action.help, command
+            assert "robot file" in action.help, command
+            assert f"a preset ({', '.join(preset_names())})" in action.help, command
             seen.add(command)
         elif flag == "--floor" and action.choices is not None:
             assert list(action.choices) == list(FLOORS), (command, flag)
