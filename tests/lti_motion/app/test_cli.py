@@ -77,6 +77,7 @@ ROBOT_FILE_ERRORS = [
     ["demo", "--runs", "2", "--out", "{out}"],
     ["calibrate", "--out", "{out}"],
     ["monitor", "--duration", "1"],
+    ["virtual-roomba", "--duration", "0.3"],
 ], ids=lambda c: c[0])
 @pytest.mark.parametrize("old, new, message", ROBOT_FILE_ERRORS, ids=["range", "missing",
                                                                       "unknown"])
