@@ -16,6 +16,7 @@ __all__ = [
     "PassiveModeError",
     "PortError",
     "ProtocolError",
+    "RobotFileError",
     "SimulatorError",
     "StreamBandwidthError",
     "StreamStalledError",
@@ -25,6 +26,12 @@ __all__ = [
 
 class SimulatorError(ValueError):
     """Bad input to the simulator (shape, NaN, unknown preset or floor, ...)."""
+
+
+class RobotFileError(SimulatorError):
+    """A robot description file (or preset name) that cannot describe a robot: unparsable,
+    an unknown or missing field, a wrong type or a value out of range. The message names
+    the file, the section and the field on one line."""
 
 
 class ProtocolError(ValueError):

@@ -65,7 +65,7 @@ HEAVY = (*ADAPTERS, "scipy.signal", "scipy.stats")
         ("import lti_motion", ("numpy", "scipy", *ADAPTERS)),
         ("import fusion", HEAVY),
         ("import drivers", ("numpy", *HEAVY)),
-        ("import drivers.sim.config", HEAVY),
+        ("import drivers.sim.config", (*HEAVY, "tomllib")),     # robot files on first use
         ("import lti_motion.excitation", HEAVY),
     )])
 def test_an_import_loads_only_what_it_needs(code, absent):
@@ -86,7 +86,7 @@ except SystemExit:
                                   ["virtual-roomba", "--help"], ["no-such-command"]],
                          ids=" ".join)
 def test_cli_help_loads_no_numerical_machinery(argv):
-    assert loaded_after(HELP.format(argv=argv), ("scipy", *HEAVY)) == []
+    assert loaded_after(HELP.format(argv=argv), ("scipy", "tomllib", *HEAVY)) == []
 
 
 NO_BACKEND = """

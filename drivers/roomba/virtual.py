@@ -73,7 +73,7 @@ from drivers.roomba.oi import (
     Opcode,
     PacketLayout,
 )
-from drivers.sim.config import Fault, FloorMap, RobotParams, Room
+from drivers.sim.config import Fault, FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
 
 __all__ = [
@@ -161,14 +161,16 @@ class VirtualRoomba:
     Parameters
     ----------
     robot : str or RobotParams
-        Simulator preset or parameters (``"create2"``, ``"paper"``, ...).
+        Simulator preset or parameters (``"create2"``, ``"paper"``, ...); its own
+        faults (:attr:`~drivers.sim.config.RobotParams.faults`) happen as scheduled.
     seed : int
         Seed of the simulator and (through a separate generator) of the line faults.
     speed : float
         Wall-clock speed-up: 1.0 is real time; 20.0 sends a frame every
         0.75 ms of wall time. Give the driver ``clock_rate=speed``.
     floor, room, initial_pose, faults
-        Passed to :class:`~drivers.sim.Simulator` (``faults`` are the
+        Passed to :class:`~drivers.sim.Simulator` (``floor`` defaults to the robot's;
+        ``faults`` are the
         simulator's own: floor changes, payload, lost frames, ...).
     corrupt_probability : float
         Probability that each outgoing byte gets one random bit flipped.
@@ -217,7 +219,7 @@ class VirtualRoomba:
         *,
         seed: int = 0,
         speed: float = 1.0,
-        floor: str | FloorMap = "hard",
+        floor: str | FloorMap | None = None,
         room: Room | None = None,
         initial_pose: Sequence[float] | None = None,
         faults: Sequence[Fault] = (),
@@ -720,10 +722,10 @@ def _base_values() -> dict[int, int]:
 
 def serve(
     *,
-    preset: str = "create2",
+    preset: str | RobotParams = "create2",
     seed: int = 0,
     speed: float = 1.0,
-    floor: str = "hard",
+    floor: str | None = None,
     print_fn: Callable[[str], object] = print,
     duration_s: float | None = None,
 ) -> EmulatorStats:
@@ -735,8 +737,11 @@ def serve(
 
     Parameters
     ----------
-    preset, seed, speed, floor
-        As for :class:`VirtualRoomba`.
+    preset : str or RobotParams
+        The robot: parameters, a preset name or a robot file
+        (:func:`~drivers.sim.config.load_robot`).
+    seed, speed, floor
+        As for :class:`VirtualRoomba` (``floor`` defaults to the robot's).
     print_fn : callable
         Where the messages go (``print`` by default).
     duration_s : float, optional
@@ -747,7 +752,9 @@ def serve(
     EmulatorStats
         The counters at the end.
     """
-    robot = VirtualRoomba(preset, seed=seed, speed=speed, floor=floor, room=Room.cluttered(),
+    params = load_robot(preset) if isinstance(preset, str) else preset
+    floor = params.floor if floor is None else floor
+    robot = VirtualRoomba(params, seed=seed, speed=speed, floor=floor, room=Room.cluttered(),
                           initial_pose=Room.CALIBRATION_SPOT)
     spots = [Room.OPEN_FLOOR, Room.CALIBRATION_SPOT]
 
@@ -764,7 +771,8 @@ def serve(
     robot.start()
     threading.Thread(target=carry, daemon=True, name="virtual-roomba-carry").start()
     try:
-        print_fn(f"virtual Roomba ({preset}, floor {floor}, seed {seed}, speed x{speed:g}) "
+        print_fn(f"virtual Roomba ({params.name}, floor {floor_name(floor)}, seed {seed}, "
+                 f"speed x{speed:g}) "
                  f"listening on {robot.device_path}")
         print_fn(f"connect with: lti-motion calibrate --port {robot.device_path} --clock-rate "
                  f"{speed:g}, or Roomba({robot.device_path!r}, clock_rate={speed:g})")

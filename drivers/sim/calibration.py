@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from drivers.sim.config import RobotParams, Room, get_preset
+from drivers.sim.config import FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration import Calibration, CalibrationPlan, calibrate
 
@@ -20,7 +20,8 @@ def print_progress(stage: str, done: int, total: int) -> None:
 
 
 def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
-                        floor: str = "hard", plan: CalibrationPlan | None = None,
+                        floor: str | FloorMap | None = None,
+                        plan: CalibrationPlan | None = None,
                         progress: Callable[[str, int, int], None] | None = None) -> Calibration:
     """Calibrate a simulated robot: rotate beside the furniture of the cluttered room, then
     carry it to open floor for the steps and the random excitation.
@@ -28,18 +29,22 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
     Parameters
     ----------
     robot : str or RobotParams
-        Preset name or parameters.
+        Preset name, robot file (:func:`~drivers.sim.config.load_robot`) or parameters.
+        The calibration is of the healthy robot: its own faults
+        (:attr:`~drivers.sim.config.RobotParams.faults`) are left out.
     seed : int
         Simulator seed; also the excitation's unless ``plan`` says otherwise.
-    floor : str
-        Floor to simulate and record in the models.
+    floor : str or FloorMap, optional
+        Floor to simulate (default the robot's); its name (a map's default surface) is
+        recorded in the models.
     plan : CalibrationPlan, optional
         Manoeuvre sizes (default: :class:`CalibrationPlan` with ``seed``).
     progress : callable, optional
         ``progress(stage, done, total)``.
     """
-    params = get_preset(robot) if isinstance(robot, str) else robot
-    sim = Simulator(params, seed=seed, floor=floor, room=Room.cluttered(),
+    params = load_robot(robot) if isinstance(robot, str) else robot
+    floor = params.floor if floor is None else floor
+    sim = Simulator(params.replace(faults=()), seed=seed, floor=floor, room=Room.cluttered(),
                     initial_pose=Room.CALIBRATION_SPOT)
 
     def to_open_floor(stage: str) -> None:
@@ -47,7 +52,7 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
             sim.place(Room.OPEN_FLOOR)
 
     return calibrate(sim, wheel_base_m=params.wheel_base_m,
-                     plan=plan or CalibrationPlan(seed=seed), floor=floor,
+                     plan=plan or CalibrationPlan(seed=seed), floor=floor_name(floor),
                      progress=progress, before_stage=to_open_floor)
 
 

@@ -3,11 +3,14 @@
 Everything here is plain data; :mod:`drivers.sim.simulator` turns it into the arrays the
 compiled kernel (:mod:`drivers.sim.kernel`) integrates.
 
-The numbers of the ``create2`` preset come from the Create 2 Open Interface
-specification (wheel base 235 mm, wheel diameter 72 mm, 508.8 ticks per wheel
-revolution, 500 mm/s top speed, 15 ms sensor period; ``../shared/spec``
-sections 4 and 7) and from plausible values for a 3.6 kg robot whose wheel
-motors are current limited. The ``paper`` preset is the paper's Roomba 560:
+A robot is described by a robot file (``docs/robot_file.md``; read and checked by
+:mod:`drivers.sim.robot_file`); :func:`load_robot` makes its :class:`RobotParams`. The
+presets are the shipped files ``drivers/sim/robots/create2.toml`` and ``paper.toml``.
+The numbers of the ``create2`` preset (also :class:`RobotParams`' defaults) come from
+the Create 2 Open Interface specification (wheel base 235 mm, wheel diameter 72 mm,
+508.8 ticks per wheel revolution, 500 mm/s top speed, 15 ms sensor period;
+``../shared/spec`` sections 4 and 7) and from plausible values for a 3.6 kg robot whose
+wheel motors are current limited. The ``paper`` preset is the paper's Roomba 560:
 18 ms sensor period, a wheel base of 0.33 m as the paper states (READING-NOTES,
 Signals) and a longer command delay; a step settles within 15 samples (paper
 Fig. 6).
@@ -16,14 +19,16 @@ Fig. 6).
 from __future__ import annotations
 
 import dataclasses
+import functools
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from drivers.exceptions import SimulatorError
+from drivers.exceptions import RobotFileError, SimulatorError
 
 __all__ = [
     "FLOORS",
@@ -33,8 +38,10 @@ __all__ = [
     "FloorMap",
     "RobotParams",
     "Room",
+    "floor_name",
     "get_floor",
     "get_preset",
+    "load_robot",
 ]
 
 
@@ -124,6 +131,11 @@ class FloorMap:
                     f"and ymin < ymax, got {reg!r}"
                 )
             get_floor(reg[4])
+
+
+def floor_name(floor: str | FloorMap) -> str:
+    """The name a floor is recorded under: its own, or a floor map's default surface."""
+    return floor.default if isinstance(floor, FloorMap) else floor
 
 
 @dataclass(frozen=True)
@@ -262,6 +274,10 @@ class RobotParams:
         Standard deviation of the IR signal noise [counts].
     settling_time_s : float
         Documented time from a step command to within 2% of the final speed [s].
+    floor : str or FloorMap
+        The floor the robot drives on unless a simulation names another.
+    faults : tuple of Fault
+        Changes scheduled in every simulation of this robot (times from its start).
     """
 
     name: str = "create2"
@@ -304,8 +320,15 @@ class RobotParams:
     ir_reference_m: float = 0.04
     ir_noise: float = 3.0
     settling_time_s: float = 0.25
+    floor: str | FloorMap = "hard"
+    faults: tuple[Fault, ...] = ()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.floor, FloorMap):
+            get_floor(self.floor)
+        object.__setattr__(self, "faults", tuple(self.faults))
+        if not all(isinstance(f, Fault) for f in self.faults):
+            raise SimulatorError(f"RobotParams.faults must hold Fault objects, got {self.faults}")
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if isinstance(value, float) and not np.isfinite(value):
@@ -347,37 +370,6 @@ class RobotParams:
     def replace(self, **changes: object) -> RobotParams:
         """A copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
-
-
-#: The robot presets by name (read-only: :func:`get_preset` with overrides makes a variant).
-PRESETS: Mapping[str, RobotParams] = MappingProxyType({
-    "create2": RobotParams(),
-    "paper": RobotParams(
-        name="paper",
-        period_s=0.018,
-        wheel_base_m=0.33,
-        wheel_diameter_m=0.068,
-        mass_kg=3.8,
-        yaw_inertia_kg_m2=0.07,
-        delay_periods=4.5,
-        settling_time_s=0.27,      # 15 samples of 18 ms
-    ),
-})
-
-
-def get_preset(name: str, **overrides: object) -> RobotParams:
-    """A preset's parameters, optionally with fields overridden.
-
-    Raises
-    ------
-    SimulatorError
-        If there is no such preset; the message lists the known ones.
-    """
-    try:
-        base = PRESETS[name]
-    except (KeyError, TypeError):
-        raise SimulatorError(f"unknown preset {name!r}; known presets: {sorted(PRESETS)}") from None
-    return base.replace(**overrides) if overrides else base
 
 
 FaultKind = Literal[
@@ -451,3 +443,82 @@ class Fault:
     def wheels(self) -> tuple[int, ...]:
         """Wheel indices (0 left, 1 right) this fault hits."""
         return {"left": (0,), "right": (1,), "both": (0, 1)}[self.wheel]
+
+
+def load_robot(name_or_path: str | os.PathLike[str]) -> RobotParams:
+    """The robot a robot file describes, or a shipped preset by name.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A preset name (``"create2"``, ``"paper"``) or a ``.toml`` / ``.json`` robot file
+        (``docs/robot_file.md``).
+
+    Raises
+    ------
+    RobotFileError
+        A file that cannot describe a robot: one line naming the file and the field.
+    FileNotFoundError
+        No such file.
+
+    Examples
+    --------
+    >>> load_robot("paper").period_s
+    0.018
+    """
+    # the reader (tomllib, importlib.resources) loads with the first robot, not with
+    # this module: the command line's start-up imports this module for its floor names
+    from drivers.sim.robot_file import read_robot_file
+
+    spec = read_robot_file(name_or_path)
+    try:
+        floor = (FloorMap(spec.floor_default, spec.floor_regions) if spec.floor_regions
+                 else get_floor(spec.floor_default).name)
+    except SimulatorError as exc:
+        raise RobotFileError(f"{spec.source}: [floor] {exc}") from None
+    faults = []
+    for i, args in enumerate(spec.faults, start=1):
+        try:
+            faults.append(Fault(**args))
+        except SimulatorError as exc:
+            raise RobotFileError(f"{spec.source}: [[faults]] #{i} {exc}") from None
+    try:
+        return RobotParams(**spec.params, floor=floor, faults=tuple(faults))
+    except SimulatorError as exc:
+        raise RobotFileError(f"{spec.source}: {exc}") from None
+
+
+@functools.cache
+def _shipped_presets() -> Mapping[str, RobotParams]:
+    from drivers.sim.robot_file import preset_names
+
+    return MappingProxyType({name: load_robot(name) for name in preset_names()})
+
+
+def __getattr__(name: str) -> object:
+    """``PRESETS``, read from the shipped robot files on first use (PEP 562)."""
+    if name == "PRESETS":
+        return _shipped_presets()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+if TYPE_CHECKING:
+    #: The robot presets by name, read from the shipped robot files on first use
+    #: (read-only: :func:`get_preset` with overrides makes a variant).
+    PRESETS: Mapping[str, RobotParams]
+
+
+def get_preset(name: str, **overrides: object) -> RobotParams:
+    """A preset's parameters, optionally with fields overridden.
+
+    Raises
+    ------
+    SimulatorError
+        If there is no such preset; the message lists the known ones.
+    """
+    presets = _shipped_presets()
+    try:
+        base = presets[name]
+    except (KeyError, TypeError):
+        raise SimulatorError(f"unknown preset {name!r}; known presets: {sorted(presets)}") from None
+    return base.replace(**overrides) if overrides else base

@@ -28,6 +28,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 
@@ -76,6 +77,14 @@ def _params_row(p: RobotParams, floor_default: int) -> np.ndarray:
     row[K.P_DERR0:K.P_DERR0 + 2] = p.wheel_diameter_errors
     row[K.P_CASTER] = p.caster_offset_m
     return row
+
+
+def _own_faults(params: Sequence[RobotParams]) -> list[Fault]:
+    """The robots' own faults (:attr:`RobotParams.faults`), each on its robot only."""
+    if all(p.faults == params[0].faults for p in params):
+        return list(params[0].faults)
+    return [dataclasses.replace(f, robots=(i,) if f.robots is None else f.robots)
+            for i, p in enumerate(params) for f in p.faults]
 
 
 class _NoiseBlocks:
@@ -132,15 +141,17 @@ class Simulator:
         and its outputs have no robot axis.
     seed : int or sequence of int
         Seed per robot (an int for a batch means ``seed, seed + 1, ...``).
-    floor : str or FloorMap
-        Surface everywhere (``"hard"``, ``"tile"``, ``"carpet"``) or by region.
+    floor : str or FloorMap, optional
+        Surface everywhere (``"hard"``, ``"tile"``, ``"carpet"``) or by region; default
+        the robots' own (:attr:`RobotParams.floor`, the same for every robot).
     room : Room, optional
         Walls and boxes; default :meth:`Room.cluttered`.
     initial_pose : array_like, shape (3,) or (N, 3), optional
         Start pose(s) (x m, y m, heading rad); default the room's centre
         ``(2.5, 2.5, 0)``.
     faults : sequence of Fault
-        Scheduled changes (times from the start of the simulation).
+        Scheduled changes (times from the start of the simulation), besides each
+        robot's own (:attr:`RobotParams.faults`, which hit only that robot).
 
     Raises
     ------
@@ -154,7 +165,7 @@ class Simulator:
         *,
         n_robots: int | None = None,
         seed: int | Sequence[int] = 0,
-        floor: str | FloorMap = "hard",
+        floor: str | FloorMap | None = None,
         room: Room | None = None,
         initial_pose: np.ndarray | Sequence[float] | None = None,
         faults: Sequence[Fault] = (),
@@ -186,8 +197,13 @@ class Simulator:
         self.n = len(seeds)
         self.dt_s = params[0].period_s
         self.room = room if room is not None else Room.cluttered()
+        if floor is None:
+            floor = params[0].floor
+            if any(p.floor != floor for p in params):
+                raise SimulatorError("robots in lock step drive on one floor; their "
+                                     "parameters name different ones: give floor=")
         self.floor_map = floor if isinstance(floor, FloorMap) else FloorMap(default=floor)
-        self.faults = tuple(sorted(faults, key=lambda f: f.t_s))
+        self.faults = tuple(sorted([*_own_faults(params), *faults], key=lambda f: f.t_s))
         for f in self.faults:
             if f.robots is not None and any(not 0 <= r < self.n for r in f.robots):
                 raise SimulatorError(

@@ -21,7 +21,8 @@ This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
 
 Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
-and a mistyped option cost only the parser (and numpy, for the simulator's presets).
+and a mistyped option cost only the parser (and numpy, for the simulator's floor names;
+robot files are read when a sub-command names a robot).
 """
 
 from __future__ import annotations
@@ -32,14 +33,20 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from drivers.sim.config import FLOORS, PRESETS
+from drivers.sim.config import FLOORS, load_robot
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
 
-#: The simulator's robot presets and floors, the choices of --sim, --preset and --floor.
-PRESET_NAMES = tuple(PRESETS)
+#: The simulator's floors, the choices of --floor.
 FLOOR_NAMES = tuple(FLOORS)
+#: --robot of demo, calibrate, monitor and virtual-roomba (old spellings --preset, --sim
+#: kept as aliases, same dest); replay's --robot is a robot index (docs/robot_file.md).
+#: The preset names are written out, not read from the robot files, so that start-up
+#: reads no file (tests/lti_motion/app/test_cli.py checks they are all named).
+ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
+              "(.toml or .json, docs/robot_file.md)")
+FLOOR_HELP = "simulated floor (default: the robot's)"
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
@@ -48,15 +55,17 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print_progress,
         summarize,
     )
+    from drivers.sim.config import floor_name
     from lti_motion.app.plots import plot_calibration
     from lti_motion.calibration import CalibrationPlan, calibrate
 
     plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
     out = Path(args.out)
     if args.sim:
-        print(f"calibrating the simulated {args.sim} robot on {args.floor} floor "
-              f"(seed {args.seed})")
-        cal = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor, plan=plan,
+        robot = load_robot(args.sim)
+        print(f"calibrating the simulated {robot.name} robot on "
+              f"{args.floor or floor_name(robot.floor)} floor (seed {args.seed})")
+        cal = calibrate_simulator(robot, seed=args.seed, floor=args.floor, plan=plan,
                                   progress=print_progress)
     else:
         from drivers.roomba.driver import Roomba
@@ -71,7 +80,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
         print(f"calibrating the robot on {args.port} at {args.baud} baud")
         with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan, floor=args.floor,
+            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan,
+                            floor=args.floor or "hard",
                             progress=print_progress, before_stage=before_stage)
     from lti_motion.logfile import save_log
 
@@ -132,15 +142,16 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     if args.nominal and args.sim:
         raise ValueError("--nominal reads logs of a robot's nominal drives; it needs --port "
                          "(--sim drives --nominal-drives itself)")
+    robot = load_robot(args.sim) if args.sim else None
     if args.model is not None:
         model = _load_model(args.model)
     elif args.sim:
         from drivers.sim.calibration import calibrate_simulator, print_progress
         from lti_motion.calibration import CalibrationPlan
 
-        print(f"no --model: calibrating the simulated {args.sim} robot first "
+        print(f"no --model: calibrating the simulated {robot.name} robot first "
               f"({args.excitation_s:g} s of excitation, seed {args.seed})")
-        model = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor,
+        model = calibrate_simulator(robot, seed=args.seed, floor=args.floor,
                                     plan=CalibrationPlan(seed=args.seed,
                                                          excitation_s=args.excitation_s),
                                     progress=print_progress).arx
@@ -148,7 +159,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         raise ValueError("monitor --port needs --model FILE: calibrate the robot first with "
                          f"'lti-motion calibrate --port {args.port}'")
     if args.sim:
-        live_monitor.run_on_simulator(model, preset=args.sim, duration_s=args.duration,
+        live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
                                       seed=args.seed, floor=args.floor, fault=args.fault,
                                       fault_at_s=args.fault_at, record=args.record,
                                       nominal_drives=args.nominal_drives)
@@ -169,7 +180,7 @@ def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
     from drivers.roomba.virtual import serve
 
     try:
-        serve(preset=args.preset, seed=args.seed, speed=args.speed, floor=args.floor,
+        serve(preset=load_robot(args.preset), seed=args.seed, speed=args.speed, floor=args.floor,
               duration_s=args.duration)
     except KeyboardInterrupt:
         print("\nvirtual Roomba stopped")
@@ -179,7 +190,7 @@ def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
 def _cmd_demo(args: argparse.Namespace) -> int:
     from lti_motion.app.demo import run_demo
 
-    run_demo(Path(args.out), seed=args.seed, preset=args.preset, floor=args.floor,
+    run_demo(Path(args.out), seed=args.seed, robot=load_robot(args.preset), floor=args.floor,
              runs=args.runs, excitation_s=args.excitation_s)
     return 0
 
@@ -198,10 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "estimator; writes report.md, metrics.json and plots.")
     demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
     demo.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
-    demo.add_argument("--preset", default="create2", choices=PRESET_NAMES,
-                      help="robot preset (default: create2)")
-    demo.add_argument("--floor", default="hard", choices=FLOOR_NAMES,
-                      help="floor (default: hard)")
+    demo.add_argument("--robot", "--preset", dest="preset", default="create2",
+                      metavar="NAME_OR_FILE", help=f"{ROBOT_HELP} (default: create2)")
+    demo.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
     demo.add_argument("--runs", type=int, default=30, help="route runs per estimator (30)")
     demo.add_argument("--excitation-s", type=float, default=180.0,
                       help="length of the calibration's random excitation [s] (180)")
@@ -213,7 +223,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "random excitation) on the simulator or a robot, fits the models, and "
                     "writes model_arx.json, model_fir.json and plots.")
     where = cal.add_mutually_exclusive_group(required=True)
-    where.add_argument("--sim", choices=PRESET_NAMES, help="calibrate the simulator")
+    where.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
+                       help=f"calibrate {ROBOT_HELP}")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
@@ -221,8 +232,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "of a faster virtual Roomba")
     cal.add_argument("--wheel-base", type=float, default=0.235,
                      help="nominal wheel base [m] (default 0.235, the Create 2)")
-    cal.add_argument("--floor", default="hard", help="floor name recorded in the model "
-                     f"(and simulated with --sim: {', '.join(FLOOR_NAMES)})")
+    cal.add_argument("--floor", help="floor name recorded in the model (default: hard, or "
+                     f"the robot's) and simulated with --robot: {', '.join(FLOOR_NAMES)}")
     cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
     cal.add_argument("--excitation-s", type=float, default=180.0,
                      help="length of the random excitation [s] (default 180)")
@@ -273,7 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "--sim calibrates the simulated robot first; --port needs --model. See "
                     "docs/guide_alarms.md.")
     mwhere = mo.add_mutually_exclusive_group(required=True)
-    mwhere.add_argument("--sim", choices=PRESET_NAMES, help="monitor the simulator")
+    mwhere.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
+                        help=f"monitor {ROBOT_HELP}")
     mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
@@ -290,8 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--fault-at", type=float, default=None,
                     help="onset of --fault [s] (default: half the duration)")
     mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")
-    mo.add_argument("--floor", default="hard", choices=FLOOR_NAMES,
-                    help="simulated floor (default hard)")
+    mo.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
     mo.add_argument("--excitation-s", type=float, default=60.0,
                     help="--sim without --model: calibration excitation [s] (default 60)")
     mo.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
@@ -308,11 +319,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Starts the simulator behind the Roomba Open Interface on a "
                     "pseudo-terminal and prints its device path; connect with "
                     "'lti-motion calibrate --port PATH'. Ctrl-C stops it.")
-    vr.add_argument("--preset", default="create2", choices=PRESET_NAMES)
+    vr.add_argument("--robot", "--preset", dest="preset", default="create2",
+                    metavar="NAME_OR_FILE", help=f"{ROBOT_HELP} (default: create2)")
     vr.add_argument("--seed", type=int, default=0)
     vr.add_argument("--speed", type=float, default=1.0,
                     help="simulated seconds per wall-clock second (default 1: real time)")
-    vr.add_argument("--floor", default="hard", choices=FLOOR_NAMES)
+    vr.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
     vr.add_argument("--duration", type=float, default=None,
                     help="stop after this many wall-clock seconds (default: run until Ctrl-C)")
     vr.set_defaults(func=_cmd_virtual_roomba)

@@ -22,7 +22,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
-from drivers.sim.config import get_preset
+from drivers.sim.config import FloorMap, RobotParams, floor_name, load_robot
 from lti_motion.app.plots import plot_calibration
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
@@ -201,21 +201,43 @@ def _write_report(path: Path, metrics: dict, table: str, plots: list[Path]) -> N
     path.write_text("\n".join(report))
 
 
-def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: str = "hard",
-             runs: int = 30, excitation_s: float = 180.0,
+def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create2",
+             floor: str | FloorMap | None = None, runs: int = 30, excitation_s: float = 180.0,
              print_fn: Callable[[str], object] = print) -> dict:
     """Calibrate on the simulator, run the route for every estimator, write the report.
+
+    Parameters
+    ----------
+    out_dir : Path
+        Report folder (made if missing).
+    seed : int
+        Calibration seed; the route runs use seeds ``1000 + seed * runs + i``.
+    robot : RobotParams or str
+        The robot, or a preset name or robot file (:func:`~drivers.sim.config.load_robot`),
+        read before anything is written.
+    floor : str or FloorMap, optional
+        Floor of the calibration and the route (default the robot's).
+    runs : int
+        Route runs per estimator.
+    excitation_s : float
+        Length of the calibration's random excitation [s].
+    print_fn : callable
+        Where the progress lines go.
 
     Returns
     -------
     dict
-        The metrics written to ``out_dir / "metrics.json"``.
+        The metrics written to ``out_dir / "metrics.json"``; ``preset`` holds the
+        robot's name.
     """
     t_start = time.perf_counter()
-    params = get_preset(preset)
+    params = load_robot(robot) if isinstance(robot, str) else robot
+    floor = params.floor if floor is None else floor
+    preset = params.name
     out_dir.mkdir(parents=True, exist_ok=True)
 
-    print_fn(f"1. calibrating the simulated {preset} robot on {floor} floor (seed {seed})")
+    print_fn(f"1. calibrating the simulated {preset} robot on {floor_name(floor)} floor "
+             f"(seed {seed})")
     cal = calibrate_simulator(params, seed=seed, floor=floor,
                               plan=CalibrationPlan(seed=seed, excitation_s=excitation_s),
                               progress=print_progress)
@@ -239,7 +261,8 @@ def run_demo(out_dir: Path, *, seed: int = 0, preset: str = "create2", floor: st
         print_fn(f"   {LABELS.get(name, name):34s} closure {res.closure_offset_m.mean():.3f} "
                  f"+- {res.closure_offset_m.std():.3f} m  ({seconds[name]:.1f} s)")
 
-    metrics = _metrics(cal, results, seconds, preset=preset, floor=floor, seed=seed, runs=runs)
+    metrics = _metrics(cal, results, seconds, preset=preset, floor=floor_name(floor), seed=seed,
+                       runs=runs)
     _plot_trajectories(results, out_dir / "trajectories.png")
     _plot_closure(results, out_dir / "closure.png")
     (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")

@@ -29,6 +29,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,9 @@ from lti_motion.app.monitor_setup import (
 )
 from lti_motion.frames import SensorFrame
 from lti_motion.model import MotionModel
+
+if TYPE_CHECKING:
+    from drivers.sim.config import FloorMap, RobotParams
 
 __all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames",
            "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
@@ -254,8 +258,9 @@ def _report(run: MonitorRun, print_fn: Callable[[str], object], *, fault: str | 
         print_fn(f"injected {fault} at {fault_at_s:.2f} s: no {expected} alarm followed")
 
 
-def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s: float = 30.0,
-                     seed: int = 0, floor: str = "hard", fault: str | None = None,
+def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2",
+                     duration_s: float = 30.0, seed: int = 0,
+                     floor: str | FloorMap | None = None, fault: str | None = None,
                      fault_at_s: float | None = None, record: str | None = None,
                      nominal_drives: int = 20, landmarks: bool = True,
                      print_fn: Callable[[str], object] = print) -> MonitorRun:
@@ -265,8 +270,11 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
     ----------
     model : MotionModel
         Calibrated model of the robot.
-    preset, floor, seed
-        Simulator settings (an empty room).
+    robot : RobotParams or str
+        The robot, or a preset name or robot file (:func:`~drivers.sim.config.load_robot`);
+        its own faults happen in the drive (not in Phase I).
+    floor, seed
+        Simulator settings (an empty room); ``floor`` defaults to the robot's.
     duration_s : float
         Simulated drive [s].
     fault : str, optional
@@ -282,8 +290,12 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
         Where the lines go.
     """
     from drivers.logs import Recorder
-    from drivers.sim.config import Room
+    from drivers.sim.config import Room, floor_name, load_robot
     from drivers.sim.simulator import Simulator
+
+    params = load_robot(robot) if isinstance(robot, str) else robot
+    floor = params.floor if floor is None else floor
+    preset = params.name
 
     faults, expected = [], None
     if fault is not None:
@@ -295,17 +307,19 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
         print_fn(f"phase I: fitting the dynamics null and the encoder gate on {nominal_drives} "
                  f"nominal drives of {duration_s:g} s (seeds {seed + 1000}-"
                  f"{seed + 999 + nominal_drives}, no fault) ...")
-        nominal = nominal_on_simulator(model, preset=preset, n_drives=nominal_drives,
+        nominal = nominal_on_simulator(model, robot=params, n_drives=nominal_drives,
                                        duration_s=duration_s, seed=seed, floor=floor)
-    sim = Simulator(preset, seed=seed, floor=floor, room=Room.empty(),
+    sim = Simulator(params, seed=seed, floor=floor, room=Room.empty(),
                     initial_pose=(0.0, 0.0, 0.0), faults=faults)
     commands = monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
                              rng=np.random.default_rng(seed))
     rec = Recorder(dt_s=sim.dt_s, meta={"source": "lti-motion monitor --sim", "preset": preset,
-                                        "seed": seed, "floor": floor, "fault": fault,
+                                        "seed": seed, "floor": floor_name(floor),
+                                        "fault": fault,
                                         "fault_at_s": fault_at_s})
     print_fn(f"driving the simulated {preset} robot for {duration_s:g} s (seed {seed}, "
-             f"{floor} floor)" + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
+             f"{floor_name(floor)} floor)"
+             + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
     sensor_rng = np.random.default_rng([seed, 0x5E45])
 
     def frames() -> Iterator[tuple[SensorFrame, RangeBearing | None]]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.kinematics import wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
+
+if TYPE_CHECKING:
+    from drivers.sim.config import FloorMap, RobotParams
 
 __all__ = ["MONITOR_LANDMARKS", "monitor_route", "nominal_from_logs", "nominal_on_simulator",
            "sightings"]
@@ -79,20 +83,22 @@ def sightings(true_pose: np.ndarray, k: int, rng: np.random.Generator, *,
     return RangeBearing(k, *zip(*rows, strict=True)) if rows else RangeBearing.empty()
 
 
-def nominal_on_simulator(model: MotionModel, *, preset: str = "create2", n_drives: int = 20,
-                         duration_s: float = 30.0, seed: int = 0, floor: str = "hard"
-                         ) -> NominalFit:
+def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2",
+                         n_drives: int = 20, duration_s: float = 30.0, seed: int = 0,
+                         floor: str | FloorMap | None = None) -> NominalFit:
     """Phase I on the simulator: ``n_drives`` nominal drives of :func:`monitor_route`.
 
     Seeds ``seed + 1000 .. seed + 1000 + n_drives - 1`` (route and simulator), no
-    fault, all in one batch; commands and counts only go to
-    :func:`~lti_motion.app.monitor_setup.fit_nominal`.
+    fault (the robot's own faults are left out), all in one batch, on ``floor``
+    (default the robot's); ``robot`` is parameters, a preset name or a robot file.
+    Commands and counts only go to :func:`~lti_motion.app.monitor_setup.fit_nominal`.
     """
-    from drivers.sim.config import Room
+    from drivers.sim.config import Room, load_robot
     from drivers.sim.simulator import Simulator
 
+    params = load_robot(robot) if isinstance(robot, str) else robot
     seeds = [seed + 1000 + i for i in range(n_drives)]
-    sim = Simulator(preset, seed=seeds, floor=floor, room=Room.empty(),
+    sim = Simulator(params.replace(faults=()), seed=seeds, floor=floor, room=Room.empty(),
                     initial_pose=np.zeros((n_drives, 3)))
     cmds = np.stack([monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
                                    rng=np.random.default_rng(s)) for s in seeds])

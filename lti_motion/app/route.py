@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from drivers.sim.config import RobotParams, Room
+from drivers.sim.config import FloorMap, RobotParams, Room
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
@@ -283,7 +283,8 @@ def _follower(est: np.ndarray, target_idx: np.ndarray, phase: np.ndarray, *,
 
 
 def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[int],
-                floor: str = "hard", cruise_m_s: float = 0.25, turn_rad_s: float = 1.0,
+                floor: str | FloorMap | None = None, cruise_m_s: float = 0.25,
+                turn_rad_s: float = 1.0,
                 reach_m: float = 0.03, max_s: float = 150.0, faults: Sequence = (),
                 landmarks: LandmarkMap | None = None, landmark_noise: LandmarkNoise | None = None,
                 landmark_rate_hz: float = 2.0,
@@ -293,7 +294,8 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     The follower per robot: *stop* (0.4 s at rest), *turn* in place until the
     estimated heading error is below 0.03 rad, *stop*, *drive* until the estimated
     distance to the checkpoint is below ``reach_m``; then the next checkpoint. At
-    the last checkpoint the robot stops for good.
+    the last checkpoint the robot stops for good. ``floor`` defaults to the robot's
+    (:attr:`~drivers.sim.config.RobotParams.floor`); the robot's own faults happen too.
     """
     n = len(seeds)
     dt = params.period_s

@@ -1,6 +1,7 @@
 """The command line, run as a user runs it (short horizons)."""
 
 import json
+import tomllib
 
 import numpy as np
 import pytest
@@ -38,22 +39,70 @@ def _options(parser):
                 yield name, flag, action
 
 
-def test_preset_and_floor_choices_are_the_simulators():
-    from drivers.sim.config import FLOORS, PRESETS
+def test_robot_option_takes_a_name_or_file_and_the_old_spellings_still_parse():
+    from drivers.sim.config import FLOORS
+    from drivers.sim.robot_file import preset_names
 
     seen = set()
     for command, flag, action in _options(build_parser()):
-        if flag in ("--sim", "--preset"):
-            assert list(action.choices) == list(PRESETS), (command, flag)
-            seen.add((command, flag))
+        if flag == "--robot" and command != "replay":
+            assert action.choices is None and action.metavar == "NAME_OR_FILE", command
+            assert "robot file" in action.help, command
+            assert f"a preset ({', '.join(preset_names())})" in action.help, command
+            seen.add(command)
         elif flag == "--floor" and action.choices is not None:
             assert list(action.choices) == list(FLOORS), (command, flag)
-            seen.add((command, flag))
         elif flag == "--floor":                                  # a robot's floor: any name
             assert all(f in action.help for f in FLOORS), (command, flag)
-    assert seen == {("demo", "--preset"), ("demo", "--floor"), ("calibrate", "--sim"),
-                    ("monitor", "--sim"), ("monitor", "--floor"),
-                    ("virtual-roomba", "--preset"), ("virtual-roomba", "--floor")}
+    assert seen == {"demo", "calibrate", "monitor", "virtual-roomba"}
+    parse = build_parser().parse_args
+    for old, new in ((["demo", "--preset", "paper"], ["demo", "--robot", "paper"]),
+                     (["calibrate", "--sim", "paper"], ["calibrate", "--robot", "paper"]),
+                     (["monitor", "--sim", "paper"], ["monitor", "--robot", "paper"]),
+                     (["virtual-roomba", "--preset", "paper"],
+                      ["virtual-roomba", "--robot", "paper"])):
+        assert vars(parse(old)) == vars(parse(new)), old
+    assert parse(["replay", "x.npz", "--robot", "3"]).robot == 3    # replay: a robot index
+
+
+ROBOT_FILE_ERRORS = [
+    ("ticks_per_rev = 508.8", "ticks_per_rev = -5",
+     "[encoders] ticks_per_rev must be a positive number [ticks per wheel revolution], got -5"),
+    ("mass_kg = 3.6\n", "", "[mass] mass_kg [kg] is missing"),
+    ("mass_kg = 3.6", "mass_kg = 3.6\nmass_lb = 8", "[mass] unknown field 'mass_lb'"),
+]
+
+
+@pytest.mark.parametrize("command", [
+    ["demo", "--runs", "2", "--out", "{out}"],
+    ["calibrate", "--out", "{out}"],
+    ["monitor", "--duration", "1"],
+    ["virtual-roomba", "--duration", "0.3"],
+], ids=lambda c: c[0])
+@pytest.mark.parametrize("old, new, message", ROBOT_FILE_ERRORS, ids=["range", "missing",
+                                                                      "unknown"])
+def test_a_bad_robot_file_is_one_line_exit_2_and_nothing_written(command, old, new, message,
+                                                                 tmp_path, capsys):
+    from importlib import resources
+
+    text = (resources.files("drivers.sim") / "robots" / "create2.toml").read_text()
+    assert old in text
+    robot = tmp_path / "my.toml"
+    robot.write_text(text.replace(old, new))
+    out = tmp_path / "out"
+    argv = [a.format(out=out) for a in command]
+    assert main([argv[0], "--robot", str(robot), *argv[1:]]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"lti-motion {argv[0]}: error: robot file {robot}: {message}")
+    assert captured.err.count("\n") == 1 and "Traceback" not in captured.err
+    assert not out.exists() and captured.out == ""
+
+
+def test_an_unknown_robot_name_says_what_to_give(capsys):
+    assert main(["demo", "--robot", "roomba9000", "--out", "/nonexistent/x"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lti-motion demo: error: unknown robot 'roomba9000': neither a "
+                          "preset (create2, paper) nor a .toml or .json robot file")
 
 
 def test_calibrate_on_a_missing_port_names_it(capsys):
@@ -62,10 +111,19 @@ def test_calibrate_on_a_missing_port_names_it(capsys):
 
 
 def test_calibrate_sim_writes_models_and_plots(tmp_path, capsys):
-    assert main(["calibrate", "--sim", "create2", "--excitation-s", "40",
+    from importlib import resources
+
+    text = (resources.files("drivers.sim") / "robots" / "create2.toml").read_text()
+    robot = tmp_path / "mybot.json"              # a robot file: the Create 2 on carpet, renamed
+    doc = tomllib.loads(text.replace('name = "create2"', 'name = "mybot"'))
+    doc["floor"] = {"default": "carpet"}
+    robot.write_text(json.dumps(doc))
+    assert main(["calibrate", "--robot", str(robot), "--excitation-s", "40",
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
+    assert "calibrating the simulated mybot robot on carpet floor" in out
     assert "encoder scale" in out and "ARX" in out
+    assert json.loads((tmp_path / "model_arx.json").read_text())["floor"] == "carpet"
     for name in ("model_arx.json", "model_fir.json", "order_selection.png"):
         assert (tmp_path / name).is_file()
     from lti_motion.logfile import load_log
