@@ -25,7 +25,7 @@ Units are SI: seconds, metres, radians.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Literal
 
@@ -141,6 +141,9 @@ class Recording:
     sensor_pose : tuple of 3 float
         Sightings' sensor pose on the robot (x [m] forward, y [m] left,
         heading [rad]).
+    light_bump, bumps : ndarray or None
+        Roomba only, optional: light-bump signals ``(n, 6)`` and bumper flags
+        ``(n, 2)`` of each wheel frame.
     meta : dict
         Free-form JSON-serialisable description.
     """
@@ -157,6 +160,8 @@ class Recording:
     true_pose: Stream | None = None
     sightings: Stream | None = None
     sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    light_bump: np.ndarray | None = None
+    bumps: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -283,6 +288,32 @@ array_like, shape (n, 2)
                              "log.robot(i) first")
         truth = {} if log.true_pose is None else {"true_pose_t_s": log.t_s,
                                                   "true_pose": log.true_pose}
-        return cls.from_streams(wheel_t_s=log.t_s, dt_s=log.dt_s, counts=log.ticks,
-                                counter_bits=16, valid=log.valid, cmd_wheel_m_s=log.cmd_m_s,
-                                meta=dict(log.meta), **truth)
+        rec = cls.from_streams(wheel_t_s=log.t_s, dt_s=log.dt_s, counts=log.ticks,
+                               counter_bits=16, valid=log.valid, cmd_wheel_m_s=log.cmd_m_s,
+                               meta=dict(log.meta), **truth)
+        return replace(rec, light_bump=log.light_bump, bumps=log.bumps)
+
+    def to_frame_log(self) -> FrameLog:
+        """The :class:`~lti_motion.frames.FrameLog` of a Roomba-like recording.
+
+        Needs 16-bit counts and one wheel command per frame; missing light
+        bumps and bumpers become zeros; ground truth is left out (a FrameLog's
+        truth also needs the true body speeds).
+
+        Raises
+        ------
+        ValueError
+            If the recording holds another wheel or command kind.
+        """
+        if (self.wheel_kind != "counts" or self.counter_bits != 16 or not self.cmd_per_frame
+                or self.cmd_kind != "cmd_wheel_m_s"):
+            raise ValueError(f"only a recording of 16-bit counts with one wheel command per "
+                             f"frame is a FrameLog; this one holds {self.wheel_kind} and "
+                             f"{self.cmd_kind}")
+        n = len(self)
+        return FrameLog(
+            t_s=self.wheel.t_s, ticks=self.wheel.values, cmd_m_s=self.cmd.values,
+            light_bump=(np.zeros((n, 6), np.int64) if self.light_bump is None
+                        else self.light_bump),
+            bumps=np.zeros((n, 2), bool) if self.bumps is None else self.bumps,
+            valid=self.wheel_valid, dt_s=self.dt_s, meta=dict(self.meta))

@@ -7,7 +7,8 @@ demo
     (Table II) for every estimator; writes a report folder.
 calibrate
     Run the calibration manoeuvres on the simulator or a real robot, fit the
-    encoder scale, FIR and ARX models, save them and their plots.
+    encoder scale, FIR and ARX models, save them and their plots; or, with
+    ``--log``, fit the ARX model offline on any recorded drive.
 replay
     Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
     there is ground truth, TUM trajectories for ``evo``, plots.
@@ -42,7 +43,34 @@ PRESET_NAMES = tuple(PRESETS)
 FLOOR_NAMES = tuple(FLOORS)
 
 
+def _cmd_calibrate_log(args: argparse.Namespace) -> int:
+    """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
+    from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
+
+    preset = PRESETS[args.preset] if args.preset else None
+    if args.m_per_tick is not None or args.wheel_radius is not None:
+        source = "the robot description on the command line (--m-per-tick / --wheel-radius)"
+    elif preset is not None:
+        source = f"the nominal {args.preset} description (--preset)"
+    else:
+        source = "the robot description (none given)"
+    robot = RobotDescription(
+        wheel_base_m=args.wheel_base,
+        m_per_tick=args.m_per_tick if args.m_per_tick is not None
+        else (preset.m_per_tick if preset else None),
+        wheel_radius_m=args.wheel_radius if args.wheel_radius is not None
+        else (preset.wheel_diameter_m / 2 if preset else None),
+        source=source)
+    print(f"calibrating from the recording {args.log}")
+    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor)
+    for line in lines:
+        print(line)
+    return 0
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if getattr(args, "log", None):
+        return _cmd_calibrate_log(args)
     from drivers.sim.calibration import (
         calibrate_simulator,
         print_progress,
@@ -215,6 +243,18 @@ def build_parser() -> argparse.ArgumentParser:
     where = cal.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", choices=PRESET_NAMES, help="calibrate the simulator")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    where.add_argument("--log", metavar="FILE",
+                       help="calibrate the ARX model offline from a recorded drive of any "
+                            "differential drive (.npz, docs/log_format.md); prints an "
+                            "excitation report; the encoder scale then comes from "
+                            "--m-per-tick, --wheel-radius or --preset")
+    cal.add_argument("--m-per-tick", type=float, default=None,
+                     help="with --log: encoder scale [m/tick] from the robot description")
+    cal.add_argument("--wheel-radius", type=float, default=None,
+                     help="with --log: wheel radius [m] for wheel angles or speeds in rad/s")
+    cal.add_argument("--preset", choices=PRESET_NAMES, default=None,
+                     help="with --log: take the encoder scale and wheel radius of a "
+                          "simulator preset's nominal description")
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration import speeds_from_log
 from lti_motion.clocks import assign_periods
+from lti_motion.exceptions import LogFileError
 from lti_motion.kinematics import wheel_from_body
+from lti_motion.logfile import load_log, load_recording, save_log, save_recording
 from lti_motion.odometry import body_speeds_from_ticks, stream_clock
 from lti_motion.recording import Recording
 from lti_motion.resample import on_grid
@@ -150,3 +154,41 @@ def test_speeds_from_log_matches_the_nominal_clock_on_a_clean_simulated_log():
     ref = body_speeds_from_ticks(log.ticks, t, m_per_tick=4.4e-4, wheel_base_m=0.235)
     np.testing.assert_allclose(y, ref, rtol=1e-3, atol=1e-9)
     np.testing.assert_array_equal(u, log.cmd_m_s[1:])
+
+
+def test_version_2_files_round_trip_and_version_1_reads_as_a_recording(tmp_path):
+    rec = _arc("wheel_angles_rad")
+    imu_t = np.arange(N) * DT_S + 0.003
+    rec = Recording.from_streams(wheel_t_s=rec.wheel.t_s, wheel_angles_rad=rec.wheel.values,
+                                 cmd_t_s=rec.cmd.t_s, cmd_body=rec.cmd.values,
+                                 yaw_rate_t_s=imu_t, yaw_rate_rad_s=np.full(N, 0.4),
+                                 sightings_t_s=[0.5], sightings=[[7, 2.0, 0.1]],
+                                 sensor_pose=(0.1, 0.0, 0.0), meta={"robot": "jointstate"})
+    back = load_recording(save_recording(tmp_path / "r.npz", rec))
+    assert (back.wheel_kind, back.cmd_kind, back.cmd_per_frame) == ("wheel_angles_rad",
+                                                                    "cmd_body", False)
+    np.testing.assert_array_equal(back.wheel.values, rec.wheel.values)
+    np.testing.assert_array_equal(back.yaw_rate.values, rec.yaw_rate.values)
+    assert back.sensor_pose == (0.1, 0.0, 0.0) and back.meta == {"robot": "jointstate"}
+    with pytest.raises(LogFileError, match="not Roomba frames"):
+        load_log(tmp_path / "r.npz")
+
+    log = Simulator("create2", seed=1).run(np.full((50, 2), 0.1))
+    v1 = load_recording(save_log(tmp_path / "v1.npz", log))
+    assert (v1.wheel_kind, v1.counter_bits, v1.cmd_per_frame) == ("counts", 16, True)
+    v2 = save_recording(tmp_path / "v2.npz", v1)
+    again = load_log(v2)
+    np.testing.assert_array_equal(again.ticks, log.ticks)
+    np.testing.assert_array_equal(again.light_bump, log.light_bump)
+
+
+def test_a_version_2_file_with_stamps_going_backwards_is_refused_naming_the_field(tmp_path):
+    t = np.arange(20) * DT_S
+    t[5] = t[2]
+    arrays = {"wheel_t_s": t, "wheel": np.zeros((20, 2)), "cmd": np.zeros((20, 2))}
+    header = {"format": "lti-motion-log", "version": 2, "dt_s": DT_S, "cmd_per_frame": True,
+              "wheel_kind": "wheel_speeds_m_s", "cmd_kind": "cmd_wheel_m_s"}
+    np.savez(tmp_path / "bad.npz", header=np.array(json.dumps(header)), **arrays)
+    with pytest.raises(LogFileError, match="wheel_speeds_m_s: timestamps go backwards at "
+                                           "sample 5"):
+        load_recording(tmp_path / "bad.npz")

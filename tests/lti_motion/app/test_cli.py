@@ -52,6 +52,7 @@ def test_preset_and_floor_choices_are_the_simulators():
         elif flag == "--floor":                                  # a robot's floor: any name
             assert all(f in action.help for f in FLOORS), (command, flag)
     assert seen == {("demo", "--preset"), ("demo", "--floor"), ("calibrate", "--sim"),
+                    ("calibrate", "--preset"),
                     ("monitor", "--sim"), ("monitor", "--floor"),
                     ("virtual-roomba", "--preset"), ("virtual-roomba", "--floor")}
 
