@@ -24,9 +24,9 @@ order they were sampled, so frame ``i``'s period is at most one less than
 frame ``i + 1``'s: ``k_i = min(u_i, k_{i+1} - 1)``, the latest period
 consistent with every later frame (a backward running minimum). A frame that
 arrived more than a period late is pulled back by the on-time frame after it;
-a gap in ``k`` is a lost frame. Frames with the same stamp as the one before
-are duplicates and merged (the later kept); frames whose stamp is not finite
-are dropped. The period is found by fitting on a growing prefix (64 frames,
+a gap in ``k`` is a lost frame. Frames the caller marks as duplicates (same
+stamp and payload as the one before) are merged; frames whose stamp is not
+finite are dropped. The period is found by fitting on a growing prefix (64 frames,
 then doubling), so a drift of 100 ppm over hours never accumulates into a
 wrong period count. Under 64 frames the nominal period is kept and only the
 offset is fitted.
@@ -102,7 +102,7 @@ class PeriodAssignment:
     clock : ClockFit
         The fitted clock.
     n_merged : int
-        Frames merged into a neighbour (duplicated stamps).
+        Frames merged into the one before (duplicates).
     n_dropped : int
         Frames dropped (stamp not finite).
     n_late : int
@@ -185,11 +185,12 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
     nominal = float(np.median(np.diff(t))) if dt_s is None else float(dt_s)
     if not (np.isfinite(nominal) and nominal > 0):
         raise ValueError(f"the sensor period must be a positive number of seconds, got {dt_s}")
-    period, offset = nominal, float(t[0])
     n = min(_FIRST_PREFIX, t.size)
+    # a lower bound of the envelope: lost frames only make t_i - T i larger, latency too
+    period, offset = nominal, float(np.min(t[:n] - nominal * np.arange(n)))
     while t.size >= _FIRST_PREFIX:
-        k = _monotone_periods(t[:n], period, offset)
-        if n >= 8:
+        for _ in range(2):                    # assignment and line, to their fixed point
+            k = _monotone_periods(t[:n], period, offset)
             period, offset, _ = _envelope_line(k, t[:n])
         if n == t.size:
             break
@@ -209,17 +210,21 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
     return clock, k
 
 
-def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None) -> PeriodAssignment:
+def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
+                   duplicate: np.ndarray | None = None) -> PeriodAssignment:
     """Assign frames to the robot's sensor periods; never raises on jitter, gaps or repeats.
 
     Parameters
     ----------
     t_s : array_like, shape (n,)
-        Host stamps of the frames in arrival order [s]. Stamps equal to the
-        one before are duplicates (merged); stamps that are not finite are
-        dropped. Stamps that go backwards are bad input.
+        Host stamps of the frames in arrival order [s]. Stamps that are not
+        finite are dropped; equal stamps (a burst delivery) are fine. Stamps
+        that go backwards are bad input.
     dt_s : float, optional
         Nominal sensor period [s]; by default the median frame interval.
+    duplicate : array_like of bool, shape (n,), optional
+        Frames known to repeat the one before (same stamp and payload):
+        merged into it.
 
     Returns
     -------
@@ -248,10 +253,10 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None) -> PeriodAssig
         i = int(np.flatnonzero(finite)[back[0] + 1])
         raise ValueError(f"frame times go backwards at frame {i}: {t[i]:.6f} s after "
                          f"{t[finite][back[0]]:.6f} s")
-    keep = finite.copy()
-    fin_idx = np.flatnonzero(finite)
-    dup = fin_idx[1:][np.diff(t[finite]) == 0] - 1      # the earlier of two equal stamps
-    keep[dup] = False
+    dup = np.zeros(t.size, bool) if duplicate is None else np.asarray(duplicate, bool).ravel()
+    if dup.shape != t.shape:
+        raise ValueError(f"duplicate must have shape {t.shape}, got {dup.shape}")
+    keep = finite & ~dup
     if keep.sum() < 2:
         raise ValueError(f"at least 2 distinct finite frame times are needed, got {keep.sum()}")
     clock, k = fit_clock(t[keep], dt_s=dt_s)
@@ -260,7 +265,8 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None) -> PeriodAssig
     upper = np.floor((t[keep] - clock.offset_s) / clock.period_s + _ENVELOPE_SLACK)
     n_late = int(np.sum(upper > k))
     n_missing = int(k[-1] + 1 - k.size)
-    out = PeriodAssignment(period=period, keep=keep, clock=clock, n_merged=int(dup.size),
+    out = PeriodAssignment(period=period, keep=keep, clock=clock,
+                           n_merged=int((dup & finite).sum()),
                            n_dropped=int((~finite).sum()), n_late=n_late, n_missing=n_missing)
     if out.n_merged or out.n_dropped:
         _log.info("clock: %s", out.summary())

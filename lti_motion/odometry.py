@@ -163,8 +163,8 @@ def stream_clock(t_s: np.ndarray, dt_s: float) -> np.ndarray:
     Returns
     -------
     ndarray, shape (n,)
-        Increasing, except that a frame with the same host stamp as the one
-        after it (a duplicate) gets that frame's time.
+        Increasing; a frame whose stamp is not finite gets the time of the
+        next frame.
 
     Raises
     ------

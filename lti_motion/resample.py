@@ -7,7 +7,8 @@ calibration fits and what the EKF fuses.
 Notes
 -----
 The grid is the robot's sensor periods, found from the wheel stream's stamps
-by :func:`lti_motion.clocks.assign_periods`; period ``k`` ends at host time
+by :func:`lti_motion.clocks.assign_periods` (a wheel frame with the stamp and
+values of the one before is a duplicate and merged); period ``k`` ends at host time
 ``offset_s + period_s k`` on the latency-free envelope. The rule for every
 measured stream:
 
@@ -203,7 +204,10 @@ def on_grid(rec: Recording, *, wheel_base_m: float, m_per_tick: float | None = N
     >>> g.speeds.shape, np.allclose(g.speeds, [0.2, 0.0])
     ((49, 2), True)
     """
-    a = assign_periods(rec.wheel.t_s, dt_s=rec.dt_s)
+    t, v = rec.wheel.t_s, rec.wheel.values
+    repeat = np.zeros(t.size, bool)     # a frame delivered twice: same stamp, same values
+    repeat[1:] = (np.diff(t) == 0) & np.all(v[1:] == v[:-1], axis=1)
+    a = assign_periods(t, dt_s=rec.dt_s, duplicate=repeat)
     n_periods = a.n_periods - 1
     t_grid = a.clock.times_s(np.arange(n_periods + 1))
     used = a.keep & rec.wheel_valid
