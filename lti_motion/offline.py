@@ -13,6 +13,7 @@ the caller gives, and the result says so.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -201,6 +202,7 @@ def calibrate_recording(
     encoders: Literal["quadrature", "commanded"] = "quadrature",
     scale_from: str = "the robot description", validation: float = 0.3,
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo", floor: str | None = None,
+    orders: Sequence[int] = range(1, 13), delays: Sequence[int] = range(0, 9),
 ) -> OfflineCalibration:
     """Fit the ARX motion model on any recording with enough excitation.
 
@@ -223,6 +225,8 @@ def calibrate_recording(
         Steady-state gain structure (:func:`lti_motion.model.fit_arx`).
     floor : str, optional
         Floor name recorded in the model.
+    orders, delays : sequence of int
+        ARX order and delay grid (:func:`lti_motion.model.fit_arx`).
 
     Returns
     -------
@@ -243,7 +247,7 @@ def calibrate_recording(
                               + "; ".join(report.refusals))
     u, y = grid.cmd_m_s, grid.speeds
     model = fit_arx([(u, y)], dt_s=grid.period_s, wheel_base_m=wheel_base_m,
-                    validation=validation, dc_gain=dc_gain,
+                    validation=validation, dc_gain=dc_gain, orders=orders, delays=delays,
                     m_per_tick=m_per_tick if rec.wheel_kind == "counts" else None, floor=floor)
     tail = round(len(u) * (1 - validation))
     fit = model.fit_percent([(u[tail:], y[tail:])])
