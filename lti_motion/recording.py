@@ -197,7 +197,9 @@ array_like, shape (n, 2)
         counter_bits : int, optional
             Width of a wrapping counter (``counts`` only); ``None``: no wrap.
         valid : array_like of bool, shape (n,), optional
-            ``False`` for wheel frames to ignore (lost on the way).
+            ``False`` for wheel frames to ignore (lost on the way). A frame
+            whose values are not finite (NaN: the reading did not arrive) is
+            ignored the same way.
         cmd_t_s : array_like, shape (m,), optional
             Stamps of the commands when they were sent [s]; ``None``: one
             command per wheel frame, in effect for the period it closes.
@@ -223,7 +225,8 @@ array_like, shape (n, 2)
         ------
         ValueError
             If not exactly one wheel kind or command kind is given, a stamp
-            is not finite or goes backwards (the message names the stream),
+            is not finite or goes backwards, or a command is not finite (the
+            message names the stream),
             or ``counter_bits`` is not 1..64.
         ShapeError
             If an array's shape does not match its stamps.
@@ -255,6 +258,10 @@ array_like, shape (n, 2)
         cmd_kind, cmd_values = _one_of("command", {"cmd_wheel_m_s": cmd_wheel_m_s,
                                                    "cmd_body": cmd_body})
         cmd = _stream(cmd_kind, wheel.t_s if cmd_t_s is None else cmd_t_s, cmd_values, 2)
+        bad = np.flatnonzero(~np.all(np.isfinite(cmd.values), axis=1))
+        if bad.size:
+            raise ValueError(f"{cmd_kind}: command {int(bad[0])} is not finite "
+                             f"({cmd.values[bad[0]].tolist()})")
         ok = np.ones(wheel.t_s.size, bool) if valid is None else np.asarray(valid, bool)
         if ok.shape != wheel.t_s.shape:
             raise ShapeError(f"valid must have shape {wheel.t_s.shape}, got {ok.shape}")

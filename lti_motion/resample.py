@@ -210,7 +210,7 @@ def on_grid(rec: Recording, *, wheel_base_m: float, m_per_tick: float | None = N
     a = assign_periods(t, dt_s=rec.dt_s, duplicate=repeat)
     n_periods = a.n_periods - 1
     t_grid = a.clock.times_s(np.arange(n_periods + 1))
-    used = a.keep & rec.wheel_valid
+    used = a.keep & rec.wheel_valid & np.all(np.isfinite(v), axis=1)   # NaN: did not arrive
     if used.sum() < 2:
         raise ValueError(f"{rec.wheel_kind}: fewer than 2 valid wheel frames")
     k_used = a.period[used].astype(float)

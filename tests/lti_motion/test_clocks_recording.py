@@ -211,3 +211,18 @@ def test_a_late_first_frame_does_not_bend_the_clock(rng):
     a = assign_periods(t, dt_s=0.015)
     assert abs(a.clock.drift_ppm) < 20.0, a.clock.drift_ppm
     assert np.mean(a.period != k_true - k_true[0]) < 0.005
+
+
+def test_a_reading_that_did_not_arrive_is_a_lost_frame_and_a_nan_command_is_refused():
+    t = np.arange(N) * DT_S
+    speeds = np.tile(WHEEL_M_S, (N, 1))
+    speeds[200] = np.nan
+    rec = Recording.from_streams(wheel_t_s=t, wheel_speeds_m_s=speeds,
+                                 cmd_wheel_m_s=np.zeros((N, 2)))
+    g = on_grid(rec, wheel_base_m=B_M)
+    np.testing.assert_allclose(g.speeds, np.tile(BODY, (N - 1, 1)), atol=1e-9)
+    assert (~g.measured).sum() == 2
+    cmd = np.zeros((N, 2))
+    cmd[7, 1] = np.inf
+    with pytest.raises(ValueError, match="cmd_wheel_m_s: command 7 is not finite"):
+        Recording.from_streams(wheel_t_s=t, wheel_speeds_m_s=speeds, cmd_wheel_m_s=cmd)
