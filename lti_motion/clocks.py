@@ -28,8 +28,10 @@ a gap in ``k`` is a lost frame. Frames the caller marks as duplicates (same
 stamp and payload as the one before) are merged; frames whose stamp is not
 finite are dropped. The period is found by fitting on a growing prefix (64 frames,
 then doubling), so a drift of 100 ppm over hours never accumulates into a
-wrong period count. Under 64 frames the nominal period is kept and only the
-offset is fitted.
+wrong period count. The fitted period replaces the nominal one only where
+they differ by more than three standard errors of the fit (a short record
+cannot resolve a drift: 100 frames with 1 ms of jitter leave 200 ppm of
+uncertainty); under 64 frames only the offset is fitted.
 
 References
 ----------
@@ -128,22 +130,35 @@ class PeriodAssignment:
     def summary(self) -> str:
         """One line: period, drift and the frame counts."""
         c = self.clock
-        return (f"sensor period {c.period_s * 1e3:.4f} ms (drift {c.drift_ppm:+.0f} ppm), "
+        return (f"sensor period {c.period_s * 1e3:.4f} ms ({c.drift_ppm:+.0f} ppm against "
+                f"the nominal {c.period_s / c.rate * 1e3:.4f} ms), "
                 f"median latency {c.latency_median_s * 1e3:.1f} ms; {self.n_missing} periods "
                 f"lost, {self.n_late} frames late, {self.n_merged} merged, "
                 f"{self.n_dropped} dropped")
 
 
-def _envelope_line(k: np.ndarray, t: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """Least-squares line through the lowest residuals, then lowered onto the envelope."""
+def _envelope_line(k: np.ndarray, t: np.ndarray, nominal: float
+                   ) -> tuple[float, float, np.ndarray]:
+    """Least-squares line through the lowest residuals, then lowered onto the envelope.
+
+    The slope stays ``nominal`` unless the fitted one differs from it by more
+    than three standard errors (a short record cannot resolve a drift).
+    """
     k = k.astype(float)
     period, offset = np.polyfit(k, t, 1)
+    low = np.ones(k.size, bool)
     for _ in range(3):                        # reweight: keep the earliest arrivals
         r = t - (offset + period * k)
-        low = r <= np.quantile(r, _ENVELOPE_FRACTION)
-        if low.sum() < 2 or np.ptp(k[low]) == 0:
+        sub = r <= np.quantile(r, _ENVELOPE_FRACTION)
+        if sub.sum() < 3 or np.ptp(k[sub]) == 0:
             break
+        low = sub
         period, offset = np.polyfit(k[low], t[low], 1)
+    r_low = t[low] - (offset + period * k[low])
+    # standard error of an LS slope: s / (sqrt(m) std(k)), Montgomery 2012 eq. 2.10
+    se = float(np.std(r_low) / (np.sqrt(low.sum()) * max(np.std(k[low]), 1e-12)))
+    if abs(period - nominal) <= 3.0 * se:
+        period, offset = nominal, float(np.mean(t[low] - nominal * k[low]))
     r = t - (offset + period * k)
     floor = np.quantile(r, 0.01) if r.size >= 100 else r.min()
     return float(period), float(offset + floor), r - floor
@@ -191,13 +206,13 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
     while t.size >= _FIRST_PREFIX:
         for _ in range(2):                    # assignment and line, to their fixed point
             k = _monotone_periods(t[:n], period, offset)
-            period, offset, _ = _envelope_line(k, t[:n])
+            period, offset, _ = _envelope_line(k, t[:n], nominal)
         if n == t.size:
             break
         n = min(2 * n, t.size)
     k = _monotone_periods(t, period, offset)
     if t.size >= _FIRST_PREFIX:
-        period, offset, latency = _envelope_line(k, t)
+        period, offset, latency = _envelope_line(k, t, nominal)
     else:                                     # too few frames to beat the nominal period
         latency = t - period * k
         offset = float(latency.min())
