@@ -5,9 +5,10 @@ Any drive with enough excitation will do, not only the paper's manoeuvres:
 (condition of the regression, frequency content of the commands, time at
 rest, which parameters the data leave unidentified) and why it refuses data
 that cannot identify one; :func:`calibrate_recording` fits the ARX model
-(paper II.C) on it. Without a rotation in place the encoder scale is not
-measured (paper eq. 13 needs one): it comes from the robot description
-the caller gives, and the result says so.
+(paper II.C) on it. A Roomba recording that holds a rotation in place beside
+a wall measures the encoder scale (paper eq. 13, :func:`rotation_scale`);
+without one the scale comes from the robot description the caller gives,
+and the result says so.
 """
 
 from __future__ import annotations
@@ -19,7 +20,12 @@ from typing import Literal
 
 import numpy as np
 
-from lti_motion.exceptions import NotExcitedError
+from lti_motion.encoder_scale import (
+    RotationPeriod,
+    encoder_scale_m_per_tick,
+    rotation_period_ticks,
+)
+from lti_motion.exceptions import CalibrationError, NotExcitedError
 from lti_motion.excitation import DEFAULT_MAX_CONDITION, excitation_condition_number
 from lti_motion.kinematics import body_from_wheel
 from lti_motion.model import MotionModel, fit_arx
@@ -27,7 +33,7 @@ from lti_motion.recording import Recording
 from lti_motion.resample import GridSignals, on_grid
 
 __all__ = ["ExcitationReport", "OfflineCalibration", "calibrate_recording",
-           "excitation_report"]
+           "excitation_report", "rotation_scale"]
 
 _log = logging.getLogger(__name__)
 
@@ -174,6 +180,52 @@ def excitation_report(grid: GridSignals, *, wheel_base_m: float, n_lags: int = 1
         clock=grid.assignment.summary())
 
 
+#: Shortest rotation in place searched for an encoder scale [s].
+_MIN_ROTATION_S = 4.0
+
+
+def rotation_scale(rec: Recording, *, wheel_base_m: float
+                   ) -> tuple[float, RotationPeriod] | str:
+    """The encoder scale from a rotation in place inside a recording, or why there is none.
+
+    The longest stretch of wheel commands turning in place (opposite signs,
+    ``|L + R| < 0.1 |L - R|``, at least 0.05 m/s) lasting ``_MIN_ROTATION_S``
+    or more, in a recording of counts with light-bump signals, gives the
+    period of the signals in ticks and the scale ``2 pi b / D`` (paper eq. 13,
+    :func:`~lti_motion.encoder_scale.rotation_period_ticks`).
+
+    Returns
+    -------
+    (float, RotationPeriod) or str
+        The scale [m/tick] and its period estimate, or the reason there is none.
+    """
+    if rec.wheel_kind != "counts" or rec.light_bump is None or not rec.cmd_per_frame:
+        return "the recording has no light-bump signals beside per-frame counts"
+    cmd = body_from_wheel(rec.cmd.values, wheel_base_m=wheel_base_m)
+    left, right = rec.cmd.values[:, 0], rec.cmd.values[:, 1]
+    turning = ((left * right < 0) & (np.abs(left + right) < 0.1 * np.abs(left - right))
+               & (np.abs(cmd[:, 1]) * wheel_base_m / 2 >= 0.05) & rec.wheel_valid)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], turning.astype(int), [0]])))
+    starts, stops = edges[::2], edges[1::2]
+    if starts.size == 0:
+        return "no rotation in place in the recording"
+    j = int(np.argmax(stops - starts))
+    seg = slice(int(starts[j]), int(stops[j]))
+    if np.ptp(rec.wheel.t_s[seg]) < _MIN_ROTATION_S:
+        return f"no rotation in place of {_MIN_ROTATION_S:g} s or more"
+    counts = rec.wheel.values[seg].astype(np.int64)
+    steps = np.diff(counts, axis=0)
+    if rec.counter_bits is not None and rec.counter_bits < 64:
+        mod = 1 << rec.counter_bits
+        steps = (steps + mod // 2) % mod - mod // 2
+    travel = np.vstack([np.zeros((1, 2), np.int64), np.cumsum(steps, axis=0)])
+    try:
+        rotation = rotation_period_ticks(rec.light_bump[seg], travel[:, 1] - travel[:, 0])
+    except CalibrationError as exc:
+        return f"the rotation in place gives no period ({exc})"
+    return encoder_scale_m_per_tick(rotation.period_ticks, wheel_base_m=wheel_base_m), rotation
+
+
 @dataclass(frozen=True)
 class OfflineCalibration:
     """An ARX model fitted on a recording, and how well the data determined it.
@@ -188,12 +240,22 @@ class OfflineCalibration:
         the order and delay, so slightly optimistic).
     grid : GridSignals
         The signals the model was fitted on.
+    m_per_tick : float or None
+        The encoder scale used [m/tick] (counts only).
+    scale_from : str
+        Where it came from: the rotation in place found in the recording, or
+        the robot description.
+    scale_measured : bool
+        Whether the recording's rotation in place measured it.
     """
 
     model: MotionModel
     report: ExcitationReport
     fit_percent: np.ndarray
     grid: GridSignals
+    m_per_tick: float | None = None
+    scale_from: str = ""
+    scale_measured: bool = False
 
 
 def calibrate_recording(
@@ -214,7 +276,9 @@ def calibrate_recording(
         Wheel base from the robot description [m].
     m_per_tick, wheel_radius_m : float, optional
         Encoder scale [m/tick] (counts) or wheel radius [m] (angles, rad/s),
-        from the robot description.
+        from the robot description. A recording of counts with light bumps
+        that holds a rotation in place measures the scale instead
+        (:func:`rotation_scale`).
     encoders : {"quadrature", "commanded"}
         ``"commanded"`` for Roomba / Create 2 counters.
     scale_from : str
@@ -239,9 +303,18 @@ def calibrate_recording(
     ValueError
         For bad input (:func:`lti_motion.resample.on_grid`).
     """
+    found = rotation_scale(rec, wheel_base_m=wheel_base_m)
+    measured = not isinstance(found, str)
+    if measured:
+        m_per_tick = found[0]
+        scale_from = (f"the rotation in place in the recording (period {found[1].period_ticks:.1f}"
+                      f" ticks, confidence {found[1].confidence:.2f}; paper eq. 13)")
+    elif rec.wheel_kind == "counts":
+        scale_from = f"{scale_from} ({found})"
     grid = on_grid(rec, wheel_base_m=wheel_base_m, m_per_tick=m_per_tick,
                    wheel_radius_m=wheel_radius_m, encoders=encoders)
-    report = excitation_report(grid, wheel_base_m=wheel_base_m, scale_from=scale_from)
+    report = excitation_report(grid, wheel_base_m=wheel_base_m,
+                               scale_from=None if measured else scale_from)
     if report.refusals:
         raise NotExcitedError("this recording cannot identify a model: "
                               + "; ".join(report.refusals))
@@ -252,4 +325,6 @@ def calibrate_recording(
     tail = round(len(u) * (1 - validation))
     fit = model.fit_percent([(u[tail:], y[tail:])])
     _log.info("offline ARX fit %.1f%% (v), %.1f%% (w) on the held-out tail", *fit)
-    return OfflineCalibration(model=model, report=report, fit_percent=fit, grid=grid)
+    return OfflineCalibration(model=model, report=report, fit_percent=fit, grid=grid,
+                              m_per_tick=m_per_tick if rec.wheel_kind == "counts" else None,
+                              scale_from=scale_from, scale_measured=measured)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lti_motion.logfile import load_recording
-from lti_motion.offline import OfflineCalibration, calibrate_recording
+from lti_motion.offline import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
 from lti_motion.recording import Recording
 
@@ -58,9 +58,11 @@ def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
     """The scale keyword the recording's wheel kind needs, or a command-line error."""
     if rec.wheel_kind == "counts":
         if robot.m_per_tick is None:
-            raise ValueError("this log holds encoder counts: give --m-per-tick (metres per "
-                             "tick, from the robot description) or --preset; a recording "
-                             "without a rotation in place cannot measure it")
+            found = rotation_scale(rec, wheel_base_m=robot.wheel_base_m)
+            if isinstance(found, str):
+                raise ValueError(f"this log holds encoder counts and {found}: give "
+                                 "--m-per-tick (metres per tick, from the robot description) "
+                                 "or --preset")
         return {"m_per_tick": robot.m_per_tick}
     if rec.wheel_kind in ("wheel_angles_rad", "wheel_speeds_rad_s"):
         if robot.wheel_radius_m is None:
@@ -94,9 +96,15 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
                               encoders="commanded" if frames_v1 else "quadrature",
                               floor=floor, **scale)
     lines = cal.report.lines()
-    what = ", ".join(f"{k} = {v:.6g}" for k, v in scale.items()) or "none needed (body speeds)"
-    lines.append(f"encoder scale: {what}, from {robot.source}; NOT measured (no rotation in "
-                 "place: run 'lti-motion calibrate --sim/--port' to measure it)")
+    if cal.scale_measured:
+        lines.append(f"encoder scale: m_per_tick = {cal.m_per_tick:.6g}, measured by "
+                     f"{cal.scale_from}")
+    else:
+        what = (", ".join(f"{k} = {v:.6g}" for k, v in scale.items() if v is not None)
+                or "none needed (body speeds)")
+        lines.append(f"encoder scale: {what}, from {cal.scale_from}; NOT measured (no "
+                     "rotation in place beside a wall in this recording: run 'lti-motion "
+                     "calibrate --sim/--port' to measure it)")
     m = cal.model
     lines.append(f"ARX model: order {m.orders['na']}, delay {m.orders['delay']}, period "
                  f"{m.dt_s * 1e3:.4f} ms; free-run fit on the held-out last 30%: "

@@ -81,3 +81,36 @@ def test_counts_without_a_scale_and_an_impossible_wheel_speed_exit_2(drive, tmp_
     err = capsys.readouterr().err
     assert "wheel_angles_rad: a wheel at 100 m/s" in err and err.count("\n") == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_a_recording_with_a_rotation_in_place_measures_the_scale(tmp_path, capsys):
+    from drivers.sim.config import Room
+    from drivers.sim.simulator import ground_m_per_tick
+    from lti_motion.excitation import rotation_in_place
+    from lti_motion.frames import FrameLog
+
+    params = PARAMS.replace(wheel_diameter_errors=(0.03, 0.03))   # 3% off the description
+    dt = params.period_s
+    rest = np.zeros((round(1 / dt), 2))
+    sim = Simulator(params, seed=6, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
+    turn = sim.run(np.concatenate([rest, rotation_in_place(
+        turns=3.0, wheel_speed_m_s=0.15, wheel_base_m=PARAMS.wheel_base_m, dt_s=dt), rest]))
+    sim.place(Room.OPEN_FLOOR)
+    cmd = random_held_normal(n=round(40 / dt), dt_s=dt, rng=np.random.default_rng(6),
+                             std_m_s=0.2, mean_m_s=0.0, hold_s=(0.5, 2.0), correlation=0.85)
+    drive = sim.run(np.concatenate([rest, cmd, rest]))
+    both = FrameLog(**{name: np.concatenate([getattr(turn, name), getattr(drive, name)])
+                       for name in ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s",
+                                    "valid")}, dt_s=dt)
+    path = save_log(tmp_path / "both.npz", both)
+    assert main(["calibrate", "--log", str(path), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "measured by the rotation in place" in out and "NOT measured" not in out
+    model = MotionModel.load(tmp_path / "o" / "model_arx.json")
+    truth = ground_m_per_tick(params, "hard")
+    assert model.m_per_tick == pytest.approx(truth, rel=0.01)
+    assert abs(PARAMS.m_per_tick / truth - 1) > 0.025          # the description is not
+    # the same drive without its rotation: the scale must come from the description
+    path = save_log(tmp_path / "drive.npz", drive)
+    assert main(["calibrate", "--log", str(path), "--out", str(tmp_path / "p")]) == 2
+    assert "no rotation in place" in capsys.readouterr().err
