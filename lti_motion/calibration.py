@@ -26,7 +26,9 @@ from lti_motion.encoder_scale import RotationPeriod, encoder_scale_m_per_tick, r
 from lti_motion.excitation import random_held_normal, rotation_in_place, step_sequence
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
-from lti_motion.odometry import body_speeds_from_ticks, stream_clock, unwrap_ticks
+from lti_motion.odometry import unwrap_ticks
+from lti_motion.recording import Recording
+from lti_motion.resample import on_grid
 
 __all__ = [
     "Calibration",
@@ -194,21 +196,24 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
 
     Frame ``k`` closes period ``k``, whose command ``u[k]`` went out at its
     start; the body speeds ``y[k]`` are the encoder speeds over that period,
-    timed on the robot's sensor clock (:func:`~lti_motion.odometry.stream_clock`).
+    timed on the robot's sensor clock fitted to the frame times
+    (:func:`lti_motion.clocks.assign_periods`: jitter, drift, late and
+    duplicated frames never raise). Frames marked invalid (lost) are skipped:
+    the next valid frame's counts span the gap (:func:`lti_motion.resample.on_grid`).
     ``encoders="commanded"`` (the default, for the Roomba / Create 2 and the
     simulator) restores the wheels' direction around reversals.
 
     Returns
     -------
-    cmd_m_s : ndarray, shape (n - 1, 2)
-        Wheel commands (left, right) [m/s] of periods ``1 .. n - 1``.
-    speeds : ndarray, shape (n - 1, 2)
+    cmd_m_s : ndarray, shape (P, 2)
+        Wheel commands (left, right) [m/s] of periods ``1 .. P`` (``P = n - 1``
+        when no period was lost after the last frame).
+    speeds : ndarray, shape (P, 2)
         Body speeds (v [m/s], w [rad/s]) over the same periods.
     """
-    t_s = stream_clock(log.t_s, log.dt_s)
-    y = body_speeds_from_ticks(log.ticks, t_s, m_per_tick=m_per_tick, wheel_base_m=wheel_base_m,
-                               encoders=encoders)
-    return log.cmd_m_s[1:], y
+    grid = on_grid(Recording.from_frame_log(log), wheel_base_m=wheel_base_m,
+                   m_per_tick=m_per_tick, encoders=encoders)
+    return grid.cmd_m_s, grid.speeds
 
 
 def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None = None,

@@ -21,6 +21,7 @@ import os
 import struct
 import zipfile
 import zlib
+from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
 
@@ -29,16 +30,22 @@ import numpy as np
 from lti_motion.exceptions import LogFileError
 from lti_motion.frames import FrameLog
 from lti_motion.persistence import atomic_write
+from lti_motion.recording import Recording
 
 __all__ = [
     "LOG_FORMAT",
     "LOG_VERSION",
+    "RECORDING_VERSION",
     "load_log",
+    "load_recording",
     "save_log",
+    "save_recording",
 ]
 
 LOG_FORMAT = "lti-motion-log"
 LOG_VERSION = 1
+#: Version 2 holds a :class:`~lti_motion.recording.Recording` (any differential drive).
+RECORDING_VERSION = 2
 _ARRAYS = ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s", "valid")
 _TRUTH = ("true_pose", "true_body_m_s")
 
@@ -105,6 +112,8 @@ def load_log(path: str | os.PathLike) -> FrameLog:
     try:
         with np.load(path, allow_pickle=False) as npz:
             header = _header(path, npz)
+            if header["version"] == RECORDING_VERSION:
+                return _frame_log_of_recording(path, _read_recording(path, npz, header))
             missing = [name for name in _ARRAYS if name not in npz.files]
             if missing:
                 raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
@@ -164,7 +173,8 @@ def _array(path: Path, npz: np.lib.npyio.NpzFile, name: str) -> np.ndarray:
                            f"read ({_reason(exc)})") from exc
 
 
-def _header(path: Path, npz: np.lib.npyio.NpzFile) -> dict:
+def _header(path: Path, npz: np.lib.npyio.NpzFile,
+            versions: tuple[int, ...] = (LOG_VERSION, RECORDING_VERSION)) -> dict:
     """The header as a dict with a known format, version and a positive ``dt_s``."""
     if "header" not in npz.files:
         raise LogFileError(f"{path} is an NPZ archive but not an {LOG_FORMAT} file (it has no "
@@ -186,9 +196,10 @@ def _header(path: Path, npz: np.lib.npyio.NpzFile) -> dict:
     if header.get("format") != LOG_FORMAT:
         raise LogFileError(f"{path} is not an {LOG_FORMAT} file "
                            f"(format {header.get('format')!r})")
-    if header.get("version") != LOG_VERSION:
+    if header.get("version") not in versions:
         raise LogFileError(f"{path} has log version {header.get('version')!r}; "
-                           f"this lti-motion reads version {LOG_VERSION}")
+                           f"this lti-motion reads version {LOG_VERSION} and "
+                           f"{RECORDING_VERSION}")
     if "dt_s" not in header:
         raise LogFileError(f"{path} is damaged: its header lacks dt_s, the sensor period [s]")
     dt_s = header["dt_s"]
@@ -277,3 +288,129 @@ def _is_cell(value: object, column: str) -> bool:
     if column == "frame_index":
         return number and float(value).is_integer() and value >= 0
     return number
+
+
+# -- version 2: a Recording of any differential drive (docs/log_format.md) ------------------
+
+#: Streams of a version-2 file: name -> (stamps array, values array, columns).
+_V2_STREAMS = MappingProxyType({
+    "wheel": ("wheel_t_s", "wheel", 2), "cmd": ("cmd_t_s", "cmd", 2),
+    "yaw_rate": ("yaw_rate_t_s", "yaw_rate_rad_s", 1),
+    "true_pose": ("true_pose_t_s", "true_pose", 3),
+    "sightings": ("sightings_t_s", "sightings", 3)})
+
+
+def save_recording(path: str | os.PathLike, rec: Recording) -> Path:
+    """Write a :class:`~lti_motion.recording.Recording` atomically (format version 2).
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    path = Path(path)
+    header = {"format": LOG_FORMAT, "version": RECORDING_VERSION, "dt_s": rec.dt_s,
+              "wheel_kind": rec.wheel_kind, "cmd_kind": rec.cmd_kind,
+              "cmd_per_frame": rec.cmd_per_frame, "counter_bits": rec.counter_bits,
+              "sensor_pose": list(rec.sensor_pose), "meta": rec.meta}
+    arrays = {"wheel_valid": rec.wheel_valid}
+    for name, (t_key, v_key, _) in _V2_STREAMS.items():
+        stream = getattr(rec, name)
+        if stream is not None and not (name == "cmd" and rec.cmd_per_frame):
+            arrays[t_key] = stream.t_s
+        if stream is not None:
+            arrays[v_key] = stream.values
+    for name in ("light_bump", "bumps"):
+        if getattr(rec, name) is not None:
+            arrays[name] = getattr(rec, name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(path) as fh:
+        np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
+    return path
+
+
+def load_recording(path: str | os.PathLike) -> Recording:
+    """Read a log of either version as a :class:`~lti_motion.recording.Recording`.
+
+    Version 1 (Roomba / simulator frames) converts with
+    :meth:`Recording.from_frame_log`; version 2 is read as written. Every
+    check of :func:`load_log` applies, and every stream's stamps must be
+    finite and never decrease.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    LogFileError
+        If the file is damaged, of another format or version, a batch of
+        robots (version 1), or an array, stamp or value is wrong; one line
+        naming the file and the field.
+    """
+    path = Path(path)
+    _check_npz(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            header = _header(path, npz)
+            if header["version"] == RECORDING_VERSION:
+                return _read_recording(path, npz, header)
+    except (FileNotFoundError, LogFileError):
+        raise
+    except _READ_ERRORS as exc:
+        raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
+    log = load_log(path)
+    if log.n_robots is not None:
+        raise LogFileError(f"{path} holds a batch of {log.n_robots} robots; save one robot's "
+                           "log (log.robot(i)) to read it as a recording")
+    return Recording.from_frame_log(log)
+
+
+def _read_recording(path: Path, npz: np.lib.npyio.NpzFile, header: dict) -> Recording:
+    """The Recording of a version-2 archive, every field checked by the constructor."""
+    kinds = {"wheel_kind": ("counts", "wheel_angles_rad", "wheel_speeds_rad_s",
+                            "wheel_speeds_m_s", "body_speeds"),
+             "cmd_kind": ("cmd_wheel_m_s", "cmd_body")}
+    for key, allowed in kinds.items():
+        if header.get(key) not in allowed:
+            raise LogFileError(f"{path} is damaged: its header has {key} = "
+                               f"{header.get(key)!r}; expected one of {', '.join(allowed)}")
+    per_frame = header.get("cmd_per_frame") is True
+    needed = ["wheel_t_s", "wheel", "cmd"] + ([] if per_frame else ["cmd_t_s"])
+    missing = [name for name in needed if name not in npz.files]
+    if missing:
+        raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
+                           f"{LOG_FORMAT} version {RECORDING_VERSION} file")
+    arrays = {name: _array(path, npz, name) for name in npz.files if name != "header"}
+    for name, arr in arrays.items():
+        if arr.dtype.kind not in "biuf":
+            raise LogFileError(f"{path} is damaged: its array {name} holds {arr.dtype} "
+                               "values; expected numbers")
+    kw = {"wheel_t_s": arrays["wheel_t_s"], header["wheel_kind"]: arrays["wheel"],
+          header["cmd_kind"]: arrays["cmd"], "cmd_t_s": arrays.get("cmd_t_s"),
+          "valid": arrays.get("wheel_valid"), "meta": header.get("meta", {})}
+    for t_key, v_key, _ in list(_V2_STREAMS.values())[2:]:
+        if v_key in arrays or t_key in arrays:
+            kw[t_key], kw[v_key] = arrays.get(t_key), arrays.get(v_key)
+    bits = header.get("counter_bits")
+    try:
+        rec = Recording.from_streams(dt_s=float(header["dt_s"]), counter_bits=bits,
+                                     sensor_pose=tuple(header.get("sensor_pose", (0, 0, 0))),
+                                     **kw)
+        n = len(rec)
+        extras = {}
+        for name, cols in (("light_bump", 6), ("bumps", 2)):
+            if name in arrays:
+                if arrays[name].shape != (n, cols):
+                    raise ValueError(f"{name} must have shape ({n}, {cols}), got "
+                                     f"{arrays[name].shape}")
+                extras[name] = arrays[name]
+    except (ValueError, TypeError) as exc:
+        raise LogFileError(f"{path} is damaged: {' '.join(str(exc).split())}") from exc
+    return replace(rec, **extras)
+
+
+def _frame_log_of_recording(path: Path, rec: Recording) -> FrameLog:
+    try:
+        return rec.to_frame_log()
+    except ValueError as exc:
+        raise LogFileError(f"{path} is a version-{RECORDING_VERSION} recording that is not "
+                           f"Roomba frames ({exc}); read it with load_recording") from exc

@@ -13,6 +13,7 @@ from typing import Literal
 
 import numpy as np
 
+from lti_motion.clocks import assign_periods
 from lti_motion.exceptions import ShapeError
 from lti_motion.kinematics import body_from_wheel
 
@@ -142,44 +143,46 @@ def body_speeds_from_ticks(
 def stream_clock(t_s: np.ndarray, dt_s: float) -> np.ndarray:
     """Timestamps on the robot's own sensor clock, recovered from jittered host times.
 
-    The robot samples its encoders every ``dt_s`` exactly; the host stamps
-    each frame on arrival, with latency jitter of a millisecond or more (USB
-    serial adapters deliver in bursts). Differencing counts over host times
-    turns that jitter into speed noise proportional to speed (1 ms of jitter
-    on a 15 ms period is 7% of the speed). This returns ``t0 + k dt_s``, with
-    ``k`` the nearest whole number of periods since the first frame, so gaps
-    from lost frames are kept.
+    The robot samples its encoders every period; the host stamps each frame
+    on arrival, with latency jitter of a millisecond or more (USB serial
+    adapters deliver in bursts). Differencing counts over host times turns
+    that jitter into speed noise proportional to speed (1 ms of jitter on a
+    15 ms period is 7% of the speed). This returns the time of each frame's
+    sensor period on the clock line fitted to the stamps' latency-free
+    envelope (:func:`lti_motion.clocks.assign_periods`: sensor period, offset
+    and drift; frames assigned to periods monotonically), so gaps from lost
+    frames are kept and jitter, drift and late frames never raise.
 
     Parameters
     ----------
     t_s : ndarray, shape (n,)
-        Host timestamps [s], increasing.
+        Host timestamps [s], never decreasing.
     dt_s : float
-        The robot's sensor period [s].
+        The robot's nominal sensor period [s].
 
     Returns
     -------
     ndarray, shape (n,)
+        Increasing; a frame whose stamp is not finite gets the time of the
+        next frame.
 
     Raises
     ------
     ValueError
-        If two frames fall on the same period (jitter of half a period or more).
+        If the stamps go backwards or fewer than 2 are distinct.
 
     Examples
     --------
-    >>> stream_clock(np.array([0.0021, 0.0158, 0.0312, 0.0611]), 0.015).round(4).tolist()
-    [0.0021, 0.0171, 0.0321, 0.0621]
+    >>> t = stream_clock(np.array([0.0021, 0.0158, 0.0312, 0.0611]), 0.015)
+    >>> np.round(np.diff(t) / 0.015, 3).tolist()
+    [1.0, 1.0, 2.0]
     """
-    t_s = np.asarray(t_s, dtype=float)
-    k = np.rint((t_s - t_s[0]) / dt_s)
-    if np.any(np.diff(k) < 1):
-        bad = int(np.argmin(np.diff(k)))
-        raise ValueError(
-            f"frames {bad} and {bad + 1} fall on the same sensor period of {dt_s} s; "
-            "host timestamps jitter by half a period or more, or dt_s is wrong"
-        )
-    return t_s[0] + k * dt_s
+    a = assign_periods(t_s, dt_s=dt_s)
+    k = a.period.copy()
+    kept = np.flatnonzero(a.keep)
+    nxt = kept[np.minimum(np.searchsorted(kept, np.arange(k.size)), kept.size - 1)]
+    k[~a.keep] = a.period[nxt[~a.keep]]
+    return a.clock.times_s(k)
 
 
 def unfold_commanded_direction(deltas: np.ndarray, *, window: int = 12) -> np.ndarray:

@@ -7,7 +7,8 @@ demo
     (Table II) for every estimator; writes a report folder.
 calibrate
     Run the calibration manoeuvres on the simulator or a real robot, fit the
-    encoder scale, FIR and ARX models, save them and their plots.
+    encoder scale, FIR and ARX models, save them and their plots; or, with
+    ``--log``, fit the ARX model offline on any recorded drive.
 replay
     Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
     there is ground truth, TUM trajectories for ``evo``, plots.
@@ -33,7 +34,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from drivers.sim.config import FLOORS, load_robot
+from drivers.sim.config import FLOORS, RobotParams, load_robot
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
@@ -47,9 +48,48 @@ FLOOR_NAMES = tuple(FLOORS)
 ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
               "(.toml or .json, docs/robot_file.md)")
 FLOOR_HELP = "simulated floor (default: the robot's)"
+#: The wheel base [m] of a Create 2, calibrate's default without --wheel-base or --robot.
+CREATE2_WHEEL_BASE_M = 0.235
+
+
+def _cmd_calibrate_log(args: argparse.Namespace) -> int:
+    """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
+    from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
+
+    described = load_robot(args.sim) if args.sim else None
+    if args.m_per_tick is not None or args.wheel_radius is not None:
+        source = "the robot description on the command line (--m-per-tick / --wheel-radius)"
+    elif described is not None:
+        source = f"the nominal {described.name} description (--robot)"
+    else:
+        source = "the robot description (none given)"
+    robot = RobotDescription(
+        wheel_base_m=_wheel_base(args, described),
+        m_per_tick=args.m_per_tick if args.m_per_tick is not None
+        else (described.m_per_tick if described else None),
+        wheel_radius_m=args.wheel_radius if args.wheel_radius is not None
+        else (described.wheel_diameter_m / 2 if described else None),
+        source=source)
+    print(f"calibrating from the recording {args.log}")
+    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor)
+    for line in lines:
+        print(line)
+    return 0
+
+
+def _wheel_base(args: argparse.Namespace, described: RobotParams | None) -> float:
+    """``--wheel-base`` [m], else the robot description's, else the Create 2's 0.235 m."""
+    if args.wheel_base is not None:
+        return args.wheel_base
+    return described.wheel_base_m if described is not None else CREATE2_WHEEL_BASE_M
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.log:
+        return _cmd_calibrate_log(args)
+    if not (args.sim or args.port):
+        raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot) "
+                       "or --log FILE (a recorded drive)")
     from drivers.sim.calibration import (
         calibrate_simulator,
         print_progress,
@@ -61,7 +101,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
     plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
     out = Path(args.out)
-    if args.sim:
+    if args.sim and not args.port:
         robot = load_robot(args.sim)
         print(f"calibrating the simulated {robot.name} robot on "
               f"{args.floor or floor_name(robot.floor)} floor (seed {args.seed})")
@@ -80,7 +120,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
         print(f"calibrating the robot on {args.port} at {args.baud} baud")
         with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan,
+            wheel_base_m = _wheel_base(args, load_robot(args.sim) if args.sim else None)
+            cal = calibrate(robot, wheel_base_m=wheel_base_m, plan=plan,
                             floor=args.floor or "hard",
                             progress=print_progress, before_stage=before_stage)
     from lti_motion.logfile import save_log
@@ -222,16 +263,28 @@ def build_parser() -> argparse.ArgumentParser:
         description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
                     "random excitation) on the simulator or a robot, fits the models, and "
                     "writes model_arx.json, model_fir.json and plots.")
-    where = cal.add_mutually_exclusive_group(required=True)
-    where.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
-                       help=f"calibrate {ROBOT_HELP}")
+    cal.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
+                     help=f"calibrate {ROBOT_HELP}; with --port or --log, the robot's "
+                          "description (wheel base; with --log also its encoder scale and "
+                          "wheel radius)")
+    where = cal.add_mutually_exclusive_group()
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    where.add_argument("--log", metavar="FILE",
+                       help="calibrate the ARX model offline from a recorded drive of any "
+                            "differential drive (.npz, docs/log_format.md); prints an "
+                            "excitation report; the encoder scale then comes from "
+                            "--m-per-tick, --wheel-radius or --robot")
+    cal.add_argument("--m-per-tick", type=float, default=None,
+                     help="with --log: encoder scale [m/tick] from the robot description")
+    cal.add_argument("--wheel-radius", type=float, default=None,
+                     help="with --log: wheel radius [m] for wheel angles or speeds in rad/s")
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "
                           "of a faster virtual Roomba")
-    cal.add_argument("--wheel-base", type=float, default=0.235,
-                     help="nominal wheel base [m] (default 0.235, the Create 2)")
+    cal.add_argument("--wheel-base", type=float, default=None,
+                     help="nominal wheel base [m] (default: the --robot description's, else "
+                          "0.235, the Create 2)")
     cal.add_argument("--floor", help="floor name recorded in the model (default: hard, or "
                      f"the robot's) and simulated with --robot: {', '.join(FLOOR_NAMES)}")
     cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")

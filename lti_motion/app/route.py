@@ -72,6 +72,11 @@ def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
     return tick_deltas(np.stack([np.asarray(prev, np.int64), np.asarray(now, np.int64)]))[0]
 
 
+def _valid(frame: SensorFrame, n_robots: int) -> np.ndarray:
+    """The frame's ``valid`` flag per robot: a lost frame's counts are never read."""
+    return np.broadcast_to(np.asarray(frame.valid, bool), (n_robots,))
+
+
 class Odometry:
     """Encoder odometry: wheel ticks times the encoder scale, integrated with eq. 11.
 
@@ -89,17 +94,20 @@ class Odometry:
 
     def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
         self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
-        self._ticks = None
+        self._ticks = np.zeros((n_robots, 2), np.int64)
+        self._anchored = np.zeros(n_robots, bool)
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
              observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
-        ticks = np.asarray(frame.ticks, np.int64)
-        if self._ticks is None:
-            self._ticks = ticks
-            return self.pose
+        ticks = np.asarray(frame.ticks, np.int64).reshape(self._ticks.shape)
+        valid = _valid(frame, len(ticks))
+        # a lost frame is skipped: the next valid frame's counts span the gap
+        use = valid & self._anchored
         d = _tick_step(self._ticks, ticks) * self.m_per_tick
-        self._ticks = ticks
-        # displacement [m] and turn [rad] over the period
+        d[~use] = 0.0
+        self._ticks = np.where(valid[:, None], ticks, self._ticks)
+        self._anchored |= valid
+        # displacement [m] and turn [rad] over the period(s) since the last valid frame
         v, w = body_from_wheel(d, wheel_base_m=self.wheel_base_m).T
         self.pose = pose_step(self.pose, v, w, 1.0)
         return self.pose
@@ -167,19 +175,23 @@ class ArxHybrid:
     def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
         self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
         self.z = np.zeros((n_robots, self.model.A.shape[0]))
-        self._ticks = None
+        self._ticks = np.zeros((n_robots, 2), np.int64)
+        self._since = np.zeros(n_robots)         # periods since the last valid frame, 0: none
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
              observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         m = self.model
-        ticks = np.asarray(frame.ticks, np.int64)
+        ticks = np.asarray(frame.ticks, np.int64).reshape(self._ticks.shape)
+        valid = _valid(frame, len(ticks))
         y_hat = self.z @ m.C.T + cmd_m_s @ m.D.T
-        if self._ticks is None:
-            y_meas = y_hat
-        else:
-            d = _tick_step(self._ticks, ticks) * (m.m_per_tick / m.dt_s)
-            y_meas = body_from_wheel(d, wheel_base_m=m.wheel_base_m)
-        self._ticks = ticks
+        self._since[self._since > 0] += 1
+        use = valid & (self._since > 0)
+        # over a gap of lost frames: the mean speed since the last valid frame
+        d = _tick_step(self._ticks, ticks) * (m.m_per_tick / m.dt_s)
+        d /= np.maximum(self._since - 1, 1)[:, None]
+        y_meas = np.where(use[:, None], body_from_wheel(d, wheel_base_m=m.wheel_base_m), y_hat)
+        self._ticks = np.where(valid[:, None], ticks, self._ticks)
+        self._since[valid] = 1
         self.z = self.z @ self._a.T + cmd_m_s @ self._b.T + y_meas @ m.K.T
         self.pose = pose_step(self.pose, y_hat[:, 0], y_hat[:, 1], m.dt_s)
         return self.pose
@@ -201,17 +213,19 @@ class EkfEstimator:
 
     def step(self, frame: SensorFrame, cmd_m_s: np.ndarray,
              observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
-        ticks = np.asarray(frame.ticks, np.int64)
+        ticks = np.asarray(frame.ticks, np.int64).reshape(len(self.pose), 2)
+        valid = _valid(frame, len(ticks))
         if self.filters is None:            # the first frame anchors the encoder counts
             self.filters = [
                 ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
-                         initial_ticks=t, landmarks=self.landmarks,
+                         initial_ticks=t if ok else None, landmarks=self.landmarks,
                          landmark_noise=self.landmark_noise, history=0)
-                for pose, t in zip(self.pose, ticks, strict=True)]
+                for pose, t, ok in zip(self.pose, ticks, valid, strict=True)]
             return self.pose
         for i, ekf in enumerate(self.filters):
             ekf.predict(cmd_m_s[i])
-            ekf.update_encoders(ticks[i])
+            if valid[i]:                    # a lost frame's counts are never read
+                ekf.update_encoders(ticks[i])
             if observations is not None and self.landmarks is not None:
                 ekf.update_landmarks(observations[i])
             self.pose[i] = ekf.x[:3]

@@ -7,7 +7,7 @@ import pytest
 
 from drivers.sim.simulator import Simulator
 from lti_motion.exceptions import LogFileError
-from lti_motion.logfile import LOG_VERSION, load_log, save_log
+from lti_motion.logfile import LOG_VERSION, RECORDING_VERSION, load_log, save_log
 
 
 @pytest.fixture
@@ -37,8 +37,8 @@ def test_damaged_foreign_and_future_files_raise(tmp_path, sim_log):
         load_log(foreign)
     future = tmp_path / "future.npz"
     np.savez(future, header=np.array(json.dumps({"format": "lti-motion-log",
-                                                 "version": LOG_VERSION + 1})))
-    with pytest.raises(LogFileError, match=f"version {LOG_VERSION + 1}"):
+                                                 "version": RECORDING_VERSION + 1})))
+    with pytest.raises(LogFileError, match=f"version {RECORDING_VERSION + 1}"):
         load_log(future)
     with pytest.raises(FileNotFoundError):
         load_log(tmp_path / "missing.npz")

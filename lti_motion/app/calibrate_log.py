@@ -1,0 +1,118 @@
+"""``lti-motion calibrate --log FILE``: the ARX model from any recorded drive.
+
+Reads a log of either version (Roomba / simulator frames, or a recording of
+any differential drive, ``docs/log_format.md``), prints the excitation report
+(:func:`lti_motion.offline.excitation_report`), refuses data that cannot
+identify a model with the reason, and writes ``model_arx.json`` and
+``excitation.txt``. The encoder scale is not measured (that needs the rotation
+in place of ``calibrate --sim/--port``): it comes from the robot description
+given on the command line, and the output says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from lti_motion.logfile import load_recording
+from lti_motion.offline import OfflineCalibration, calibrate_recording, rotation_scale
+from lti_motion.persistence import atomic_write
+from lti_motion.recording import Recording
+
+__all__ = ["RobotDescription", "run_calibrate_log"]
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """What the command line says about the robot [m, m/tick].
+
+    Attributes
+    ----------
+    wheel_base_m : float
+        ``--wheel-base``.
+    m_per_tick : float or None
+        ``--m-per-tick``, else the ``--robot`` description's nominal scale.
+    wheel_radius_m : float or None
+        ``--wheel-radius``, else the ``--robot`` description's nominal radius.
+    source : str
+        Where the scale came from, for the output.
+    """
+
+    wheel_base_m: float
+    m_per_tick: float | None
+    wheel_radius_m: float | None
+    source: str
+
+    def __post_init__(self) -> None:
+        for flag, value in (("--wheel-base", self.wheel_base_m),
+                            ("--m-per-tick", self.m_per_tick),
+                            ("--wheel-radius", self.wheel_radius_m)):
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{flag} must be a positive number of metres"
+                                 f"{' per tick' if flag == '--m-per-tick' else ''}, "
+                                 f"got {value}")
+
+
+def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
+    """The scale keyword the recording's wheel kind needs, or a command-line error."""
+    if rec.wheel_kind == "counts":
+        if robot.m_per_tick is None:
+            found = rotation_scale(rec, wheel_base_m=robot.wheel_base_m)
+            if isinstance(found, str):
+                raise ValueError(f"this log holds encoder counts and {found}: give "
+                                 "--m-per-tick (metres per tick, from the robot description) "
+                                 "or --robot NAME_OR_FILE")
+        return {"m_per_tick": robot.m_per_tick}
+    if rec.wheel_kind in ("wheel_angles_rad", "wheel_speeds_rad_s"):
+        if robot.wheel_radius_m is None:
+            raise ValueError(f"this log holds {rec.wheel_kind.replace('_', ' ')}: give "
+                             "--wheel-radius (metres, from the robot description) or "
+                             "--robot NAME_OR_FILE")
+        return {"wheel_radius_m": robot.wheel_radius_m}
+    return {}
+
+
+def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
+                      floor: str | None = None) -> tuple[OfflineCalibration, list[str]]:
+    """Calibrate from a log file; write the model and report only when all went well.
+
+    Returns
+    -------
+    OfflineCalibration
+        The model, report and fit.
+    list of str
+        The lines to print.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        One line each, at the command-line user's level (the CLI exits 2);
+        nothing is written.
+    """
+    rec = load_recording(path)
+    scale = _scale_for(rec, robot)
+    frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
+    cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
+                              encoders="commanded" if frames_v1 else "quadrature",
+                              floor=floor, **scale)
+    lines = cal.report.lines()
+    if cal.scale_measured:
+        lines.append(f"encoder scale: m_per_tick = {cal.m_per_tick:.6g}, measured by "
+                     f"{cal.scale_from}")
+    else:
+        what = (", ".join(f"{k} = {v:.6g}" for k, v in scale.items() if v is not None)
+                or "none needed (body speeds)")
+        lines.append(f"encoder scale: {what}, from {cal.scale_from}; NOT measured (no "
+                     "rotation in place beside a wall in this recording: run 'lti-motion "
+                     "calibrate --sim/--port' to measure it)")
+    m = cal.model
+    lines.append(f"ARX model: order {m.orders['na']}, delay {m.orders['delay']}, period "
+                 f"{m.dt_s * 1e3:.4f} ms; free-run fit on the held-out last 30%: "
+                 f"v {cal.fit_percent[0]:.1f}%, w {cal.fit_percent[1]:.1f}%")
+    out.mkdir(parents=True, exist_ok=True)
+    model_path = m.save(out / "model_arx.json")
+    with atomic_write(out / "excitation.txt", text=True) as fh:
+        fh.write("\n".join(lines) + "\n")
+    lines.append(f"wrote {model_path} and {out / 'excitation.txt'}")
+    return cal, lines

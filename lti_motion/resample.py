@@ -1,0 +1,238 @@
+"""Any recording onto the model's grid: per-period wheel commands and body speeds.
+
+The one code path from a :class:`~lti_motion.recording.Recording` (any wheel
+measurement kind, any command kind, streams at different rates) to what
+calibration fits and what the EKF fuses.
+
+Notes
+-----
+The grid is the robot's sensor periods, found from the wheel stream's stamps
+by :func:`lti_motion.clocks.assign_periods` (a wheel frame with the stamp and
+values of the one before is a duplicate and merged); period ``k`` ends at host time
+``offset_s + period_s k`` on the latency-free envelope. The rule for every
+measured stream:
+
+1. Make it cumulative: counts are unwrapped (shortest signed step on a
+   ``2**counter_bits`` ring) and scaled by ``m_per_tick``; angles are
+   scaled by ``wheel_radius_m`` (unwrapped first when every angle lies in
+   ``[-pi, pi]``, i.e. the source wraps them; otherwise taken as continuous,
+   as ``JointState.position`` of a continuous joint is); speeds (wheel, body, IMU yaw
+   rate) are integrated with the trapezoid rule over their own times.
+2. Interpolate the cumulative value linearly at the period boundaries (wheel
+   frames sit at the end of the period they were assigned to; other streams
+   at their stamps), difference, and divide by the period: the mean rate over
+   each period. Frames lost or marked invalid are skipped, so the next frame's
+   counts span the gap and are spread evenly over the periods they cover
+   (those periods are flagged ``measured = False``).
+
+Commands are held (zero-order hold, as a robot holds its last command): the
+command of period ``k`` is the last one sent before the middle of the period,
+zero before the first; a command stored per wheel frame belongs to the period
+that frame closes, and a period with no frame takes the next frame's command.
+A body twist becomes wheel speeds through the wheel base
+(:func:`lti_motion.kinematics.wheel_from_body`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from lti_motion.clocks import PeriodAssignment, assign_periods
+from lti_motion.kinematics import body_from_wheel, wheel_from_body
+from lti_motion.odometry import unfold_commanded_direction
+from lti_motion.recording import Recording, Stream
+
+__all__ = ["MAX_WHEEL_SPEED_M_S", "GridSignals", "on_grid"]
+
+#: Fastest wheel (or body) speed taken as physically possible by default [m/s].
+MAX_WHEEL_SPEED_M_S = 5.0
+
+
+@dataclass(frozen=True)
+class GridSignals:
+    """A recording on the model's grid, periods ``1 .. P`` (period 0 has no start).
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (P,)
+        Host time of the end of each period [s].
+    period_s : float
+        The fitted sensor period [s] (host seconds).
+    cmd_m_s : ndarray, shape (P, 2)
+        Wheel commands (left, right) in effect for each period [m/s].
+    speeds : ndarray, shape (P, 2)
+        Mean body speeds (v [m/s], w [rad/s]) over each period.
+    measured : ndarray of bool, shape (P,)
+        ``False`` for periods inside a gap (speed spread from the next frame).
+    yaw_rate_rad_s : ndarray, shape (P,), or None
+        Mean IMU yaw rate over each period [rad/s].
+    true_pose : ndarray, shape (P, 3), or None
+        Ground-truth pose at the end of each period.
+    assignment : PeriodAssignment
+        The frames' periods and the clock counts (lost, late, merged, dropped).
+    """
+
+    t_s: np.ndarray
+    period_s: float
+    cmd_m_s: np.ndarray
+    speeds: np.ndarray
+    measured: np.ndarray
+    yaw_rate_rad_s: np.ndarray | None
+    true_pose: np.ndarray | None
+    assignment: PeriodAssignment
+
+
+def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
+                m_per_tick: float | None, wheel_radius_m: float | None,
+                encoders: str) -> np.ndarray:
+    """Cumulative wheel travel [m] (or body travel [m, rad]) at the used frames."""
+    v = rec.wheel.values[used]
+    kind = rec.wheel_kind
+    if kind == "counts":
+        if m_per_tick is None:
+            raise ValueError("counts need the encoder scale m_per_tick [m/tick]")
+        steps = np.diff(v.astype(np.int64), axis=0)
+        if rec.counter_bits is not None and rec.counter_bits < 64:
+            mod = 1 << rec.counter_bits
+            steps = (steps + mod // 2) % mod - mod // 2      # shortest signed step
+        if encoders == "commanded":
+            steps = unfold_commanded_direction(steps)
+        travel = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0) * m_per_tick])
+        return travel
+    if kind in ("wheel_angles_rad", "wheel_speeds_rad_s") and wheel_radius_m is None:
+        raise ValueError(f"{kind} need the wheel radius wheel_radius_m [m]")
+    if kind == "wheel_angles_rad":
+        if np.all(np.abs(v) <= np.pi):        # wrapped to (-pi, pi]: unwrap
+            v = np.unwrap(v, axis=0)
+        return (v - v[0]) * wheel_radius_m
+    rate = v * wheel_radius_m if kind == "wheel_speeds_rad_s" else v
+    # trapezoid rule over the frames' own times
+    inc = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t_used)[:, None]
+    return np.vstack([np.zeros((1, 2)), np.cumsum(inc, axis=0)])
+
+
+def _integrate_at(stream: Stream, t_grid: np.ndarray) -> np.ndarray:
+    """Mean rate of a rate stream over each grid interval (trapezoid, then interpolate)."""
+    t, v = stream.t_s, stream.values[:, 0]
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    at = np.interp(t_grid, t, cum)
+    return np.diff(at) / np.diff(t_grid)
+
+
+def _commands(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray) -> np.ndarray:
+    """Wheel or body commands of periods 1..P by the hold rule of the module Notes."""
+    n_periods = t_grid.size - 1
+    if rec.cmd_per_frame:
+        k = a.period[a.keep]
+        vals = rec.cmd.values[a.keep].astype(float)
+        # each period takes the command of the first frame at or after it
+        nxt = np.searchsorted(k, np.arange(1, n_periods + 1))
+        return vals[np.minimum(nxt, k.size - 1)]
+    mid = t_grid[:-1] + 0.5 * np.diff(t_grid)
+    last = np.searchsorted(rec.cmd.t_s, mid, side="right") - 1
+    out = rec.cmd.values[np.maximum(last, 0)].astype(float)
+    out[last < 0] = 0.0
+    return out
+
+
+def _check_speed(name: str, wheel_m_s: np.ndarray, t_s: np.ndarray, limit: float) -> None:
+    bad = np.flatnonzero(np.any(np.abs(wheel_m_s) > limit, axis=1))
+    if bad.size:
+        k = int(bad[0])
+        raise ValueError(f"{name}: a wheel at {np.max(np.abs(wheel_m_s[k])):.3g} m/s at "
+                         f"t = {t_s[k]:.3f} s cannot be right (limit {limit:g} m/s); check "
+                         "the field's unit and scale")
+
+
+def _pose_at(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray) -> np.ndarray | None:
+    if rec.true_pose is None:
+        return None
+    pose = rec.true_pose.values.astype(float).copy()
+    pose[:, 2] = np.unwrap(pose[:, 2])
+    if np.array_equal(rec.true_pose.t_s, rec.wheel.t_s):      # one pose per wheel frame
+        k = a.period[a.keep].astype(float)
+        grid = np.arange(1, t_grid.size, dtype=float)
+        return np.stack([np.interp(grid, k, pose[a.keep, j]) for j in range(3)], axis=1)
+    return np.stack([np.interp(t_grid[1:], rec.true_pose.t_s, pose[:, j]) for j in range(3)],
+                    axis=1)
+
+
+def on_grid(rec: Recording, *, wheel_base_m: float, m_per_tick: float | None = None,
+            wheel_radius_m: float | None = None,
+            encoders: Literal["quadrature", "commanded"] = "quadrature",
+            max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S) -> GridSignals:
+    """Per-period wheel commands and body speeds of any recording (module Notes).
+
+    Parameters
+    ----------
+    rec : Recording
+        Any wheel and command kind.
+    wheel_base_m : float
+        Distance between the wheels' contact points [m].
+    m_per_tick : float, optional
+        Encoder scale [m/tick] (paper eq. 13); needed for counts.
+    wheel_radius_m : float, optional
+        Wheel radius [m]; needed for wheel angles and speeds in rad/s.
+    encoders : {"quadrature", "commanded"}
+        ``"commanded"`` for counters that count in the commanded direction
+        (Roomba / Create 2; :func:`~lti_motion.odometry.unfold_commanded_direction`).
+    max_wheel_speed_m_s : float
+        Fastest wheel speed that can be right [m/s]; faster is bad input.
+
+    Returns
+    -------
+    GridSignals
+
+    Raises
+    ------
+    ValueError
+        If the scale a kind needs is missing, fewer than 2 valid wheel frames
+        remain, or a wheel (measured or commanded) exceeds
+        ``max_wheel_speed_m_s``; the message names the field.
+
+    Examples
+    --------
+    Wheel angles at 50 Hz of a robot driving straight at 0.2 m/s:
+
+    >>> t = np.arange(50) * 0.02
+    >>> rec = Recording.from_streams(wheel_t_s=t, wheel_angles_rad=np.outer(t, [5.0, 5.0]),
+    ...                              cmd_wheel_m_s=np.full((50, 2), 0.2))
+    >>> g = on_grid(rec, wheel_base_m=0.3, wheel_radius_m=0.04)
+    >>> g.speeds.shape, np.allclose(g.speeds, [0.2, 0.0])
+    ((49, 2), True)
+    """
+    t, v = rec.wheel.t_s, rec.wheel.values
+    repeat = np.zeros(t.size, bool)     # a frame delivered twice: same stamp, same values
+    repeat[1:] = (np.diff(t) == 0) & np.all(v[1:] == v[:-1], axis=1)
+    a = assign_periods(t, dt_s=rec.dt_s, duplicate=repeat)
+    n_periods = a.n_periods - 1
+    t_grid = a.clock.times_s(np.arange(n_periods + 1))
+    used = a.keep & rec.wheel_valid & np.all(np.isfinite(v), axis=1)   # NaN: did not arrive
+    if used.sum() < 2:
+        raise ValueError(f"{rec.wheel_kind}: fewer than 2 valid wheel frames")
+    k_used = a.period[used].astype(float)
+    travel = _cumulative(rec, used, a.clock.times_s(k_used), m_per_tick=m_per_tick,
+                         wheel_radius_m=wheel_radius_m, encoders=encoders)
+    grid = np.arange(n_periods + 1, dtype=float)
+    cum = np.stack([np.interp(grid, k_used, travel[:, j]) for j in range(2)], axis=1)
+    rate = np.diff(cum, axis=0) / a.clock.period_s
+    if rec.wheel_kind == "body_speeds":
+        speeds = rate
+        wheel = wheel_from_body(rate, wheel_base_m=wheel_base_m)
+    else:
+        wheel, speeds = rate, body_from_wheel(rate, wheel_base_m=wheel_base_m)
+    _check_speed(rec.wheel_kind, wheel, t_grid[1:], max_wheel_speed_m_s)
+    cmd = _commands(rec, a, t_grid)
+    if rec.cmd_kind == "cmd_body":
+        cmd = wheel_from_body(cmd, wheel_base_m=wheel_base_m)
+    _check_speed(rec.cmd_kind, cmd, t_grid[1:], max_wheel_speed_m_s)
+    closed = np.zeros(n_periods + 1, bool)
+    closed[a.period[used]] = True
+    measured = closed[1:] & closed[:-1]
+    yaw = None if rec.yaw_rate is None else _integrate_at(rec.yaw_rate, t_grid)
+    return GridSignals(t_s=t_grid[1:], period_s=a.clock.period_s, cmd_m_s=cmd, speeds=speeds,
+                       measured=measured, yaw_rate_rad_s=yaw, true_pose=_pose_at(rec, a, t_grid),
+                       assignment=a)
