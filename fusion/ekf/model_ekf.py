@@ -241,6 +241,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
         self.max_jump_ticks = float(max_jump_ticks)
         self._bound = ScaleBound.from_scales(fm.scales)
+        self._inv_prior_var = (1.0 / self._bound.prior_var[0], 1.0 / self._bound.prior_var[1])
         self._watch = DivergenceWatch(diverged_after)
         self.resets: deque[FilterReset] = deque(maxlen=1000)
         self.n_resets = 0
@@ -352,10 +353,15 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
                H: np.ndarray, R: np.ndarray, landmark_id: Hashable | None, *,
                PHt: np.ndarray | None = None, force: bool = False) -> UpdateRecord:
         """The shared gated update, then the scale bound and the divergence watch."""
-        record = super()._gated(kind, t, zmeas, innovation, H, R, landmark_id, PHt=PHt,
-                                force=force)
+        record = GatedUpdates._gated(self, kind, t, zmeas, innovation, H, R, landmark_id,
+                                     PHt=PHt, force=force)
         if record.accepted:
-            self._bound_scales(t)
+            # d^2 at the prior's own spread is the largest over time: below the threshold there,
+            # the scales are plausible (and inside the physical bound); two products a step
+            k_v, k_w = self.x[SCALES].tolist()
+            if k_v * k_v * self._inv_prior_var[0] + k_w * k_w * self._inv_prior_var[1] > \
+                    self._bound.threshold:
+                self._bound_scales(t)
         if kind != "encoders" and self._watch.observe(record.accepted, landmark_id):
             range_m = None if kind == "pose" else float(zmeas[0] - innovation[0])
             e, b = discrepancy(innovation, range_m)
