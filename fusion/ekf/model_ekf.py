@@ -362,7 +362,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             if k_v * k_v * self._inv_prior_var[0] + k_w * k_w * self._inv_prior_var[1] > \
                     self._bound.threshold:
                 self._bound_scales(t)
-        if kind != "encoders" and self._watch.observe(record.accepted, landmark_id):
+        # a pose fix counts as a landmark of its own (each a new source): it places the robot
+        if kind != "encoders" and self._watch.observe(
+                record.accepted, landmark_id if kind == "landmark" else object()):
             range_m = None if kind == "pose" else float(zmeas[0] - innovation[0])
             e, b = discrepancy(innovation, range_m)
             self._reset(t, "diverged", float(self._watch.readings),

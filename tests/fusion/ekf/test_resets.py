@@ -205,3 +205,17 @@ def test_without_the_bias_the_filter_never_resets(example, route_model):
     log, speeds, sightings = _drive(example, route_model, seed=100, rest_s=30.0, bias_m_s=0.0)
     ekf, poses, _ = _filter(route_model, log, speeds, sightings)
     assert ekf.n_resets == 0 and _ate(log, poses) < 0.02
+
+
+def test_pose_fixes_that_stay_outside_the_gate_mean_divergence_too(small_model):
+    """A filter sure of a pose 1 m off rejects pose fixes; after diverged_after of them in a
+    row it resets and widens its pose covariance, and the next fix is fused."""
+    ekf = ModelEKF(small_model, pose_std=(0.001,) * 3, diverged_after=5)
+    cov = np.diag([1e-4, 1e-4, 1e-4])
+    fix = np.array([1.0, 0.0, 0.0])
+    for _ in range(5):
+        ekf.predict(np.zeros(2))
+        assert not ekf.update_pose(fix, cov).accepted
+    assert ekf.n_resets == 1 and ekf.resets[0].cause == "diverged" and _is_psd(ekf.P)
+    ekf.predict(np.zeros(2))
+    assert ekf.update_pose(fix, cov).accepted and ekf.pose[0] > 0.9
