@@ -30,12 +30,12 @@ covariance stays as it was, positive semi-definite.
 
 **Divergence** (:class:`DivergenceWatch`). When ``n`` absolute readings in a
 row (landmark sightings, pose fixes) of at least two different landmarks (a
-pose fix counts as a landmark of its own) are outside the gate, the pose and its covariance disagree with the world, not
-one landmark with the map: the filter has diverged and its gate now keeps out
-the readings that would bring it back. The scale states are reset and the
-pose covariance is widened by the last rejected sighting's discrepancy
-(:func:`discrepancy`, :func:`widen_pose`), so the next sightings are fused
-again.
+pose fix counts as a landmark of its own) are outside the gate, the pose and
+its covariance disagree with the world, not one landmark with the map: the
+filter has diverged and its gate now keeps out the readings that would bring
+it back. The scale states are reset and the pose covariance is widened by the
+last rejected sighting's discrepancy (:func:`discrepancy`,
+:func:`widen_pose`), so the next sightings are fused again.
 
 **The covariance stays positive semi-definite.** A reset sets ``c = 0``, its
 covariance block to ``diag(p^2)`` and its cross-covariances to zero:
