@@ -85,15 +85,22 @@ class ScaleErrors:
     walk_per_sqrt_s : tuple of 2 float
         Random-walk rates [1/sqrt(s)]: how fast the scales may wander
         (floor, load, tyre wear); 1e-4 is 0.1% in 100 s.
+    plausible_probability : float
+        Chi-square probability (2 degrees of freedom) of the plausibility
+        test of the estimated scale errors against their prior spread: beyond
+        it the filter resets them (:mod:`fusion.ekf.resets`; the default
+        ``1 - 1e-6`` is 5.3 standard deviations, 5.3% at the 1% prior).
 
     Raises
     ------
     FilterOptionError
-        If a value is negative or not finite, or a prior is zero.
+        If a value is negative or not finite, a prior is zero, or
+        ``plausible_probability`` is not in (0, 1).
     """
 
     prior_std: tuple[float, float] = (0.01, 0.01)
     walk_per_sqrt_s: tuple[float, float] = (1e-4, 1e-4)
+    plausible_probability: float = 1.0 - 1e-6
 
     def __post_init__(self) -> None:
         values = (*self.prior_std, *self.walk_per_sqrt_s)
@@ -101,6 +108,10 @@ class ScaleErrors:
                 min(self.prior_std) <= 0:
             raise FilterOptionError(f"ScaleErrors needs positive priors and non-negative walk "
                                     f"rates, two of each, got {self}")
+        p = self.plausible_probability
+        if not (isinstance(p, (int, float)) and 0.0 < p < 1.0):
+            raise FilterOptionError(f"ScaleErrors.plausible_probability must be in (0, 1), got "
+                                    f"{self.plausible_probability}")
 
 
 def nis(innovation: np.ndarray, SI: np.ndarray) -> float:

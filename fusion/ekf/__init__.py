@@ -7,12 +7,16 @@
   velocity-model EKF, the baseline;
 - :mod:`fusion.ekf.updates`: what both filters share, the chi-square gate,
   :class:`UpdateRecord`, :class:`FilterStats` and the landmark updates
-  (``update_landmark``, ``update_landmarks``).
+  (``update_landmark``, ``update_landmarks``);
+- :mod:`fusion.ekf.resets`: the bounds on :class:`ModelEKF`'s scale-error states
+  and its resets (:class:`FilterReset`).
 """
 
 from fusion.ekf.functions import FilterModel
 from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.resets import FilterReset
 from fusion.ekf.updates import FilterStats, UpdateRecord
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 
-__all__ = ["FilterModel", "FilterStats", "ModelEKF", "UpdateRecord", "VelocityModelEKF"]
+__all__ = ["FilterModel", "FilterReset", "FilterStats", "ModelEKF", "UpdateRecord",
+           "VelocityModelEKF"]

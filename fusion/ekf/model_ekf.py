@@ -30,16 +30,25 @@ counted rejections (``unknown_landmarks="count"``, the default, with the ids
 kept in :attr:`ModelEKF.stats`) or raise
 :class:`~fusion.exceptions.UnknownLandmarkError` (``"raise"``).
 
+After every fused update the scale-error states are bounded and tested for
+plausibility, and a run of absolute readings outside the gate is judged
+(:mod:`fusion.ekf.resets`): an implausible scale or a diverged filter is
+reset, logged, counted in :attr:`ModelEKF.n_resets` and kept in
+:attr:`ModelEKF.resets` (:class:`fusion.monitoring.MonitoredFilter` turns
+each into a ``"filter_reset"`` alarm).
+
 filterpy's attributes stay meaningful: ``x`` (n,), ``P``, ``F``, ``Q`` of
 the last prediction, ``R`` (the encoder reading's noise), ``y``, ``S``,
 ``SI``, ``K``, ``z`` of the last update, ``x_prior``/``P_prior`` and
 ``x_post``/``P_post``. filterpy's generic ``update(z, HJacobian, Hx, ...)``
-still works (no gate, no record); ``predict_update`` is disabled.
+still works (no gate, no record, no bound); ``predict_update`` is disabled.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+from collections import deque
 from collections.abc import Hashable, Mapping
 from typing import Literal
 
@@ -60,7 +69,18 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
-from fusion.ekf.updates import GatedUpdates, UpdateReason, UpdateRecord
+from fusion.ekf.resets import (
+    MAX_SCALE_ERROR,
+    DivergenceWatch,
+    FilterReset,
+    ResetCause,
+    ScaleBound,
+    discrepancy,
+    reset_scales,
+    scale_statistic,
+    widen_pose,
+)
+from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRecord
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
@@ -68,6 +88,8 @@ from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
 __all__ = ["ModelEKF"]
+
+_log = logging.getLogger(__name__)
 
 if int(filterpy.__version__.split(".")[0]) < 2:     # 1.4.5's EKF.update never set SI
     raise ImportError(f"fusion.ekf.model_ekf needs filterpy >= 2.0, found {filterpy.__version__}; "
@@ -92,7 +114,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     slip : SlipNoise, optional
         White ground-versus-encoder speed noise (:mod:`fusion.ekf.functions`).
     scales : ScaleErrors, optional
-        Prior and drift of the scale-error states ``(k_v, k_w)``.
+        Prior, drift and plausibility bound of the scale-error states
+        ``(k_v, k_w)`` (:mod:`fusion.ekf.resets`).
     encoder_std : tuple of 2 float
         Floor of the encoder reading noise ``(v [m/s], w [rad/s])``.
     m_per_tick : float, optional
@@ -134,11 +157,24 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         Most periods one encoder reading may span after gated or lost ones
         (500 periods of 15 ms at 0.5 m/s stay far from the 16-bit counter's
         half range).
+    diverged_after : int or None
+        Absolute readings (landmark sightings, pose fixes) outside the gate in
+        a row, of at least two landmarks, after which the filter is judged
+        diverged: its scale states are reset and its pose covariance widened
+        (:mod:`fusion.ekf.resets`); ``None`` never judges.
+
+    Attributes
+    ----------
+    resets : collections.deque of FilterReset
+        The latest resets (up to 1,000), oldest first.
+    n_resets : int
+        Resets so far.
 
     Raises
     ------
     FilterOptionError, MeasurementShapeError
-        For invalid options.
+        For invalid options (a scale prior whose plausibility bound reaches
+        the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR`, too).
 
     Examples
     --------
@@ -187,6 +223,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         reanchor_periods: int = 16,
         max_periods: int = 500,
         max_jump_ticks: float = 10.0,
+        diverged_after: int | None = 20,
     ) -> None:
         fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
                          encoder_std=encoder_std, m_per_tick=m_per_tick)
@@ -203,6 +240,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if not max_jump_ticks > 0:
             raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
         self.max_jump_ticks = float(max_jump_ticks)
+        self._bound = ScaleBound.from_scales(fm.scales)
+        self._inv_prior_var = (1.0 / self._bound.prior_var[0], 1.0 / self._bound.prior_var[1])
+        self._watch = DivergenceWatch(diverged_after)
+        self.resets: deque[FilterReset] = deque(maxlen=1000)
+        self.n_resets = 0
+        self._scales_since_s = float(t0_s)        # start of the scales' prior spread
         self.x = initial_state(fm, initial_pose, z=z0)
         self.P = initial_covariance(fm, pose_std=pose_std, z_cov=z_cov)
         self.F = np.array(fm.F_template)
@@ -304,6 +347,52 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
         raise NotImplementedError("ModelEKF.predict_update is not supported; call predict(u) "
                                   "and then the update methods")
+
+    # -- bounds and resets (fusion.ekf.resets) ----------------------------------------------------
+    def _gated(self, kind: UpdateKind, t: float, zmeas: np.ndarray, innovation: np.ndarray,
+               H: np.ndarray, R: np.ndarray, landmark_id: Hashable | None, *,
+               PHt: np.ndarray | None = None, force: bool = False) -> UpdateRecord:
+        """The shared gated update, then the scale bound and the divergence watch."""
+        record = GatedUpdates._gated(self, kind, t, zmeas, innovation, H, R, landmark_id,
+                                     PHt=PHt, force=force)
+        if record.accepted:
+            # d^2 at the prior's own spread is the largest over time: below the threshold there,
+            # the scales are plausible (and inside the physical bound); two products a step
+            k_v, k_w = self.x[SCALES].tolist()
+            if k_v * k_v * self._inv_prior_var[0] + k_w * k_w * self._inv_prior_var[1] > \
+                    self._bound.threshold:
+                self._bound_scales(t)
+        # a pose fix counts as a landmark of its own (each a new source): it places the robot
+        if kind != "encoders" and self._watch.observe(
+                record.accepted, landmark_id if kind == "landmark" else object()):
+            range_m = None if kind == "pose" else float(zmeas[0] - innovation[0])
+            e, b = discrepancy(innovation, range_m)
+            self._reset(t, "diverged", float(self._watch.readings),
+                        float(self._watch.readings))
+            self.P = self.P_post = widen_pose(self.P, position_m=e, heading_rad=b)
+        return record
+
+    def _bound_scales(self, t: float) -> None:
+        """Reset implausible scale errors; clip them to the physical bound."""
+        k_v, k_w = self.x[SCALES].tolist()
+        d2 = scale_statistic(k_v, k_w, self._bound, t - self._scales_since_s)
+        if d2 > self._bound.threshold:
+            self._reset(t, "scale_implausible", d2, self._bound.threshold)
+        elif abs(k_v) > MAX_SCALE_ERROR or abs(k_w) > MAX_SCALE_ERROR:
+            x = self.x.copy()
+            x[SCALES] = np.clip(x[SCALES], -MAX_SCALE_ERROR, MAX_SCALE_ERROR)
+            self.x = self.x_post = x
+
+    def _reset(self, t: float, cause: ResetCause, statistic: float, threshold: float) -> None:
+        k_v, k_w = self.x[SCALES].tolist()
+        self.x, self.P = reset_scales(self.x, self.P, self._bound)
+        self.x_post, self.P_post = self.x, self.P
+        self._scales_since_s = t
+        event = FilterReset(t, cause, statistic, threshold, (k_v, k_w))
+        self.resets.append(event)
+        self.n_resets += 1
+        _log.warning("filter reset at t=%.3f s: %s (%.3g > %.3g), scale errors were "
+                     "(%.4f, %.4f)", t, cause, statistic, threshold, k_v, k_w)
 
     # -- updates ---------------------------------------------------------------------------------
     @staticmethod

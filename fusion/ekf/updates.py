@@ -179,6 +179,9 @@ class GatedUpdates:
                                     f"{unknown_landmarks!r}")
         if gate_probability is None:
             self._gates = {2: math.inf, 3: math.inf}
+        elif not isinstance(gate_probability, (int, float)):
+            raise FilterOptionError(f"gate probability must be a number in (0, 1) or None, got "
+                                    f"{gate_probability!r}")
         else:
             self._gates = {d: gate_threshold(gate_probability, d) for d in (2, 3)}
         self.gate_probability = gate_probability

@@ -20,6 +20,7 @@ updates, their gate and their records are the model filter's
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Mapping
 from typing import Literal
 
@@ -27,7 +28,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fusion.ekf.updates import GatedUpdates
-from fusion.exceptions import MeasurementShapeError
+from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from lti_motion.kinematics import pose_step, pose_step_jacobians
@@ -67,7 +68,10 @@ class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
     MeasurementShapeError
         If ``speed_cov`` is not (2, 2).
     FilterOptionError
-        For an invalid gate probability or ``unknown_landmarks``.
+        For an impossible option: ``dt_s`` not positive, ``speed_cov`` not
+        finite, symmetric and positive semi-definite (a negative noise),
+        ``pose_std`` not three positive numbers, a gate probability outside
+        (0, 1) (``None`` fuses everything) or an unknown ``unknown_landmarks``.
 
     Examples
     --------
@@ -91,6 +95,15 @@ class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
         m = np.asarray(speed_cov, float)
         if m.shape != (2, 2):
             raise MeasurementShapeError(f"speed_cov must be (2, 2), got {m.shape}")
+        if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
+            raise FilterOptionError(f"dt_s must be a positive number of seconds, got {dt_s!r}")
+        if not (np.all(np.isfinite(m)) and np.allclose(m, m.T)
+                and np.linalg.eigvalsh(0.5 * (m + m.T)).min() >= 0):
+            raise FilterOptionError(f"speed_cov must be finite, symmetric and positive "
+                                    f"semi-definite (no negative noise), got {m.tolist()}")
+        std = np.asarray(pose_std, float)
+        if std.shape != (3,) or not (np.all(np.isfinite(std)) and np.all(std > 0)):
+            raise FilterOptionError(f"pose_std must be three positive numbers, got {pose_std}")
         self._init_updates(gate_probability=gate_probability, landmarks=landmarks,
                            landmark_noise=landmark_noise, unknown_landmarks=unknown_landmarks,
                            history=history)
@@ -98,7 +111,7 @@ class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s = 0.0
         self.speed_cov = m
         self.x = np.array(initial_pose, float)
-        self.P = np.diag(np.square(pose_std))
+        self.P = np.diag(np.square(std))
 
     def predict_x(self, speeds: np.ndarray = 0) -> None:
         """The arc of one period (filterpy's hook for a non-linear ``f``)."""

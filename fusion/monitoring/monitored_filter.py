@@ -20,7 +20,10 @@ out at its start):
    dynamics tests get the command and the count changes;
 7. with a landmark map, the frame's sightings go to the scale test and, unless
    ``fuse_landmarks=False``, are fused into the EKF (their records to the
-   landmark stream's gate).
+   landmark stream's gate);
+8. each reset the EKF made during the frame (an implausible scale error or a
+   divergence, :mod:`fusion.ekf.resets`) becomes a ``"filter_reset"`` alarm
+   (its ``test`` the cause, its statistic and threshold the reset's).
 
 Alarms go to ``on_alarm`` as they are raised and come back in each
 :class:`FrameResult`; :attr:`MonitoredFilter.events` keeps them all.
@@ -34,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf.resets import FilterReset
 from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
@@ -234,6 +238,7 @@ class MonitoredFilter:
         # the stuck check compares the counts with the model's prediction, before the update
         alarms = mon.update_counts(t, deltas, wheel_from_body(
             ekf.speeds, wheel_base_m=self.model.wheel_base_m), cmd_m_s=cmd)
+        resets = ekf.n_resets
         record = ekf.update_encoders(now)
         alarms += mon.update_record(record)
         if self.dynamics is not None:
@@ -243,5 +248,14 @@ class MonitoredFilter:
         if self._fuse and sightings is not None:
             for record in ekf.update_landmarks(sightings):
                 alarms += mon.update_record(record)
+        if ekf.n_resets > resets:
+            alarms += mon.report([_reset_alarm(r) for r in
+                                  list(ekf.resets)[resets - ekf.n_resets:]])
         self._last_ticks = now
         return self._result(deltas, record, alarms)
+
+
+def _reset_alarm(reset: FilterReset) -> AlarmEvent:
+    """The ``"filter_reset"`` alarm of one EKF reset."""
+    return AlarmEvent(reset.t_s, "filter_reset", reset.cause, reset.statistic, reset.threshold,
+                      reset.t_s)

@@ -47,8 +47,8 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   better. The encoder-speed fit [%] of a rescaled model is the old one's
   (both measured and predicted speeds scale), so the record holds the scale
   and wheel base before and after instead.
-- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``): no recalibration;
-  recorded as ``"ignored"``.
+- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``) and the filter's own
+  resets (``"filter_reset"``): no recalibration; recorded as ``"ignored"``.
 
 Every decision is a frozen :class:`RecalibrationRecord` in
 :attr:`Recalibrator.history`: what, when, the fits before and after.
@@ -293,6 +293,9 @@ class Recalibrator:
             record = self._refit(event, t_s)
         elif event.kind == "scale_changed":
             record = self._scale_alarm(event)
+        elif event.kind == "filter_reset":
+            record = RecalibrationRecord(event.t_s, event, "ignored",
+                                         reason="the filter reset itself; the model is kept")
         else:
             record = RecalibrationRecord(event.t_s, event, "ignored",
                                          reason="sensor fault: the model is not at fault")

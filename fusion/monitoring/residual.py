@@ -117,7 +117,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-AlarmKind = Literal["glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed"]
+AlarmKind = Literal["glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed",
+                    "filter_reset"]
 StreamKind = Literal["encoders", "landmark"]
 
 
@@ -133,12 +134,16 @@ class AlarmEvent:
     ----------
     t_s : float
         Time of the sample that raised it [s].
-    kind : {"glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed"}
-        What changed.
+    kind : {"glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed", \
+"filter_reset"}
+        What changed; ``"filter_reset"``: the EKF reset itself
+        (:mod:`fusion.ekf.resets`, raised by
+        :class:`~fusion.monitoring.MonitoredFilter`).
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
-        ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics) or
-        ``"scale_glr"`` (scale).
+        ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics),
+        ``"scale_glr"`` (scale), or the reset's cause ``"scale_implausible"``
+        or ``"diverged"``.
     statistic, threshold : float
         The evidence: the test statistic and the threshold it crossed.
     onset_s : float
@@ -747,6 +752,14 @@ class ResidualMonitor:
             return []
         st.last_alarm[st.alarm_kind] = t
         return [AlarmEvent(t, st.alarm_kind, name, float(stat), h, float(onset), int(c))]
+
+    def report(self, raised: list[AlarmEvent]) -> list[AlarmEvent]:
+        """Record alarms raised outside the monitor's own tests (the filter's resets).
+
+        They go to ``on_alarm`` and :attr:`events` as the monitor's own do;
+        returns them.
+        """
+        return self._emit(list(raised))
 
     def _emit(self, raised: list[AlarmEvent]) -> list[AlarmEvent]:
         for event in raised:

@@ -186,6 +186,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     robot = load_robot(args.sim) if args.sim else None
     if args.model is not None:
         model = _load_model(args.model)
+        if model.m_per_tick is None:          # before any drive: nothing driven, nothing lost
+            raise MissingEncoderScaleError.needed_by("the monitor")
     elif args.sim:
         from drivers.sim.calibration import calibrate_simulator, print_progress
         from lti_motion.calibration import CalibrationPlan
@@ -401,15 +403,26 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _no_encoder_scale(args: argparse.Namespace) -> str:
-    """What a command-line user can do about a model without an encoder scale."""
+    """What a command-line user can do about a model without an encoder scale, in the words
+    and options of the command they ran."""
+    if args.command == "demo":
+        return ("the demo's calibration of the simulated robot measured no encoder scale, "
+                "which turns encoder counts into distances (its rotation in place found no "
+                "period); run it again with another --seed or --preset, or look at the "
+                "rotation's plots from 'lti-motion calibrate --sim PRESET'")
     model = getattr(args, "model", None)
     what = f"the model {model}" if model else "the model"
-    sim = ("; or leave out --model: --sim then calibrates the simulated robot first"
-           if getattr(args, "sim", None) else "")
+    port = getattr(args, "port", None)
+    calibrate = f"'lti-motion calibrate --port {port}'" if port else "'lti-motion calibrate'"
+    tail = ""
+    if args.command == "replay":
+        tail = ("; or replay only the estimators that need no encoder counts: "
+                "--estimators commands sensorless")
+    elif getattr(args, "sim", None):
+        tail = "; or leave out --model: --sim then calibrates the simulated robot first"
     return (f"{what} has no encoder scale, which turns encoder counts into distances; "
-            "calibrate the robot with 'lti-motion calibrate' (its rotation in place measures "
-            f"the scale) and give the model_arx.json it writes with --model{sim}")
-
+            f"calibrate the robot with {calibrate} (its rotation in place measures "
+            f"the scale) and give the model_arx.json it writes with --model{tail}")
 
 if __name__ == "__main__":
     raise SystemExit(main())

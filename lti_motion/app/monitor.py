@@ -45,6 +45,7 @@ from lti_motion.app.monitor_setup import (
     nominal_on_simulator,
     sightings,
 )
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import SensorFrame
 from lti_motion.model import MotionModel
 
@@ -288,11 +289,17 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         Simulate the landmark sensor and run the scale test.
     print_fn : callable
         Where the lines go.
+
+    Raises
+    ------
+    MissingEncoderScaleError
+        If the model has no encoder scale (before any drive).
     """
     from drivers.logs import Recorder
     from drivers.sim.config import Room, floor_name, load_robot
     from drivers.sim.simulator import Simulator
 
+    _require_scale(model)
     params = load_robot(robot) if isinstance(robot, str) else robot
     floor = params.floor if floor is None else floor
     preset = params.name
@@ -380,9 +387,13 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     ------
     PortError, StreamStalledError, PassiveModeError
         From the driver; the wheels are stopped first.
+    MissingEncoderScaleError
+        If the model has no encoder scale (before the port is opened).
     """
     from drivers.logs import Recorder
     from drivers.roomba.driver import Roomba
+
+    _require_scale(model)
 
     nominal = None
     if nominal_logs:
@@ -413,3 +424,9 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     if record and len(rec):
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
     return run
+
+
+def _require_scale(model: MotionModel) -> None:
+    """Fail before a drive starts (nothing driven, nothing lost) if counts cannot be scaled."""
+    if model.m_per_tick is None:
+        raise MissingEncoderScaleError.needed_by("the monitor")

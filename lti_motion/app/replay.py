@@ -114,9 +114,13 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
         ekf.update_landmarks(sightings.get(k, none))
         poses[k] = ekf.x[:3]
     stats = ekf.stats
+    causes = [r.cause for r in ekf.resets]
     return poses, {"encoders_gated": stats.count("encoders", "gated"),
                    "landmarks_fused": stats.count("landmark", "fused"),
-                   "landmarks_gated": stats.count("landmark", "gated")}
+                   "landmarks_gated": stats.count("landmark", "gated"),
+                   "filter_resets": ekf.n_resets,
+                   "resets_scale_implausible": causes.count("scale_implausible"),
+                   "resets_diverged": causes.count("diverged")}
 
 
 def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
@@ -140,7 +144,9 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
     poses : dict of str to ndarray, shape (n, 3)
         Each estimator's pose at every frame.
     extra : dict of str to dict
-        Filter counts (gated readings, landmarks fused) per EKF estimator.
+        Filter counts (gated readings, landmarks fused, the filter's resets by
+        cause: ``filter_resets``, ``resets_scale_implausible``,
+        ``resets_diverged``) per EKF estimator.
 
     Raises
     ------
@@ -323,6 +329,11 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
                if src.ticks is not None else "")
         print_fn(f"  {src.label(name)}: {enc}{counts['landmarks_fused']} sightings fused, "
                  f"{counts['landmarks_gated']} gated")
+        if counts["filter_resets"]:
+            print_fn(f"  {src.label(name)}: the filter reset itself {counts['filter_resets']} "
+                     f"times ({counts['resets_scale_implausible']} implausible scale errors, "
+                     f"{counts['resets_diverged']} divergences: landmarks gated in a row); "
+                     f"see docs/ekf.md, Bounds and resets")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = [write_tum(out / f"{name}.tum", src.t_s, p) for name, p in poses.items()]

@@ -151,3 +151,30 @@ def test_the_baseline_keeps_time_and_noise_defaults():
     rec = ekf.update_landmark(1, range_bearing(ekf.x, np.array(LANDMARKS[1])))
     assert rec.t_s == pytest.approx(0.4) and rec.nis == pytest.approx(0.0, abs=1e-20)
     assert rec.innovation_cov[1, 1] > 0.02 ** 2 and math.isfinite(rec.nis)
+
+
+def test_the_baseline_takes_no_gate_and_refuses_impossible_options(model):
+    """Issue 15 item 4: VelocityModelEKF(gate_probability=None) fuses everything, as ModelEKF
+    does; impossible options are one-line FilterOptionErrors (ValueErrors)."""
+    vf = VelocityModelEKF(dt_s=0.1, speed_cov=np.diag([1e-4, 1e-3]), landmarks=LANDMARKS,
+                          gate_probability=None)
+    mf = ModelEKF(model, landmarks=LANDMARKS, gate_probability=None)
+    for ekf in (vf, mf):
+        ekf.predict(np.array([0.2, 0.2]) if ekf is mf else np.array([0.2, 0.0]))
+        far = range_bearing(ekf.x, np.array(LANDMARKS[1])) + np.array([3.0, 1.0])
+        rec = ekf.update_landmark(1, far)
+        assert rec.accepted and rec.nis > 1e3 and rec.reason == "fused"
+    ok = {"dt_s": 0.1, "speed_cov": np.diag([1e-4, 1e-3])}
+    cases = [({"dt_s": -0.1}, "dt_s"), ({"dt_s": math.nan}, "dt_s"),
+             ({"speed_cov": -np.eye(2)}, "negative noise"),
+             ({"speed_cov": np.full((2, 2), np.nan)}, "finite"),
+             ({"speed_cov": np.array([[1.0, 0.0], [0.5, 1.0]])}, "symmetric"),
+             ({"pose_std": (0.01, -0.01, 0.01)}, "pose_std"),
+             ({"gate_probability": 1.0}, "gate probability"),
+             ({"gate_probability": "0.99"}, "gate probability")]
+    for bad, match in cases:
+        with pytest.raises(FilterOptionError, match=match) as info:
+            VelocityModelEKF(**{**ok, **bad})
+        assert isinstance(info.value, ValueError) and "\n" not in str(info.value)
+    with pytest.raises(FilterOptionError, match="gate probability"):
+        ModelEKF(model, gate_probability="0.99")

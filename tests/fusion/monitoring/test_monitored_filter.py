@@ -100,3 +100,26 @@ def test_bad_input_is_a_clear_error():
     mf = MonitoredFilter(_model())
     with pytest.raises(MeasurementShapeError, match=r"shape \(2,\)"):
         mf.step(np.zeros(3), np.zeros(2))
+
+
+def test_a_diverged_filter_resets_and_says_so_with_a_filter_reset_alarm():
+    """Issue 15 item 3: a filter sure of a pose 1.1 m from the truth gates every sighting; after
+    20 of them, of several landmarks, it resets (scales to the prior, pose covariance widened),
+    raises one "filter_reset" alarm and the landmarks bring it back."""
+    from fusion.range_bearing import RangeBearing, range_bearing
+
+    lm = LandmarkMap({0: (3.0, 0.0), 1: (0.0, 3.0), 2: (3.0, 3.0)})
+    truth = np.array([1.0, 0.5, 0.0])
+    heard = []
+    mf = MonitoredFilter(_model(), landmarks=lm, initial_pose=(0.0, 0.0, 0.0),
+                         pose_std=(0.005, 0.005, 0.005), on_alarm=heard.append)
+    rng = np.random.default_rng(3)
+    for k in range(200):
+        j = k % 3
+        z = range_bearing(truth, np.array(lm.position(j))) + rng.normal(0.0, [0.01, 0.005])
+        result = mf.step(np.array([100, 100]), np.zeros(2),
+                         sightings=RangeBearing([k], [j], [z[0]], [z[1]]))
+    resets = [e for e in mf.events if e.kind == "filter_reset"]
+    assert [e.test for e in resets] == ["diverged"] and resets[0] in heard
+    assert mf.ekf.n_resets == 1 and resets[0].t_s == mf.ekf.resets[0].t_s
+    assert np.hypot(*(result.pose[:2] - truth[:2])) < 0.05

@@ -246,13 +246,25 @@ def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model
     assert message in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("argv", [
-    ["replay", "{log}", "--model", "{model}", "--estimators", "odometry"],
-    ["monitor", "--sim", "create2", "--model", "{model}", "--duration", "1",
-     "--nominal-drives", "0"],
-], ids=lambda argv: argv[0])
-def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, model_file,
+@pytest.mark.parametrize(("argv", "advice"), [
+    (["replay", "{log}", "--model", "{model}", "--estimators", "odometry"],
+     "--estimators commands sensorless"),
+    (["replay", "{log}", "--model", "{model}", "--estimators", "ekf"],
+     "--estimators commands sensorless"),
+    (["replay", "{log}", "--model", "{model}"], "--estimators commands sensorless"),
+    (["monitor", "--sim", "create2", "--model", "{model}", "--duration", "1",
+      "--nominal-drives", "0"], "leave out --model"),
+    (["monitor", "--sim", "create2", "--model", "{model}", "--duration", "1"],
+     "leave out --model"),
+    (["monitor", "--port", "/dev/no-such-robot", "--model", "{model}"],
+     "'lti-motion calibrate --port /dev/no-such-robot'"),
+], ids=["replay-odometry", "replay-ekf", "replay-all", "monitor-sim", "monitor-sim-nominal",
+        "monitor-port"])
+def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, advice,
+                                                                          model_file,
                                                                           tmp_path, capsys):
+    """Issue 15 item 5: every command path that needs the scale says, in its own options,
+    what gives it; the monitor says so before it drives (or opens the port)."""
     from drivers.sim.simulator import Simulator
     from lti_motion.logfile import save_log
     from lti_motion.model import MotionModel
@@ -262,10 +274,37 @@ def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, m
     log = save_log(tmp_path / "short.npz", Simulator("create2", seed=0).run(np.full((50, 2), 0.1)))
     argv = [a.format(model=unscaled, log=log) for a in argv]
     assert main([*argv, "--out", str(tmp_path / "out")] if argv[0] == "replay" else argv) == 2
-    err = capsys.readouterr().err
+    captured = capsys.readouterr()
+    err = captured.err
     assert err.count("\n") == 1 and err.startswith(f"lti-motion {argv[0]}: error: the model ")
-    assert "has no encoder scale" in err and "'lti-motion calibrate'" in err and "--model" in err
-    for internal in ("Error", "m_per_tick", "FilterModel", "lti_motion.", "Traceback"):
+    assert "has no encoder scale" in err and "'lti-motion calibrate" in err and "--model" in err
+    assert advice in err
+    for internal in ("Error", "m_per_tick", "FilterModel", "ModelEKF", "lti_motion.",
+                     "Traceback"):
+        assert internal not in err, internal
+    if argv[0] == "monitor":
+        assert "phase I" not in captured.out          # no nominal drive before the error
+    else:                                             # the advice works
+        assert main([*argv[:4], "--estimators", "commands", "sensorless",
+                     "--out", str(tmp_path / "out2")]) == 0
+
+
+def test_the_demo_says_what_its_user_can_do_about_a_missing_scale(monkeypatch, tmp_path,
+                                                                  capsys):
+    """The demo calibrates its own model; should that give no scale, its user hears about
+    the demo's options, not the library's."""
+    import lti_motion.app.demo as demo
+    from lti_motion.exceptions import MissingEncoderScaleError
+
+    def unscaled(*args, **kwargs):
+        raise MissingEncoderScaleError.needed_by("encoder odometry")
+
+    monkeypatch.setattr(demo, "run_demo", unscaled)
+    assert main(["demo", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("lti-motion demo: error: the demo's ")
+    assert "--seed" in err and "'lti-motion calibrate --sim PRESET'" in err
+    for internal in ("Error", "m_per_tick", "lti_motion.", "--model"):
         assert internal not in err, internal
 
 
