@@ -149,13 +149,21 @@ class Roomba:
         Wall time [s] allowed for the first valid frame after opening.
     stall_periods : int
         A read that sees no valid frame for this many stream periods (robot
-        time, i.e. ``stall_periods * 0.015 / clock_rate`` wall seconds) raises
+        time, i.e. ``stall_periods * 0.015 / clock_rate`` wall seconds), and
+        for at least ``stall_floor_s`` of wall time, raises
         :class:`StreamStalledError`.
+    stall_floor_s : float
+        Shortest stall window in wall time [s], >= 0 (default 0.3 s). A loaded
+        host, or a virtual Roomba sharing its cores, leaves gaps of tens of
+        milliseconds between frames; at a high ``clock_rate`` the window of
+        ``stall_periods`` alone shrinks to a few milliseconds (7.5 ms at 10x)
+        and such a gap would stop the drive. On a robot (``clock_rate=1``) the
+        window is ``max(0.075, 0.3)`` s by default.
     reconnect : bool
         On a stall, re-send the stream request once and wait up to
         ``reconnect_timeout_s`` (robot time) before raising.
     reconnect_timeout_s : float
-        See ``reconnect``.
+        See ``reconnect`` (robot time, and at least ``stall_floor_s`` of wall time).
     reassert_mode : bool
         On a fall to Passive, re-send Safe/Full once (logged as a warning and
         counted) instead of raising; raises if the mode is still wrong
@@ -217,6 +225,7 @@ class Roomba:
         write_timeout_s: float = 0.5,
         open_timeout_s: float = 1.0,
         stall_periods: int = 5,
+        stall_floor_s: float = 0.3,
         reconnect: bool = False,
         reconnect_timeout_s: float = 1.0,
         reassert_mode: bool = False,
@@ -247,8 +256,9 @@ class Roomba:
                         ("wheel_base_m", wheel_base_m)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite positive number, got {v!r}")
-        if not (math.isfinite(settle_s) and settle_s >= 0):
-            raise ValueError(f"settle_s must be finite and >= 0, got {settle_s!r}")
+        for name, v in (("settle_s", settle_s), ("stall_floor_s", stall_floor_s)):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
         self.port = str(port)
         self.baud = int(baud)
         self.mode = mode
@@ -283,7 +293,9 @@ class Roomba:
         self.wheel_diameter_m = float(wheel_diameter_m)
         self.ticks_per_rev = float(ticks_per_rev)
         self.wheel_base_m = float(wheel_base_m)
-        self._stall_window_s = stall_periods * STREAM_PERIOD_S / self.clock_rate
+        self.stall_floor_s = float(stall_floor_s)
+        self._stall_window_s = max(stall_periods * STREAM_PERIOD_S / self.clock_rate,
+                                   self.stall_floor_s)
         self.read_timeout_s = (min(0.05, max(5e-4, self._stall_window_s / 4))
                                if read_timeout_s is None else float(read_timeout_s))
         if not (math.isfinite(self.read_timeout_s) and self.read_timeout_s > 0):
@@ -517,29 +529,19 @@ class Roomba:
         deadline = time.monotonic() + self._stall_window_s
         reconnected = False
         while not self._pending:
-            if time.monotonic() >= deadline:
+            if time.monotonic() >= deadline and not self._take_waiting(ser):
                 self._stalls += 1
                 if self.reconnect and not reconnected:
                     reconnected = True
                     _log.warning("Roomba on %s: no frame for %d periods; re-requesting the "
                                  "stream", self.port, self.stall_periods)
                     self._write(stream(self.layout.ids))
-                    deadline = time.monotonic() + self.reconnect_timeout_s / self.clock_rate
+                    deadline = time.monotonic() + max(self.reconnect_timeout_s / self.clock_rate,
+                                                      self.stall_floor_s)
                     continue
                 self._stop_wheels_quietly()
-                c = self.counters
-                raise StreamStalledError(
-                    f"no valid stream frame from {self.port} ({self.baud} baud) within "
-                    f"{self.stall_periods} periods ({self.stall_periods * STREAM_PERIOD_S:.3f} s "
-                    f"robot time{', after one re-request' if reconnected else ''}); "
-                    f"{c.frames} frames so far, {c.checksum_failures} checksum failures. The "
-                    "wheels were commanded to stop. Check the cable, that the robot is on and "
-                    "awake, and the baud rate (spec §1.3, G3, G15)")
-            chunk, host_s, fresh = self._receive(ser)
-            frames = self._parser.feed(chunk) if chunk else []
-            if frames:
-                ks = self._clock.assign(len(frames), host_s, fresh=fresh)
-                self._pending.extend((f, k, host_s) for f, k in zip(frames, ks, strict=True))
+                raise self._stall_error(reconnected=reconnected)
+            self._take(*self._receive(ser))
         sf, k, host_s = self._pending.popleft()
         frame = self._to_frame(sf, k, host_s)
         self._check_mode(frame)
@@ -588,6 +590,37 @@ class Roomba:
         except (serial.SerialException, OSError) as exc:
             raise PortError(f"read from {self.port} failed: {exc}") from exc
         return chunk, time.monotonic(), fresh
+
+    def _take(self, chunk: bytes, host_s: float, fresh: bool) -> int:
+        """Parse a chunk and queue its frames with their stream periods; how many."""
+        frames = self._parser.feed(chunk) if chunk else []
+        if frames:
+            ks = self._clock.assign(len(frames), host_s, fresh=fresh)
+            self._pending.extend((f, k, host_s) for f, k in zip(frames, ks, strict=True))
+        return len(frames)
+
+    def _take_waiting(self, ser: serial.Serial) -> bool:
+        """At a deadline: queue what already waits in the OS buffer, without waiting.
+
+        A host descheduled past the deadline finds the frames that arrived
+        meanwhile here instead of calling it a stall.
+        """
+        try:
+            waiting = ser.in_waiting
+            chunk = ser.read(waiting) if waiting else b""
+        except (serial.SerialException, OSError) as exc:
+            raise PortError(f"read from {self.port} failed: {exc}") from exc
+        return self._take(chunk, time.monotonic(), False) > 0
+
+    def _stall_error(self, *, reconnected: bool) -> StreamStalledError:
+        c = self.counters
+        return StreamStalledError(
+            f"no valid stream frame from {self.port} ({self.baud} baud) for "
+            f"{self._stall_window_s:.3g} s of wall time (at least {self.stall_periods} "
+            f"periods{', after one re-request' if reconnected else ''}); "
+            f"{c.frames} frames so far, {c.checksum_failures} checksum failures. The "
+            "wheels were commanded to stop. Check the cable, that the robot is on and "
+            "awake, and the baud rate (spec §1.3, G3, G15)")
 
     def _await_first_frame(self, ser: serial.Serial) -> None:
         deadline = time.monotonic() + self.open_timeout_s
