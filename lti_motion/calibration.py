@@ -23,7 +23,13 @@ from typing import Literal, Protocol
 import numpy as np
 
 from lti_motion.encoder_scale import RotationPeriod, encoder_scale_m_per_tick, rotation_period_ticks
-from lti_motion.excitation import random_held_normal, rotation_in_place, step_sequence
+from lti_motion.exceptions import CalibrationError
+from lti_motion.excitation import (
+    StepSequence,
+    random_held_normal,
+    rotation_in_place,
+    step_sequence,
+)
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.odometry import body_speeds_from_ticks, stream_clock, unwrap_ticks
@@ -34,6 +40,7 @@ __all__ = [
     "Robot",
     "calibrate",
     "drive",
+    "phases_as_applied",
     "speeds_from_log",
 ]
 
@@ -211,6 +218,60 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     return log.cmd_m_s[1:], y
 
 
+def phases_as_applied(steps: StepSequence, cmd_m_s: np.ndarray, *,
+                      max_lag: int) -> tuple[slice, slice, slice, slice]:
+    """The step phases where the recorded commands put them.
+
+    A robot applies a command one or more periods after the host planned it
+    when the host answers late (frames waiting in a buffer, G17); its frames
+    record the command it applied (packets 41/42). Each phase starts at the
+    first sample, from its planned start on, whose recorded command is the
+    phase's; it ends where the next one starts (the last one where the
+    planned length or the data ends). A simulator applies every command on
+    time, and the phases are the planned ones.
+
+    Parameters
+    ----------
+    steps : StepSequence
+        The planned manoeuvre; ``steps.cmd_m_s[k]`` was sent for sample ``k``.
+    cmd_m_s : ndarray, shape (n, 2)
+        Recorded (applied) wheel commands [m/s], sample 0 aligned with the plan's.
+    max_lag : int
+        Most periods a command may land late.
+
+    Returns
+    -------
+    tuple of four slices
+        Left on, left off, right on, right off, in samples of ``cmd_m_s``.
+
+    Raises
+    ------
+    CalibrationError
+        If a phase's command does not appear within ``max_lag`` periods of its plan.
+
+    Examples
+    --------
+    >>> seq = step_sequence(amplitude_m_s=0.2, hold_s=0.06, rest_s=0.03, dt_s=0.015)
+    >>> late = np.concatenate([np.zeros((1, 2)), seq.cmd_m_s[:-1]])   # one period late
+    >>> phases_as_applied(seq, late, max_lag=3)
+    (slice(1, 5, None), slice(5, 7, None), slice(7, 11, None), slice(11, 12, None))
+    """
+    starts = []
+    for phase in steps.phases:
+        level = steps.cmd_m_s[phase.start]
+        window = cmd_m_s[phase.start:phase.start + max_lag + 1]
+        hit = np.flatnonzero(np.all(np.abs(window - level) < 5e-4, axis=1))   # mm/s rounding
+        if hit.size == 0:
+            raise CalibrationError(
+                f"the robot did not apply the step command {level.tolist()} m/s within "
+                f"{max_lag} periods of sample {phase.start}; its link is too slow or the "
+                "commands were lost")
+        starts.append(phase.start + int(hit[0]))
+    last = steps.phases[-1]
+    ends = [*starts[1:], min(starts[-1] + last.stop - last.start, len(cmd_m_s))]
+    return tuple(slice(a, b) for a, b in zip(starts, ends, strict=True))
+
+
 def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None = None,
               floor: str | None = None,
               progress: Callable[[str, int, int], None] | None = None,
@@ -274,6 +335,7 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     u_s, y_s = speeds_from_log(step_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
     lead = len(rest) - 1        # speeds_from_log drops the first frame
     u_s, y_s = u_s[lead:], y_s[lead:]
+    step_phases = phases_as_applied(steps, u_s, max_lag=len(rest))
 
     rng = np.random.default_rng(plan.seed)
     exc_cmd = random_held_normal(n=round(plan.excitation_s / dt), dt_s=dt, rng=rng,
@@ -288,7 +350,7 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
     arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
                   **common)
-    fir = fit_fir_from_steps(u_s, y_s, phases=steps, noise_runs=[(u_x, y_x)],
+    fir = fit_fir_from_steps(u_s, y_s, phases=step_phases, noise_runs=[(u_x, y_x)],
                              dc_gain=plan.fir_dc_gain, **common)
     return Calibration(m_per_tick=scale, rotation=rotation, fir=fir, arx=arx,
                        logs={"rotation": rot_log, "steps": step_log, "excitation": exc_log})
