@@ -123,6 +123,27 @@ class LinkCounters:
 # ---------------------------------------------------------------------- the driver
 
 
+def _check_options(*, mode: str, clock: str, cmd_source: str, stall_periods: object,
+                   positive: dict[str, float], non_negative: dict[str, float]) -> None:
+    """Raise ValueError for a bad :class:`Roomba` option, naming it and its value."""
+    if mode not in ("safe", "full"):
+        raise ValueError(f"mode must be 'safe' or 'full', got {mode!r}")
+    if clock not in ("stream", "host"):
+        raise ValueError(f"clock must be 'stream' or 'host', got {clock!r}")
+    if cmd_source not in ("requested", "sent"):
+        raise ValueError(f"cmd_source must be 'requested' or 'sent', got {cmd_source!r}")
+    if isinstance(stall_periods, bool) or not (isinstance(stall_periods, int)
+                                               and stall_periods >= 1):
+        raise ValueError(f"stall_periods must be an int >= 1, got {stall_periods!r}")
+    for name, v in positive.items():
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a finite positive number, got {v!r}")
+    for name, v in non_negative.items():
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+
+
+
 class Roomba:
     """A Roomba 600 / Create 2 on a serial port, streaming sensor frames.
 
@@ -240,43 +261,18 @@ class Roomba:
         ticks_per_rev: float = 508.8,
         wheel_base_m: float = 0.235,
     ) -> None:
-        if mode not in ("safe", "full"):
-            raise ValueError(f"mode must be 'safe' or 'full', got {mode!r}")
-        if clock not in ("stream", "host"):
-            raise ValueError(f"clock must be 'stream' or 'host', got {clock!r}")
-        if cmd_source not in ("requested", "sent"):
-            raise ValueError(f"cmd_source must be 'requested' or 'sent', got {cmd_source!r}")
-        if isinstance(stall_periods, bool) or not (isinstance(stall_periods, int)
-                                                   and stall_periods >= 1):
-            raise ValueError(f"stall_periods must be an int >= 1, got {stall_periods!r}")
-        for name, v in (("clock_rate", clock_rate), ("write_timeout_s", write_timeout_s),
-                        ("open_timeout_s", open_timeout_s),
-                        ("reconnect_timeout_s", reconnect_timeout_s),
-                        ("wheel_diameter_m", wheel_diameter_m), ("ticks_per_rev", ticks_per_rev),
-                        ("wheel_base_m", wheel_base_m)):
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite positive number, got {v!r}")
-        for name, v in (("settle_s", settle_s), ("stall_floor_s", stall_floor_s)):
-            if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+        _check_options(mode=mode, clock=clock, cmd_source=cmd_source,
+                       stall_periods=stall_periods,
+                       positive={"clock_rate": clock_rate, "write_timeout_s": write_timeout_s,
+                                 "open_timeout_s": open_timeout_s,
+                                 "reconnect_timeout_s": reconnect_timeout_s,
+                                 "wheel_diameter_m": wheel_diameter_m,
+                                 "ticks_per_rev": ticks_per_rev, "wheel_base_m": wheel_base_m},
+                       non_negative={"settle_s": settle_s, "stall_floor_s": stall_floor_s})
         self.port = str(port)
         self.baud = int(baud)
         self.mode = mode
-        self.layout = PacketLayout.from_ids(stream_ids, what="Stream (148)")
-        self.layout.require_streamable()
-        check_stream_bandwidth(self.layout.ids, baud_bps=self.baud)
-        fields = self.layout.field_ids
-        for pid in (43, 44):
-            if pid not in fields:
-                raise ProtocolError(f"stream_ids {list(self.layout.ids)} lack encoder packet "
-                                    f"{pid}; the driver needs 43 and 44 (spec §7)")
-        self._i_ticks = (fields.index(43), fields.index(44))
-        self._i_light = (tuple(fields.index(p) for p in _LIGHT_IDS)
-                         if all(p in fields for p in _LIGHT_IDS) else None)
-        self._i_bumps = fields.index(7) if 7 in fields else None
-        self._i_mode = fields.index(35) if 35 in fields else None
-        self._i_req = ((fields.index(42), fields.index(41))
-                       if 41 in fields and 42 in fields and cmd_source == "requested" else None)
+        self._index_fields(stream_ids, cmd_source=cmd_source)
         self.dt_s = STREAM_PERIOD_S
         self.clock = clock
         self.clock_rate = float(clock_rate)
@@ -294,13 +290,39 @@ class Roomba:
         self.ticks_per_rev = float(ticks_per_rev)
         self.wheel_base_m = float(wheel_base_m)
         self.stall_floor_s = float(stall_floor_s)
-        self._stall_window_s = max(stall_periods * STREAM_PERIOD_S / self.clock_rate,
+        self._set_timeouts(read_timeout_s)
+        self._init_link_state()
+
+    def _index_fields(self, stream_ids: Sequence[int], *, cmd_source: str) -> None:
+        """The stream layout, and where the packets the driver reads sit in a frame."""
+        self.layout = PacketLayout.from_ids(stream_ids, what="Stream (148)")
+        self.layout.require_streamable()
+        check_stream_bandwidth(self.layout.ids, baud_bps=self.baud)
+        fields = self.layout.field_ids
+        for pid in (43, 44):
+            if pid not in fields:
+                raise ProtocolError(f"stream_ids {list(self.layout.ids)} lack encoder packet "
+                                    f"{pid}; the driver needs 43 and 44 (spec §7)")
+        self._i_ticks = (fields.index(43), fields.index(44))
+        self._i_light = (tuple(fields.index(p) for p in _LIGHT_IDS)
+                         if all(p in fields for p in _LIGHT_IDS) else None)
+        self._i_bumps = fields.index(7) if 7 in fields else None
+        self._i_mode = fields.index(35) if 35 in fields else None
+        self._i_req = ((fields.index(42), fields.index(41))
+                       if 41 in fields and 42 in fields and cmd_source == "requested" else None)
+
+    def _set_timeouts(self, read_timeout_s: float | None) -> None:
+        """The stall window [wall s] and the pyserial read timeout derived from it."""
+        self._stall_window_s = max(self.stall_periods * STREAM_PERIOD_S / self.clock_rate,
                                    self.stall_floor_s)
         self.read_timeout_s = (min(0.05, max(5e-4, self._stall_window_s / 4))
                                if read_timeout_s is None else float(read_timeout_s))
         if not (math.isfinite(self.read_timeout_s) and self.read_timeout_s > 0):
             raise ValueError(f"read_timeout_s must be a finite positive number, "
                              f"got {read_timeout_s!r}")
+
+    def _init_link_state(self) -> None:
+        """A closed port, an empty parser, queue and stream clock, zero counters."""
         self._ser: serial.Serial | None = None
         self._parser = StreamParser(self.layout.ids)
         self._clock = StreamClock(clock_rate=self.clock_rate,
