@@ -28,8 +28,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from drivers.sim.config import FLOORS, PRESETS
@@ -71,8 +72,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
         print(f"calibrating the robot on {args.port} at {args.baud} baud")
         with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            cal = calibrate(robot, wheel_base_m=args.wheel_base, plan=plan, floor=args.floor,
-                            progress=print_progress, before_stage=before_stage)
+            cal = calibrate(robot, wheel_base_m=args.wheel_base or 0.235, plan=plan,
+                            floor=args.floor, progress=print_progress,
+                            before_stage=before_stage)
     from lti_motion.logfile import save_log
 
     out.mkdir(parents=True, exist_ok=True)
@@ -219,8 +221,8 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "
                           "of a faster virtual Roomba")
-    cal.add_argument("--wheel-base", type=float, default=0.235,
-                     help="nominal wheel base [m] (default 0.235, the Create 2)")
+    cal.add_argument("--wheel-base", type=float, default=None,
+                     help="--port: nominal wheel base [m] (default 0.235, the Create 2)")
     cal.add_argument("--floor", default="hard", help="floor name recorded in the model "
                      f"(and simulated with --sim: {', '.join(FLOOR_NAMES)})")
     cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
@@ -319,12 +321,69 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Shortest random excitation a calibration accepts [s]: the ARX order and delay are chosen
+#: on its held-out last 30%, and the calibration-sequence plot shows its first 20 s.
+MIN_EXCITATION_S = 20.0
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Refuse options that make no sense, before anything runs (issue 15 item 13).
+
+    Raises
+    ------
+    ValueError
+        One line in the command's words, naming the option and its value.
+    """
+    def positive(option: str, value: float | None) -> None:
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{option} must be a positive number, got {value:g}")
+
+    excitation_s = getattr(args, "excitation_s", None)
+    if excitation_s is not None and not excitation_s >= MIN_EXCITATION_S:
+        raise ValueError(f"--excitation-s must be at least {MIN_EXCITATION_S:g} s (the model's "
+                         f"order is chosen on its last 30%), got {excitation_s:g}")
+    if args.command == "calibrate":
+        _check_calibrate_args(args, positive)
+    elif args.command == "monitor":
+        positive("--duration", args.duration)
+        positive("--clock-rate", args.clock_rate)
+        if args.fault_at is not None and args.fault is None:
+            raise ValueError("--fault-at is the onset of --fault; give --fault too")
+        if args.fault_at is not None and not 0 <= args.fault_at < args.duration:
+            raise ValueError(f"--fault-at {args.fault_at:g} s is outside the drive: give a "
+                             f"time from 0 to before --duration ({args.duration:g} s)")
+        if args.nominal_drives < 0:
+            raise ValueError(f"--nominal-drives must be 0 or more, got {args.nominal_drives}")
+    elif args.command == "replay":
+        positive("--rpe-s", args.rpe_s)
+        positive("--duration-s", args.duration_s)
+        if not (math.isfinite(args.start_s) and args.start_s >= 0):
+            raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
+        if args.robot is not None and args.robot < 0:
+            raise ValueError(f"--robot must be 0 or more, got {args.robot}")
+    elif args.command == "demo" and args.runs < 1:
+        raise ValueError(f"--runs must be 1 or more, got {args.runs}")
+    elif args.command == "virtual-roomba":
+        positive("--speed", args.speed)
+        positive("--duration", args.duration)
+
+
+def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
+    """``calibrate``: --wheel-base only for a robot (the simulator has its preset's)."""
+    if args.sim and args.wheel_base is not None:
+        raise ValueError(f"--wheel-base is for --port; the simulated {args.sim} has its own "
+                         f"({PRESETS[args.sim].wheel_base_m:g} m)")
+    positive("--wheel-base", args.wheel_base)
+    positive("--clock-rate", args.clock_rate)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lti-motion`` console script."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
+        _check_args(args)
         return args.func(args)
     except MissingEncoderScaleError:
         print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)
