@@ -16,7 +16,7 @@ duck-types them, so the core imports neither.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Literal, Protocol
 
@@ -272,10 +272,55 @@ def phases_as_applied(steps: StepSequence, cmd_m_s: np.ndarray, *,
     return tuple(slice(a, b) for a, b in zip(starts, ends, strict=True))
 
 
+def _stage_commands(plan: CalibrationPlan, *, wheel_base_m: float, dt_s: float,
+                    ) -> tuple[dict[str, np.ndarray], StepSequence, int]:
+    """The wheel commands of the three manoeuvres, the step plan, and the rest length."""
+    rest = np.zeros((round(1.0 / dt_s), 2))
+    rot_cmd = np.concatenate([rest, rotation_in_place(
+        turns=plan.rotation_turns, wheel_speed_m_s=plan.rotation_speed_m_s,
+        wheel_base_m=wheel_base_m, dt_s=dt_s), rest])
+    steps = step_sequence(amplitude_m_s=plan.step_amplitude_m_s, hold_s=plan.step_hold_s,
+                          rest_s=plan.step_rest_s, dt_s=dt_s)
+    rng = np.random.default_rng(plan.seed)
+    exc_cmd = random_held_normal(n=round(plan.excitation_s / dt_s), dt_s=dt_s, rng=rng,
+                                 std_m_s=plan.excitation_std_m_s,
+                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s,
+                                 correlation=plan.excitation_correlation)
+    commands = {"rotation": rot_cmd, "steps": np.concatenate([rest, steps.cmd_m_s]),
+                "excitation": np.concatenate([rest, exc_cmd, rest])}
+    return commands, steps, len(rest)
+
+
+def _recorded_or_driven(robot: Robot, name: str, cmd_m_s: np.ndarray, *,
+                        recorded: Mapping[str, FrameLog],
+                        progress: Callable[[str, int, int], None] | None,
+                        before_stage: Callable[[str], None] | None,
+                        after_stage: Callable[[str, FrameLog], None] | None) -> FrameLog:
+    """One manoeuvre: its recorded log if there is one (checked against the plan), else driven."""
+    if name in recorded:
+        log = recorded[name]
+        if len(log) != len(cmd_m_s) or abs(log.dt_s - robot.dt_s) > 1e-12:
+            raise CalibrationError(
+                f"the recorded {name} has {len(log)} frames of {log.dt_s:g} s; this plan drives "
+                f"{len(cmd_m_s)} of {robot.dt_s:g} s. Drive it again, or calibrate with the "
+                "options it was recorded with")
+        _log.info("%s: the recorded log of %d frames, not driven again", name, len(log))
+        return log
+    if before_stage is not None:
+        before_stage(name)
+    log = drive(robot, cmd_m_s, progress=None if progress is None
+                else (lambda d, t: progress(name, d, t)))
+    if after_stage is not None:
+        after_stage(name, log)
+    return log
+
+
 def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None = None,
               floor: str | None = None,
               progress: Callable[[str, int, int], None] | None = None,
-              before_stage: Callable[[str], None] | None = None) -> Calibration:
+              before_stage: Callable[[str], None] | None = None,
+              after_stage: Callable[[str, FrameLog], None] | None = None,
+              recorded: Mapping[str, FrameLog] | None = None) -> Calibration:
     """Run the three manoeuvres on ``robot`` and fit the encoder scale, FIR and ARX models.
 
     Parameters
@@ -296,6 +341,13 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
         ``"steps"``, ``"excitation"``): the place to move the robot, e.g. from
         beside the furniture it turns next to out to open floor where the
         random excitation cannot hit anything. Wall contact corrupts the fit.
+    after_stage : callable, optional
+        ``after_stage(stage, log)`` as soon as a manoeuvre has been driven:
+        the place to save its log, so that a later failure loses nothing.
+    recorded : mapping of str to FrameLog, optional
+        Manoeuvres already driven (e.g. saved by ``after_stage`` in a run that
+        was stopped): used instead of driving them again, neither
+        ``before_stage`` nor ``after_stage`` is called for them.
 
     Returns
     -------
@@ -305,46 +357,30 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     ------
     lti_motion.exceptions.CalibrationError
         If a manoeuvre's data cannot give a model (no periodic signal, not
-        excited, unstable fit); the message says which and what to do.
+        excited, unstable fit), or a recorded log does not have the plan's
+        length; the message says which and what to do.
     """
     plan = plan or CalibrationPlan()
     dt = robot.dt_s
+    commands, steps, n_rest = _stage_commands(plan, wheel_base_m=wheel_base_m, dt_s=dt)
+    hooks = {"recorded": recorded or {}, "progress": progress, "before_stage": before_stage,
+             "after_stage": after_stage}
 
-    def stage(name: str) -> Callable[[int, int], None] | None:
-        return None if progress is None else (lambda d, t: progress(name, d, t))
-
-    rest = np.zeros((round(1.0 / dt), 2))
-    rot_cmd = np.concatenate([rest, rotation_in_place(
-        turns=plan.rotation_turns, wheel_speed_m_s=plan.rotation_speed_m_s,
-        wheel_base_m=wheel_base_m, dt_s=dt), rest])
-    if before_stage is not None:
-        before_stage("rotation")
-    rot_log = drive(robot, rot_cmd, progress=stage("rotation"))
+    rot_log = _recorded_or_driven(robot, "rotation", commands["rotation"], **hooks)
     ticks = unwrap_ticks(rot_log.ticks[rot_log.valid])
     rotation = rotation_period_ticks(rot_log.light_bump[rot_log.valid],
                                      ticks[:, 1] - ticks[:, 0])
     scale = encoder_scale_m_per_tick(rotation.period_ticks, wheel_base_m=wheel_base_m)
     _log.info("encoder scale %.6g m/tick from a period of %.1f ticks (confidence %.3f)",
-             scale, rotation.period_ticks, rotation.confidence)
+              scale, rotation.period_ticks, rotation.confidence)
 
-    steps = step_sequence(amplitude_m_s=plan.step_amplitude_m_s, hold_s=plan.step_hold_s,
-                          rest_s=plan.step_rest_s, dt_s=dt)
-    if before_stage is not None:
-        before_stage("steps")
-    step_log = drive(robot, np.concatenate([rest, steps.cmd_m_s]), progress=stage("steps"))
+    step_log = _recorded_or_driven(robot, "steps", commands["steps"], **hooks)
     u_s, y_s = speeds_from_log(step_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
-    lead = len(rest) - 1        # speeds_from_log drops the first frame
+    lead = n_rest - 1        # speeds_from_log drops the first frame
     u_s, y_s = u_s[lead:], y_s[lead:]
-    step_phases = phases_as_applied(steps, u_s, max_lag=len(rest))
+    step_phases = phases_as_applied(steps, u_s, max_lag=n_rest)
 
-    rng = np.random.default_rng(plan.seed)
-    exc_cmd = random_held_normal(n=round(plan.excitation_s / dt), dt_s=dt, rng=rng,
-                                 std_m_s=plan.excitation_std_m_s,
-                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s,
-                                 correlation=plan.excitation_correlation)
-    if before_stage is not None:
-        before_stage("excitation")
-    exc_log = drive(robot, np.concatenate([rest, exc_cmd, rest]), progress=stage("excitation"))
+    exc_log = _recorded_or_driven(robot, "excitation", commands["excitation"], **hooks)
     u_x, y_x = speeds_from_log(exc_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
 
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}

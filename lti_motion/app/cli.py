@@ -44,49 +44,9 @@ FLOOR_NAMES = tuple(FLOORS)
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from drivers.sim.calibration import (
-        calibrate_simulator,
-        print_progress,
-        summarize,
-    )
-    from lti_motion.app.plots import plot_calibration
-    from lti_motion.calibration import CalibrationPlan, calibrate
+    from lti_motion.app.calibrate_run import run_calibrate
 
-    plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
-    out = Path(args.out)
-    if args.sim:
-        print(f"calibrating the simulated {args.sim} robot on {args.floor} floor "
-              f"(seed {args.seed})")
-        cal = calibrate_simulator(args.sim, seed=args.seed, floor=args.floor, plan=plan,
-                                  progress=print_progress)
-    else:
-        from drivers.roomba.driver import Roomba
-
-        def before_stage(stage: str) -> None:
-            where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
-                     "steps": "on open floor, 2 m clear all round",
-                     "excitation": "on open floor, 2 m clear all round"}[stage]
-            print(f"next: {stage}. Put the robot {where}.")
-            if not args.yes:
-                input("press Enter when it is there (Ctrl-C stops the robot) ")
-
-        print(f"calibrating the robot on {args.port} at {args.baud} baud")
-        with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            cal = calibrate(robot, wheel_base_m=args.wheel_base or 0.235, plan=plan,
-                            floor=args.floor, progress=print_progress,
-                            before_stage=before_stage)
-    from lti_motion.logfile import save_log
-
-    out.mkdir(parents=True, exist_ok=True)
-    cal.arx.save(out / "model_arx.json")
-    cal.fir.save(out / "model_fir.json")
-    logs = [save_log(out / f"log_{stage}.npz", log) for stage, log in cal.logs.items()]
-    plots = plot_calibration(cal, out)
-    for line in summarize(cal):
-        print(line)
-    print(f"wrote {out / 'model_arx.json'}, {out / 'model_fir.json'}, "
-          f"{', '.join(p.name for p in plots)} and the drives {', '.join(p.name for p in logs)}")
-    return 0
+    return run_calibrate(args)
 
 
 def _load_model(path: str):
@@ -212,8 +172,10 @@ def build_parser() -> argparse.ArgumentParser:
     cal = sub.add_parser(
         "calibrate", help="calibrate the encoder scale, FIR and ARX models by driving",
         description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
-                    "random excitation) on the simulator or a robot, fits the models, and "
-                    "writes model_arx.json, model_fir.json and plots.")
+                    "random excitation) on the simulator or a robot, keeps each drive as "
+                    "log_<manoeuvre>.npz as it ends (--resume goes on from them), fits the "
+                    "models, writes plots, and model_arx.json and model_fir.json when the "
+                    "model is healthy. See docs/guide_calibrate_real_robot.md.")
     where = cal.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", choices=PRESET_NAMES, help="calibrate the simulator")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
@@ -231,6 +193,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--out", default="out/calibration", help="output folder")
     cal.add_argument("--yes", action="store_true",
                      help="do not wait for Enter between manoeuvres (robot already placed)")
+    cal.add_argument("--resume", action="store_true",
+                     help="use the drives an earlier, stopped run kept in --out "
+                          "(log_<manoeuvre>.npz) and drive only the rest")
+    cal.add_argument("--accept-unhealthy", action="store_true",
+                     help="save the model even if its held-out fit is below the healthy 85%% "
+                          "(docs/guide_calibrate_real_robot.md)")
     cal.set_defaults(func=_cmd_calibrate)
 
     rp = sub.add_parser(
@@ -354,6 +322,8 @@ def _check_args(args: argparse.Namespace) -> None:
                              f"time from 0 to before --duration ({args.duration:g} s)")
         if args.nominal_drives < 0:
             raise ValueError(f"--nominal-drives must be 0 or more, got {args.nominal_drives}")
+        if args.record:
+            _check_record_path(Path(args.record))
     elif args.command == "replay":
         positive("--rpe-s", args.rpe_s)
         positive("--duration-s", args.duration_s)
@@ -375,6 +345,15 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
                          f"({PRESETS[args.sim].wheel_base_m:g} m)")
     positive("--wheel-base", args.wheel_base)
     positive("--clock-rate", args.clock_rate)
+
+
+def _check_record_path(path: Path) -> None:
+    """``monitor --record``: a file name in a folder that can be written, before driving."""
+    from lti_motion.app.calibrate_run import check_writable_folder
+
+    if path.is_dir():
+        raise ValueError(f"--record {path} is a folder; give a file name, e.g. drive.npz")
+    check_writable_folder(path.parent, option="--record")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

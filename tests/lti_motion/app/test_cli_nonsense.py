@@ -72,10 +72,3 @@ def test_nonsense_is_one_line_and_exit_2(argv, message, files, tmp_path, capsys)
     assert message in err, err
     assert "Traceback" not in err and "Error" not in err
     assert not out.exists()                              # refused before any work
-
-
-def test_a_short_excitation_at_the_minimum_calibrates_and_plots(tmp_path, capsys):
-    """20 s (the minimum) fits and plots: the sequence plot shows what there is."""
-    assert main(["calibrate", "--sim", "create2", "--excitation-s", "20",
-                 "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "calibration_sequence.png").is_file()
