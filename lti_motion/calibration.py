@@ -8,8 +8,10 @@
 
 A *robot* is anything with a sensor period ``dt_s`` [s] and a method
 ``step(cmd_m_s) -> SensorFrame`` that sends one pair of wheel commands and
-returns the next frame: the simulator (:class:`drivers.sim.Simulator`) and the
-serial driver (:class:`drivers.roomba.Roomba`) both are. This module only
+returns the next frame (and, optionally, ``discard_buffered()``, called before
+each manoeuvre, that drops frames which waited unread): the simulator
+(:class:`drivers.sim.Simulator`) and the serial driver
+(:class:`drivers.roomba.Roomba`) both are. This module only
 duck-types them, so the core imports neither.
 """
 
@@ -308,6 +310,8 @@ def _recorded_or_driven(robot: Robot, name: str, cmd_m_s: np.ndarray, *,
         return log
     if before_stage is not None:
         before_stage(name)
+    if hasattr(robot, "discard_buffered"):      # a serial robot: frames that waited unread
+        robot.discard_buffered()                # (a prompt, computing) would delay every command
     log = drive(robot, cmd_m_s, progress=None if progress is None
                 else (lambda d, t: progress(name, d, t)))
     if after_stage is not None:

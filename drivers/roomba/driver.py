@@ -569,6 +569,41 @@ class Roomba:
         self._check_mode(frame)
         return frame
 
+    def discard_buffered(self) -> int:
+        """Drop the frames that waited while nobody read; the next frame is a fresh one.
+
+        The stream flows while the host waits at a prompt or computes; those
+        frames queue in the OS (and in a virtual Roomba's output) and
+        :meth:`read_frame` would return them first, so the next commands would
+        answer stale frames and act that many periods late. Reads until a read
+        has to wait for data (at most one stall window); the dropped frames
+        still advance the stream clock, so the next timestamps show the gap.
+
+        Returns
+        -------
+        int
+            Frames dropped.
+
+        Raises
+        ------
+        PortError
+            If the port is closed or fails.
+        """
+        ser = self._require_open()
+        dropped = len(self._pending)
+        self._pending.clear()
+        deadline = time.monotonic() + self._stall_window_s
+        while time.monotonic() < deadline:
+            chunk, host_s, fresh = self._receive(ser)
+            if fresh:                               # the backlog is read: keep what is new
+                self._take(chunk, host_s, fresh)
+                break
+            dropped += self._take(chunk, host_s, False)
+            self._pending.clear()
+        if dropped:
+            _log.info("Roomba on %s: dropped %d frames that waited unread", self.port, dropped)
+        return dropped
+
     def frames(self) -> Iterator[SensorFrame]:
         """Yield :meth:`read_frame` until an exception (or the caller) stops it."""
         while True:

@@ -64,3 +64,21 @@ def test_calibration_through_a_late_link_finds_the_steps():
                                on_time.fir.coefficients["taps"].sum(axis=0),
                                rtol=0.05, atol=0.02)
     assert late.fir.orders["n_taps"] == pytest.approx(on_time.fir.orders["n_taps"], abs=3)
+
+
+def test_each_driven_manoeuvre_starts_on_fresh_frames():
+    """calibrate asks a serial robot to drop frames that waited unread before each
+    manoeuvre it drives (none for a recorded one)."""
+    calls = []
+
+    class SerialLike(LateRobot):
+        def discard_buffered(self):
+            calls.append(True)
+            return 0
+
+    sim = Simulator("create2", seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
+    plan = CalibrationPlan(seed=3, excitation_s=10.0)
+    first = calibrate(sim, wheel_base_m=0.235, plan=plan)
+    calibrate(SerialLike(sim, 0), wheel_base_m=0.235, plan=plan,
+              recorded={"rotation": first.logs["rotation"]})
+    assert len(calls) == 2                           # steps and excitation, not the rotation

@@ -242,6 +242,22 @@ def test_stream_stall_with_reconnect_resumes_and_timestamps_show_the_gap():
     assert shutdown_tail(vr) == STOP_SEQUENCE
 
 
+def test_discard_buffered_drops_the_frames_that_waited_so_commands_act_at_once():
+    """Frames queue while the host waits (a prompt, computing); read_frame returns them
+    first, so without a discard the next commands answer stale frames."""
+    with VirtualRoomba(seed=3, speed=2.0) as vr, roomba(vr) as robot:
+        time.sleep(0.5)                                # 1 s robot time: ~67 frames wait
+        stale = run_commands(robot, np.full((20, 2), 0.1))
+        time.sleep(0.5)
+        dropped = robot.discard_buffered()
+        fresh = run_commands(robot, np.full((20, 2), 0.2))
+    assert np.all(stale.cmd_m_s == 0.0)                # every frame from before the command
+    assert dropped >= 30
+    first = int(np.flatnonzero(fresh.cmd_m_s[:, 0] == 0.2)[0])
+    assert first <= 3                                  # the command acts in the next periods
+    assert fresh.t_s[0] - stale.t_s[-1] > 0.5          # the stream clock kept the gap
+
+
 def test_fall_to_passive_raises_after_stopping_the_wheels():
     with VirtualRoomba(seed=4, speed=4.0, passive_at_s=0.5) as vr:
         with pytest.raises(PassiveModeError, match=r"mode 1 \(PASSIVE\) .*expects SAFE"):
