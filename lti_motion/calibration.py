@@ -8,22 +8,30 @@
 
 A *robot* is anything with a sensor period ``dt_s`` [s] and a method
 ``step(cmd_m_s) -> SensorFrame`` that sends one pair of wheel commands and
-returns the next frame: the simulator (:class:`drivers.sim.Simulator`) and the
-serial driver (:class:`drivers.roomba.Roomba`) both are. This module only
+returns the next frame (and, optionally, ``discard_buffered()``, called before
+each manoeuvre, that drops frames which waited unread): the simulator
+(:class:`drivers.sim.Simulator`) and the serial driver
+(:class:`drivers.roomba.Roomba`) both are. This module only
 duck-types them, so the core imports neither.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Literal, Protocol
 
 import numpy as np
 
 from lti_motion.encoder_scale import RotationPeriod, encoder_scale_m_per_tick, rotation_period_ticks
-from lti_motion.excitation import random_held_normal, rotation_in_place, step_sequence
+from lti_motion.exceptions import CalibrationError
+from lti_motion.excitation import (
+    StepSequence,
+    random_held_normal,
+    rotation_in_place,
+    step_sequence,
+)
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.odometry import unwrap_ticks
@@ -36,6 +44,7 @@ __all__ = [
     "Robot",
     "calibrate",
     "drive",
+    "phases_as_applied",
     "speeds_from_log",
 ]
 
@@ -216,10 +225,111 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     return grid.cmd_m_s, grid.speeds
 
 
+def phases_as_applied(steps: StepSequence, cmd_m_s: np.ndarray, *,
+                      max_lag: int) -> tuple[slice, slice, slice, slice]:
+    """The step phases where the recorded commands put them.
+
+    A robot applies a command one or more periods after the host planned it
+    when the host answers late (frames waiting in a buffer, G17); its frames
+    record the command it applied (packets 41/42). Each phase starts at the
+    first sample, from its planned start on, whose recorded command is the
+    phase's; it ends where the next one starts (the last one where the
+    planned length or the data ends). A simulator applies every command on
+    time, and the phases are the planned ones.
+
+    Parameters
+    ----------
+    steps : StepSequence
+        The planned manoeuvre; ``steps.cmd_m_s[k]`` was sent for sample ``k``.
+    cmd_m_s : ndarray, shape (n, 2)
+        Recorded (applied) wheel commands [m/s], sample 0 aligned with the plan's.
+    max_lag : int
+        Most periods a command may land late.
+
+    Returns
+    -------
+    tuple of four slices
+        Left on, left off, right on, right off, in samples of ``cmd_m_s``.
+
+    Raises
+    ------
+    CalibrationError
+        If a phase's command does not appear within ``max_lag`` periods of its plan.
+
+    Examples
+    --------
+    >>> seq = step_sequence(amplitude_m_s=0.2, hold_s=0.06, rest_s=0.03, dt_s=0.015)
+    >>> late = np.concatenate([np.zeros((1, 2)), seq.cmd_m_s[:-1]])   # one period late
+    >>> phases_as_applied(seq, late, max_lag=3)
+    (slice(1, 5, None), slice(5, 7, None), slice(7, 11, None), slice(11, 12, None))
+    """
+    starts = []
+    for phase in steps.phases:
+        level = steps.cmd_m_s[phase.start]
+        window = cmd_m_s[phase.start:phase.start + max_lag + 1]
+        hit = np.flatnonzero(np.all(np.abs(window - level) < 5e-4, axis=1))   # mm/s rounding
+        if hit.size == 0:
+            raise CalibrationError(
+                f"the robot did not apply the step command {level.tolist()} m/s within "
+                f"{max_lag} periods of sample {phase.start}; its link is too slow or the "
+                "commands were lost")
+        starts.append(phase.start + int(hit[0]))
+    last = steps.phases[-1]
+    ends = [*starts[1:], min(starts[-1] + last.stop - last.start, len(cmd_m_s))]
+    return tuple(slice(a, b) for a, b in zip(starts, ends, strict=True))
+
+
+def _stage_commands(plan: CalibrationPlan, *, wheel_base_m: float, dt_s: float,
+                    ) -> tuple[dict[str, np.ndarray], StepSequence, int]:
+    """The wheel commands of the three manoeuvres, the step plan, and the rest length."""
+    rest = np.zeros((round(1.0 / dt_s), 2))
+    rot_cmd = np.concatenate([rest, rotation_in_place(
+        turns=plan.rotation_turns, wheel_speed_m_s=plan.rotation_speed_m_s,
+        wheel_base_m=wheel_base_m, dt_s=dt_s), rest])
+    steps = step_sequence(amplitude_m_s=plan.step_amplitude_m_s, hold_s=plan.step_hold_s,
+                          rest_s=plan.step_rest_s, dt_s=dt_s)
+    rng = np.random.default_rng(plan.seed)
+    exc_cmd = random_held_normal(n=round(plan.excitation_s / dt_s), dt_s=dt_s, rng=rng,
+                                 std_m_s=plan.excitation_std_m_s,
+                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s,
+                                 correlation=plan.excitation_correlation)
+    commands = {"rotation": rot_cmd, "steps": np.concatenate([rest, steps.cmd_m_s]),
+                "excitation": np.concatenate([rest, exc_cmd, rest])}
+    return commands, steps, len(rest)
+
+
+def _recorded_or_driven(robot: Robot, name: str, cmd_m_s: np.ndarray, *,
+                        recorded: Mapping[str, FrameLog],
+                        progress: Callable[[str, int, int], None] | None,
+                        before_stage: Callable[[str], None] | None,
+                        after_stage: Callable[[str, FrameLog], None] | None) -> FrameLog:
+    """One manoeuvre: its recorded log if there is one (checked against the plan), else driven."""
+    if name in recorded:
+        log = recorded[name]
+        if len(log) != len(cmd_m_s) or abs(log.dt_s - robot.dt_s) > 1e-12:
+            raise CalibrationError(
+                f"the recorded {name} has {len(log)} frames of {log.dt_s:g} s; this plan drives "
+                f"{len(cmd_m_s)} of {robot.dt_s:g} s. Drive it again, or calibrate with the "
+                "options it was recorded with")
+        _log.info("%s: the recorded log of %d frames, not driven again", name, len(log))
+        return log
+    if before_stage is not None:
+        before_stage(name)
+    if hasattr(robot, "discard_buffered"):      # a serial robot: frames that waited unread
+        robot.discard_buffered()                # (a prompt, computing) would delay every command
+    log = drive(robot, cmd_m_s, progress=None if progress is None
+                else (lambda d, t: progress(name, d, t)))
+    if after_stage is not None:
+        after_stage(name, log)
+    return log
+
+
 def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None = None,
               floor: str | None = None,
               progress: Callable[[str, int, int], None] | None = None,
-              before_stage: Callable[[str], None] | None = None) -> Calibration:
+              before_stage: Callable[[str], None] | None = None,
+              after_stage: Callable[[str, FrameLog], None] | None = None,
+              recorded: Mapping[str, FrameLog] | None = None) -> Calibration:
     """Run the three manoeuvres on ``robot`` and fit the encoder scale, FIR and ARX models.
 
     Parameters
@@ -240,6 +350,13 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
         ``"steps"``, ``"excitation"``): the place to move the robot, e.g. from
         beside the furniture it turns next to out to open floor where the
         random excitation cannot hit anything. Wall contact corrupts the fit.
+    after_stage : callable, optional
+        ``after_stage(stage, log)`` as soon as a manoeuvre has been driven:
+        the place to save its log, so that a later failure loses nothing.
+    recorded : mapping of str to FrameLog, optional
+        Manoeuvres already driven (e.g. saved by ``after_stage`` in a run that
+        was stopped): used instead of driving them again, neither
+        ``before_stage`` nor ``after_stage`` is called for them.
 
     Returns
     -------
@@ -249,51 +366,36 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     ------
     lti_motion.exceptions.CalibrationError
         If a manoeuvre's data cannot give a model (no periodic signal, not
-        excited, unstable fit); the message says which and what to do.
+        excited, unstable fit), or a recorded log does not have the plan's
+        length; the message says which and what to do.
     """
     plan = plan or CalibrationPlan()
     dt = robot.dt_s
+    commands, steps, n_rest = _stage_commands(plan, wheel_base_m=wheel_base_m, dt_s=dt)
+    hooks = {"recorded": recorded or {}, "progress": progress, "before_stage": before_stage,
+             "after_stage": after_stage}
 
-    def stage(name: str) -> Callable[[int, int], None] | None:
-        return None if progress is None else (lambda d, t: progress(name, d, t))
-
-    rest = np.zeros((round(1.0 / dt), 2))
-    rot_cmd = np.concatenate([rest, rotation_in_place(
-        turns=plan.rotation_turns, wheel_speed_m_s=plan.rotation_speed_m_s,
-        wheel_base_m=wheel_base_m, dt_s=dt), rest])
-    if before_stage is not None:
-        before_stage("rotation")
-    rot_log = drive(robot, rot_cmd, progress=stage("rotation"))
+    rot_log = _recorded_or_driven(robot, "rotation", commands["rotation"], **hooks)
     ticks = unwrap_ticks(rot_log.ticks[rot_log.valid])
     rotation = rotation_period_ticks(rot_log.light_bump[rot_log.valid],
                                      ticks[:, 1] - ticks[:, 0])
     scale = encoder_scale_m_per_tick(rotation.period_ticks, wheel_base_m=wheel_base_m)
     _log.info("encoder scale %.6g m/tick from a period of %.1f ticks (confidence %.3f)",
-             scale, rotation.period_ticks, rotation.confidence)
+              scale, rotation.period_ticks, rotation.confidence)
 
-    steps = step_sequence(amplitude_m_s=plan.step_amplitude_m_s, hold_s=plan.step_hold_s,
-                          rest_s=plan.step_rest_s, dt_s=dt)
-    if before_stage is not None:
-        before_stage("steps")
-    step_log = drive(robot, np.concatenate([rest, steps.cmd_m_s]), progress=stage("steps"))
+    step_log = _recorded_or_driven(robot, "steps", commands["steps"], **hooks)
     u_s, y_s = speeds_from_log(step_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
-    lead = len(rest) - 1        # speeds_from_log drops the first frame
+    lead = n_rest - 1        # speeds_from_log drops the first frame
     u_s, y_s = u_s[lead:], y_s[lead:]
+    step_phases = phases_as_applied(steps, u_s, max_lag=n_rest)
 
-    rng = np.random.default_rng(plan.seed)
-    exc_cmd = random_held_normal(n=round(plan.excitation_s / dt), dt_s=dt, rng=rng,
-                                 std_m_s=plan.excitation_std_m_s,
-                                 mean_m_s=plan.excitation_mean_m_s, hold_s=plan.hold_s,
-                                 correlation=plan.excitation_correlation)
-    if before_stage is not None:
-        before_stage("excitation")
-    exc_log = drive(robot, np.concatenate([rest, exc_cmd, rest]), progress=stage("excitation"))
+    exc_log = _recorded_or_driven(robot, "excitation", commands["excitation"], **hooks)
     u_x, y_x = speeds_from_log(exc_log, m_per_tick=scale, wheel_base_m=wheel_base_m)
 
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
     arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
                   **common)
-    fir = fit_fir_from_steps(u_s, y_s, phases=steps, noise_runs=[(u_x, y_x)],
+    fir = fit_fir_from_steps(u_s, y_s, phases=step_phases, noise_runs=[(u_x, y_x)],
                              dc_gain=plan.fir_dc_gain, **common)
     return Calibration(m_per_tick=scale, rotation=rotation, fir=fir, arx=arx,
                        logs={"rotation": rot_log, "steps": step_log, "excitation": exc_log})

@@ -123,6 +123,27 @@ class LinkCounters:
 # ---------------------------------------------------------------------- the driver
 
 
+def _check_options(*, mode: str, clock: str, cmd_source: str, stall_periods: object,
+                   positive: dict[str, float], non_negative: dict[str, float]) -> None:
+    """Raise ValueError for a bad :class:`Roomba` option, naming it and its value."""
+    if mode not in ("safe", "full"):
+        raise ValueError(f"mode must be 'safe' or 'full', got {mode!r}")
+    if clock not in ("stream", "host"):
+        raise ValueError(f"clock must be 'stream' or 'host', got {clock!r}")
+    if cmd_source not in ("requested", "sent"):
+        raise ValueError(f"cmd_source must be 'requested' or 'sent', got {cmd_source!r}")
+    if isinstance(stall_periods, bool) or not (isinstance(stall_periods, int)
+                                               and stall_periods >= 1):
+        raise ValueError(f"stall_periods must be an int >= 1, got {stall_periods!r}")
+    for name, v in positive.items():
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a finite positive number, got {v!r}")
+    for name, v in non_negative.items():
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+
+
+
 class Roomba:
     """A Roomba 600 / Create 2 on a serial port, streaming sensor frames.
 
@@ -149,13 +170,21 @@ class Roomba:
         Wall time [s] allowed for the first valid frame after opening.
     stall_periods : int
         A read that sees no valid frame for this many stream periods (robot
-        time, i.e. ``stall_periods * 0.015 / clock_rate`` wall seconds) raises
+        time, i.e. ``stall_periods * 0.015 / clock_rate`` wall seconds), and
+        for at least ``stall_floor_s`` of wall time, raises
         :class:`StreamStalledError`.
+    stall_floor_s : float
+        Shortest stall window in wall time [s], >= 0 (default 0.3 s). A loaded
+        host, or a virtual Roomba sharing its cores, leaves gaps of tens of
+        milliseconds between frames; at a high ``clock_rate`` the window of
+        ``stall_periods`` alone shrinks to a few milliseconds (7.5 ms at 10x)
+        and such a gap would stop the drive. On a robot (``clock_rate=1``) the
+        window is ``max(0.075, 0.3)`` s by default.
     reconnect : bool
         On a stall, re-send the stream request once and wait up to
         ``reconnect_timeout_s`` (robot time) before raising.
     reconnect_timeout_s : float
-        See ``reconnect``.
+        See ``reconnect`` (robot time, and at least ``stall_floor_s`` of wall time).
     reassert_mode : bool
         On a fall to Passive, re-send Safe/Full once (logged as a warning and
         counted) instead of raising; raises if the mode is still wrong
@@ -217,6 +246,7 @@ class Roomba:
         write_timeout_s: float = 0.5,
         open_timeout_s: float = 1.0,
         stall_periods: int = 5,
+        stall_floor_s: float = 0.3,
         reconnect: bool = False,
         reconnect_timeout_s: float = 1.0,
         reassert_mode: bool = False,
@@ -231,42 +261,18 @@ class Roomba:
         ticks_per_rev: float = 508.8,
         wheel_base_m: float = 0.235,
     ) -> None:
-        if mode not in ("safe", "full"):
-            raise ValueError(f"mode must be 'safe' or 'full', got {mode!r}")
-        if clock not in ("stream", "host"):
-            raise ValueError(f"clock must be 'stream' or 'host', got {clock!r}")
-        if cmd_source not in ("requested", "sent"):
-            raise ValueError(f"cmd_source must be 'requested' or 'sent', got {cmd_source!r}")
-        if isinstance(stall_periods, bool) or not (isinstance(stall_periods, int)
-                                                   and stall_periods >= 1):
-            raise ValueError(f"stall_periods must be an int >= 1, got {stall_periods!r}")
-        for name, v in (("clock_rate", clock_rate), ("write_timeout_s", write_timeout_s),
-                        ("open_timeout_s", open_timeout_s),
-                        ("reconnect_timeout_s", reconnect_timeout_s),
-                        ("wheel_diameter_m", wheel_diameter_m), ("ticks_per_rev", ticks_per_rev),
-                        ("wheel_base_m", wheel_base_m)):
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite positive number, got {v!r}")
-        if not (math.isfinite(settle_s) and settle_s >= 0):
-            raise ValueError(f"settle_s must be finite and >= 0, got {settle_s!r}")
+        _check_options(mode=mode, clock=clock, cmd_source=cmd_source,
+                       stall_periods=stall_periods,
+                       positive={"clock_rate": clock_rate, "write_timeout_s": write_timeout_s,
+                                 "open_timeout_s": open_timeout_s,
+                                 "reconnect_timeout_s": reconnect_timeout_s,
+                                 "wheel_diameter_m": wheel_diameter_m,
+                                 "ticks_per_rev": ticks_per_rev, "wheel_base_m": wheel_base_m},
+                       non_negative={"settle_s": settle_s, "stall_floor_s": stall_floor_s})
         self.port = str(port)
         self.baud = int(baud)
         self.mode = mode
-        self.layout = PacketLayout.from_ids(stream_ids, what="Stream (148)")
-        self.layout.require_streamable()
-        check_stream_bandwidth(self.layout.ids, baud_bps=self.baud)
-        fields = self.layout.field_ids
-        for pid in (43, 44):
-            if pid not in fields:
-                raise ProtocolError(f"stream_ids {list(self.layout.ids)} lack encoder packet "
-                                    f"{pid}; the driver needs 43 and 44 (spec §7)")
-        self._i_ticks = (fields.index(43), fields.index(44))
-        self._i_light = (tuple(fields.index(p) for p in _LIGHT_IDS)
-                         if all(p in fields for p in _LIGHT_IDS) else None)
-        self._i_bumps = fields.index(7) if 7 in fields else None
-        self._i_mode = fields.index(35) if 35 in fields else None
-        self._i_req = ((fields.index(42), fields.index(41))
-                       if 41 in fields and 42 in fields and cmd_source == "requested" else None)
+        self._index_fields(stream_ids, cmd_source=cmd_source)
         self.dt_s = STREAM_PERIOD_S
         self.clock = clock
         self.clock_rate = float(clock_rate)
@@ -283,12 +289,40 @@ class Roomba:
         self.wheel_diameter_m = float(wheel_diameter_m)
         self.ticks_per_rev = float(ticks_per_rev)
         self.wheel_base_m = float(wheel_base_m)
-        self._stall_window_s = stall_periods * STREAM_PERIOD_S / self.clock_rate
+        self.stall_floor_s = float(stall_floor_s)
+        self._set_timeouts(read_timeout_s)
+        self._init_link_state()
+
+    def _index_fields(self, stream_ids: Sequence[int], *, cmd_source: str) -> None:
+        """The stream layout, and where the packets the driver reads sit in a frame."""
+        self.layout = PacketLayout.from_ids(stream_ids, what="Stream (148)")
+        self.layout.require_streamable()
+        check_stream_bandwidth(self.layout.ids, baud_bps=self.baud)
+        fields = self.layout.field_ids
+        for pid in (43, 44):
+            if pid not in fields:
+                raise ProtocolError(f"stream_ids {list(self.layout.ids)} lack encoder packet "
+                                    f"{pid}; the driver needs 43 and 44 (spec §7)")
+        self._i_ticks = (fields.index(43), fields.index(44))
+        self._i_light = (tuple(fields.index(p) for p in _LIGHT_IDS)
+                         if all(p in fields for p in _LIGHT_IDS) else None)
+        self._i_bumps = fields.index(7) if 7 in fields else None
+        self._i_mode = fields.index(35) if 35 in fields else None
+        self._i_req = ((fields.index(42), fields.index(41))
+                       if 41 in fields and 42 in fields and cmd_source == "requested" else None)
+
+    def _set_timeouts(self, read_timeout_s: float | None) -> None:
+        """The stall window [wall s] and the pyserial read timeout derived from it."""
+        self._stall_window_s = max(self.stall_periods * STREAM_PERIOD_S / self.clock_rate,
+                                   self.stall_floor_s)
         self.read_timeout_s = (min(0.05, max(5e-4, self._stall_window_s / 4))
                                if read_timeout_s is None else float(read_timeout_s))
         if not (math.isfinite(self.read_timeout_s) and self.read_timeout_s > 0):
             raise ValueError(f"read_timeout_s must be a finite positive number, "
                              f"got {read_timeout_s!r}")
+
+    def _init_link_state(self) -> None:
+        """A closed port, an empty parser, queue and stream clock, zero counters."""
         self._ser: serial.Serial | None = None
         self._parser = StreamParser(self.layout.ids)
         self._clock = StreamClock(clock_rate=self.clock_rate,
@@ -517,33 +551,58 @@ class Roomba:
         deadline = time.monotonic() + self._stall_window_s
         reconnected = False
         while not self._pending:
-            if time.monotonic() >= deadline:
+            if time.monotonic() >= deadline and not self._take_waiting(ser):
                 self._stalls += 1
                 if self.reconnect and not reconnected:
                     reconnected = True
                     _log.warning("Roomba on %s: no frame for %d periods; re-requesting the "
                                  "stream", self.port, self.stall_periods)
                     self._write(stream(self.layout.ids))
-                    deadline = time.monotonic() + self.reconnect_timeout_s / self.clock_rate
+                    deadline = time.monotonic() + max(self.reconnect_timeout_s / self.clock_rate,
+                                                      self.stall_floor_s)
                     continue
                 self._stop_wheels_quietly()
-                c = self.counters
-                raise StreamStalledError(
-                    f"no valid stream frame from {self.port} ({self.baud} baud) within "
-                    f"{self.stall_periods} periods ({self.stall_periods * STREAM_PERIOD_S:.3f} s "
-                    f"robot time{', after one re-request' if reconnected else ''}); "
-                    f"{c.frames} frames so far, {c.checksum_failures} checksum failures. The "
-                    "wheels were commanded to stop. Check the cable, that the robot is on and "
-                    "awake, and the baud rate (spec §1.3, G3, G15)")
-            chunk, host_s, fresh = self._receive(ser)
-            frames = self._parser.feed(chunk) if chunk else []
-            if frames:
-                ks = self._clock.assign(len(frames), host_s, fresh=fresh)
-                self._pending.extend((f, k, host_s) for f, k in zip(frames, ks, strict=True))
+                raise self._stall_error(reconnected=reconnected)
+            self._take(*self._receive(ser))
         sf, k, host_s = self._pending.popleft()
         frame = self._to_frame(sf, k, host_s)
         self._check_mode(frame)
         return frame
+
+    def discard_buffered(self) -> int:
+        """Drop the frames that waited while nobody read; the next frame is a fresh one.
+
+        The stream flows while the host waits at a prompt or computes; those
+        frames queue in the OS (and in a virtual Roomba's output) and
+        :meth:`read_frame` would return them first, so the next commands would
+        answer stale frames and act that many periods late. Reads until a read
+        has to wait for data (at most one stall window); the dropped frames
+        still advance the stream clock, so the next timestamps show the gap.
+
+        Returns
+        -------
+        int
+            Frames dropped.
+
+        Raises
+        ------
+        PortError
+            If the port is closed or fails.
+        """
+        ser = self._require_open()
+        dropped = len(self._pending)
+        self._pending.clear()
+        deadline = time.monotonic() + self._stall_window_s
+        while time.monotonic() < deadline:
+            chunk, host_s, fresh = self._receive(ser)
+            if fresh:                               # the backlog is read: keep what is new
+                self._take(chunk, host_s, fresh)
+                break
+            dropped += self._take(chunk, host_s, False)
+            self._pending.clear()
+        if dropped:
+            _log.info("Roomba on %s: dropped %d frames that waited unread", self.port, dropped)
+        return dropped
 
     def frames(self) -> Iterator[SensorFrame]:
         """Yield :meth:`read_frame` until an exception (or the caller) stops it."""
@@ -588,6 +647,37 @@ class Roomba:
         except (serial.SerialException, OSError) as exc:
             raise PortError(f"read from {self.port} failed: {exc}") from exc
         return chunk, time.monotonic(), fresh
+
+    def _take(self, chunk: bytes, host_s: float, fresh: bool) -> int:
+        """Parse a chunk and queue its frames with their stream periods; how many."""
+        frames = self._parser.feed(chunk) if chunk else []
+        if frames:
+            ks = self._clock.assign(len(frames), host_s, fresh=fresh)
+            self._pending.extend((f, k, host_s) for f, k in zip(frames, ks, strict=True))
+        return len(frames)
+
+    def _take_waiting(self, ser: serial.Serial) -> bool:
+        """At a deadline: queue what already waits in the OS buffer, without waiting.
+
+        A host descheduled past the deadline finds the frames that arrived
+        meanwhile here instead of calling it a stall.
+        """
+        try:
+            waiting = ser.in_waiting
+            chunk = ser.read(waiting) if waiting else b""
+        except (serial.SerialException, OSError) as exc:
+            raise PortError(f"read from {self.port} failed: {exc}") from exc
+        return self._take(chunk, time.monotonic(), False) > 0
+
+    def _stall_error(self, *, reconnected: bool) -> StreamStalledError:
+        c = self.counters
+        return StreamStalledError(
+            f"no valid stream frame from {self.port} ({self.baud} baud) for "
+            f"{self._stall_window_s:.3g} s of wall time (at least {self.stall_periods} "
+            f"periods{', after one re-request' if reconnected else ''}); "
+            f"{c.frames} frames so far, {c.checksum_failures} checksum failures. The "
+            "wheels were commanded to stop. Check the cable, that the robot is on and "
+            "awake, and the baud rate (spec §1.3, G3, G15)")
 
     def _await_first_frame(self, ser: serial.Serial) -> None:
         deadline = time.monotonic() + self.open_timeout_s

@@ -3,11 +3,12 @@ demo and the examples (application layer)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 from drivers.sim.config import FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration import Calibration, CalibrationPlan, calibrate
+from lti_motion.frames import FrameLog
 
 __all__ = ["calibrate_simulator", "print_progress", "summarize"]
 
@@ -22,7 +23,9 @@ def print_progress(stage: str, done: int, total: int) -> None:
 def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
                         floor: str | FloorMap | None = None,
                         plan: CalibrationPlan | None = None,
-                        progress: Callable[[str, int, int], None] | None = None) -> Calibration:
+                        progress: Callable[[str, int, int], None] | None = None,
+                        after_stage: Callable[[str, FrameLog], None] | None = None,
+                        recorded: Mapping[str, FrameLog] | None = None) -> Calibration:
     """Calibrate a simulated robot: rotate beside the furniture of the cluttered room, then
     carry it to open floor for the steps and the random excitation.
 
@@ -41,6 +44,9 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
         Manoeuvre sizes (default: :class:`CalibrationPlan` with ``seed``).
     progress : callable, optional
         ``progress(stage, done, total)``.
+    after_stage, recorded
+        As for :func:`lti_motion.calibration.calibrate`: save each manoeuvre's
+        log as it ends; use logs saved before instead of driving again.
     """
     params = load_robot(robot) if isinstance(robot, str) else robot
     floor = params.floor if floor is None else floor
@@ -53,17 +59,25 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
 
     return calibrate(sim, wheel_base_m=params.wheel_base_m,
                      plan=plan or CalibrationPlan(seed=seed), floor=floor_name(floor),
-                     progress=progress, before_stage=to_open_floor)
+                     progress=progress, before_stage=to_open_floor, after_stage=after_stage,
+                     recorded=recorded)
 
 
 def summarize(cal: Calibration) -> list[str]:
-    """Lines a person reads: encoder scale, ARX order, delay and fit, FIR length."""
-    sel = cal.arx.selection
+    """Lines a person reads: encoder scale, ARX order, delay, fit and DC gain, FIR length.
+
+    The fit is the held-out free-run fit stored in the model
+    (``diagnostics["validation_fit_v"]``, ``["validation_fit_w"]``: the model
+    as saved, its DC gain restricted to the wheel servos' when the plan says
+    so), not the selection grid's unrestricted candidate.
+    """
+    d = cal.arx.diagnostics
+    gain = f", DC gain scale {d['dc_gain_scale']:.3f}" if "dc_gain_scale" in d else ""
     return [
         f"encoder scale   {cal.m_per_tick * 1e3:.5f} mm/tick (rotation period "
         f"{cal.rotation.period_ticks:.1f} ticks, confidence {cal.rotation.confidence:.3f})",
         f"ARX             order {cal.arx.orders['na']}, input delay {cal.arx.orders['delay']} "
-        f"samples; held-out free-run fit v {sel.validation_fit_percent[0]:.1f}%, "
-        f"w {sel.validation_fit_percent[1]:.1f}%",
+        f"samples; held-out free-run fit v {d['validation_fit_v']:.1f}%, "
+        f"w {d['validation_fit_w']:.1f}%{gain}",
         f"FIR             {cal.fir.orders['n_taps']} taps",
     ]

@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from drivers.sim.config import FLOORS, RobotParams, load_robot
+from drivers.sim.config import FLOORS, load_robot
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
@@ -48,13 +49,12 @@ FLOOR_NAMES = tuple(FLOORS)
 ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
               "(.toml or .json, docs/robot_file.md)")
 FLOOR_HELP = "simulated floor (default: the robot's)"
-#: The wheel base [m] of a Create 2, calibrate's default without --wheel-base or --robot.
-CREATE2_WHEEL_BASE_M = 0.235
 
 
 def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
     from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
+    from lti_motion.app.calibrate_run import nominal_wheel_base_m
 
     described = load_robot(args.sim) if args.sim else None
     if args.m_per_tick is not None or args.wheel_radius is not None:
@@ -64,7 +64,7 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     else:
         source = "the robot description (none given)"
     robot = RobotDescription(
-        wheel_base_m=_wheel_base(args, described),
+        wheel_base_m=nominal_wheel_base_m(args, described),
         m_per_tick=args.m_per_tick if args.m_per_tick is not None
         else (described.m_per_tick if described else None),
         wheel_radius_m=args.wheel_radius if args.wheel_radius is not None
@@ -77,65 +77,12 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     return 0
 
 
-def _wheel_base(args: argparse.Namespace, described: RobotParams | None) -> float:
-    """``--wheel-base`` [m], else the robot description's, else the Create 2's 0.235 m."""
-    if args.wheel_base is not None:
-        return args.wheel_base
-    return described.wheel_base_m if described is not None else CREATE2_WHEEL_BASE_M
-
-
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     if args.log:
         return _cmd_calibrate_log(args)
-    if not (args.sim or args.port):
-        raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot) "
-                       "or --log FILE (a recorded drive)")
-    from drivers.sim.calibration import (
-        calibrate_simulator,
-        print_progress,
-        summarize,
-    )
-    from drivers.sim.config import floor_name
-    from lti_motion.app.plots import plot_calibration
-    from lti_motion.calibration import CalibrationPlan, calibrate
+    from lti_motion.app.calibrate_run import run_calibrate
 
-    plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
-    out = Path(args.out)
-    if args.sim and not args.port:
-        robot = load_robot(args.sim)
-        print(f"calibrating the simulated {robot.name} robot on "
-              f"{args.floor or floor_name(robot.floor)} floor (seed {args.seed})")
-        cal = calibrate_simulator(robot, seed=args.seed, floor=args.floor, plan=plan,
-                                  progress=print_progress)
-    else:
-        from drivers.roomba.driver import Roomba
-
-        def before_stage(stage: str) -> None:
-            where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
-                     "steps": "on open floor, 2 m clear all round",
-                     "excitation": "on open floor, 2 m clear all round"}[stage]
-            print(f"next: {stage}. Put the robot {where}.")
-            if not args.yes:
-                input("press Enter when it is there (Ctrl-C stops the robot) ")
-
-        print(f"calibrating the robot on {args.port} at {args.baud} baud")
-        with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
-            wheel_base_m = _wheel_base(args, load_robot(args.sim) if args.sim else None)
-            cal = calibrate(robot, wheel_base_m=wheel_base_m, plan=plan,
-                            floor=args.floor or "hard",
-                            progress=print_progress, before_stage=before_stage)
-    from lti_motion.logfile import save_log
-
-    out.mkdir(parents=True, exist_ok=True)
-    cal.arx.save(out / "model_arx.json")
-    cal.fir.save(out / "model_fir.json")
-    logs = [save_log(out / f"log_{stage}.npz", log) for stage, log in cal.logs.items()]
-    plots = plot_calibration(cal, out)
-    for line in summarize(cal):
-        print(line)
-    print(f"wrote {out / 'model_arx.json'}, {out / 'model_fir.json'}, "
-          f"{', '.join(p.name for p in plots)} and the drives {', '.join(p.name for p in logs)}")
-    return 0
+    return run_calibrate(args)
 
 
 def _load_model(path: str):
@@ -263,8 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
     cal = sub.add_parser(
         "calibrate", help="calibrate the encoder scale, FIR and ARX models by driving",
         description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
-                    "random excitation) on the simulator or a robot, fits the models, and "
-                    "writes model_arx.json, model_fir.json and plots.")
+                    "random excitation) on the simulator or a robot, keeps each drive as "
+                    "log_<manoeuvre>.npz as it ends (--resume goes on from them), fits the "
+                    "models, writes plots, and model_arx.json and model_fir.json when the "
+                    "model is healthy; or fits the ARX model offline from a recorded drive "
+                    "(--log). See docs/guide_calibrate_real_robot.md.")
     cal.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
                      help=f"calibrate {ROBOT_HELP}; with --port or --log, the robot's "
                           "description (wheel base; with --log also its encoder scale and "
@@ -295,6 +245,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--out", default="out/calibration", help="output folder")
     cal.add_argument("--yes", action="store_true",
                      help="do not wait for Enter between manoeuvres (robot already placed)")
+    cal.add_argument("--resume", action="store_true",
+                     help="use the drives an earlier, stopped run kept in --out "
+                          "(log_<manoeuvre>.npz) and drive only the rest")
+    cal.add_argument("--accept-unhealthy", action="store_true",
+                     help="save the model even if its held-out fit is below the healthy 85%% "
+                          "(docs/guide_calibrate_real_robot.md)")
     cal.set_defaults(func=_cmd_calibrate)
 
     rp = sub.add_parser(
@@ -386,12 +342,85 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Shortest random excitation a calibration accepts [s]: the ARX order and delay are chosen
+#: on its held-out last 30%, and the calibration-sequence plot shows its first 20 s.
+MIN_EXCITATION_S = 20.0
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Refuse options that make no sense, before anything runs (issue 15 item 13).
+
+    Raises
+    ------
+    ValueError
+        One line in the command's words, naming the option and its value.
+    """
+    def positive(option: str, value: float | None) -> None:
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{option} must be a positive number, got {value:g}")
+
+    excitation_s = getattr(args, "excitation_s", None)
+    if excitation_s is not None and not excitation_s >= MIN_EXCITATION_S:
+        raise ValueError(f"--excitation-s must be at least {MIN_EXCITATION_S:g} s (the model's "
+                         f"order is chosen on its last 30%), got {excitation_s:g}")
+    if args.command == "calibrate":
+        _check_calibrate_args(args, positive)
+    elif args.command == "monitor":
+        positive("--duration", args.duration)
+        positive("--clock-rate", args.clock_rate)
+        if args.fault_at is not None and args.fault is None:
+            raise ValueError("--fault-at is the onset of --fault; give --fault too")
+        if args.fault_at is not None and not 0 <= args.fault_at < args.duration:
+            raise ValueError(f"--fault-at {args.fault_at:g} s is outside the drive: give a "
+                             f"time from 0 to before --duration ({args.duration:g} s)")
+        if args.nominal_drives < 0:
+            raise ValueError(f"--nominal-drives must be 0 or more, got {args.nominal_drives}")
+        if args.record:
+            _check_record_path(Path(args.record))
+    elif args.command == "replay":
+        positive("--rpe-s", args.rpe_s)
+        positive("--duration-s", args.duration_s)
+        if not (math.isfinite(args.start_s) and args.start_s >= 0):
+            raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
+        if args.robot is not None and args.robot < 0:
+            raise ValueError(f"--robot must be 0 or more, got {args.robot}")
+    elif args.command == "demo" and args.runs < 1:
+        raise ValueError(f"--runs must be 1 or more, got {args.runs}")
+    elif args.command == "virtual-roomba":
+        positive("--speed", args.speed)
+        positive("--duration", args.duration)
+
+
+def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
+    """``calibrate``: one place to drive; --wheel-base only for a robot or a recording (the
+    simulator has its description's)."""
+    if not (args.sim or args.port or args.log):
+        raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot) "
+                         "or --log FILE (a recorded drive)")
+    described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
+    if described and not (args.port or args.log) and args.wheel_base is not None:
+        raise ValueError(f"--wheel-base is for --port and --log; the simulated {args.sim} has "
+                         f"its own ({described.wheel_base_m:g} m)")
+    positive("--wheel-base", args.wheel_base)
+    positive("--clock-rate", args.clock_rate)
+
+
+def _check_record_path(path: Path) -> None:
+    """``monitor --record``: a file name in a folder that can be written, before driving."""
+    from lti_motion.app.calibrate_run import check_writable_folder
+
+    if path.is_dir():
+        raise ValueError(f"--record {path} is a folder; give a file name, e.g. drive.npz")
+    check_writable_folder(path.parent, option="--record")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lti-motion`` console script."""
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
+        _check_args(args)
         return args.func(args)
     except MissingEncoderScaleError:
         print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)

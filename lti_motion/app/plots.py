@@ -70,7 +70,7 @@ def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> Non
     """Commands and encoder speeds of the random excitation (paper Fig. 7)."""
     log = cal.logs["excitation"]
     u, y = speeds_from_log(log, m_per_tick=cal.m_per_tick, wheel_base_m=cal.arx.wheel_base_m)
-    n = round(seconds / log.dt_s)
+    n = min(round(seconds / log.dt_s), len(u))           # a short excitation: all of it
     t = np.arange(n) * log.dt_s
     fig = Figure(figsize=(10, 6))
     axes = fig.subplots(3, 1, sharex=True)

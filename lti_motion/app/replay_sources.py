@@ -150,7 +150,7 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
     path : str or path-like
         The ``.npz`` log.
     robot : int, optional
-        Robot index of a batch log (default 0); ignored for a single robot.
+        Robot index of a batch log (default 0); only 0 (or None) for a single robot.
     start_s, duration_s : float
         The stretch to replay, from the first frame [s].
 
@@ -164,6 +164,9 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
     """
     log = load_log(path)
     name = Path(path).name
+    if log.n_robots is None and robot not in (None, 0):
+        raise ValueError(f"{name} holds one robot's drive; there is no robot {robot} (leave "
+                         "out --robot)")
     if log.n_robots is not None:
         i = 0 if robot is None else robot
         if not 0 <= i < log.n_robots:
