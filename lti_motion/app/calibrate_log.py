@@ -105,7 +105,7 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
                 or "none needed (body speeds)")
         lines.append(f"encoder scale: {what}, from {cal.scale_from}; NOT measured (no "
                      "rotation in place beside a wall in this recording: run 'lti-motion "
-                     "calibrate --sim/--port' to measure it)")
+                     "calibrate --robot/--port' to measure it)")
     m = cal.model
     lines.append(f"ARX model: order {m.orders['na']}, delay {m.orders['delay']}, period "
                  f"{m.dt_s * 1e3:.4f} ms; free-run fit on the held-out last 30%: "

@@ -124,12 +124,12 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     from lti_motion.app import monitor as live_monitor
 
     if args.fault and not args.sim:
-        raise ValueError("--fault injects a simulator fault; it needs --sim")
+        raise ValueError("--fault injects a simulator fault; it needs --robot (the simulator)")
     if args.listen and args.sim:
         raise ValueError("--listen reads a robot's stream; it needs --port")
     if args.nominal and args.sim:
         raise ValueError("--nominal reads logs of a robot's nominal drives; it needs --port "
-                         "(--sim drives --nominal-drives itself)")
+                         "(--robot drives --nominal-drives itself)")
     robot = load_robot(args.sim) if args.sim else None
     if args.model is not None:
         model = _load_model(args.model)
@@ -289,10 +289,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Drives a rounded-rectangle route with speed changes (the simulator or a "
                     "robot; --listen only reads a robot), runs the model's EKF on the encoders "
                     "with the residual monitor (gate and glitch bursts, stuck encoder, dynamics "
-                    "tests after a Phase-I fit on nominal drives, and on --sim the landmark "
+                    "tests after a Phase-I fit on nominal drives, and on the simulator the "
+                    "landmark "
                     "scale test), and prints each alarm as it is raised (time, "
                     "kind, test, statistic > threshold, onset) and a summary. Without --model, "
-                    "--sim calibrates the simulated robot first; --port needs --model. See "
+                    "--robot calibrates the simulated robot first; --port needs --model. See "
                     "docs/guide_alarms.md.")
     mwhere = mo.add_mutually_exclusive_group(required=True)
     mwhere.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
@@ -303,9 +304,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="robot seconds to drive or listen (default 30)")
     mo.add_argument("--fault", choices=["stuck-encoder", "spikes", "payload", "motor", "delay",
                                         "carpet"],
-                    help="--sim only: inject this simulator fault")
+                    help="--robot only: inject this simulator fault")
     mo.add_argument("--nominal-drives", type=int, default=20,
-                    help="--sim: nominal drives of the same length first, for the dynamics "
+                    help="--robot: nominal drives of the same length first, for the dynamics "
                          "null and the encoder gate (default 20; 0: dynamics tests off)")
     mo.add_argument("--nominal", nargs="+", metavar="LOG.npz",
                     help="--port: logs of nominal drives (--record) for the dynamics null and "
@@ -315,7 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")
     mo.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
     mo.add_argument("--excitation-s", type=float, default=60.0,
-                    help="--sim without --model: calibration excitation [s] (default 60)")
+                    help="--robot without --model: calibration excitation [s] (default 60)")
     mo.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     mo.add_argument("--clock-rate", type=float, default=1.0,
                     help="robot seconds per wall second (the --speed of a virtual Roomba)")
@@ -437,8 +438,8 @@ def _no_encoder_scale(args: argparse.Namespace) -> str:
     if args.command == "demo":
         return ("the demo's calibration of the simulated robot measured no encoder scale, "
                 "which turns encoder counts into distances (its rotation in place found no "
-                "period); run it again with another --seed or --preset, or look at the "
-                "rotation's plots from 'lti-motion calibrate --sim PRESET'")
+                "period); run it again with another --seed or --robot, or look at the "
+                "rotation's plots from 'lti-motion calibrate --robot NAME_OR_FILE'")
     model = getattr(args, "model", None)
     what = f"the model {model}" if model else "the model"
     port = getattr(args, "port", None)
@@ -448,7 +449,7 @@ def _no_encoder_scale(args: argparse.Namespace) -> str:
         tail = ("; or replay only the estimators that need no encoder counts: "
                 "--estimators commands sensorless")
     elif getattr(args, "sim", None):
-        tail = "; or leave out --model: --sim then calibrates the simulated robot first"
+        tail = "; or leave out --model: --robot then calibrates the simulated robot first"
     return (f"{what} has no encoder scale, which turns encoder counts into distances; "
             f"calibrate the robot with {calibrate} (its rotation in place measures "
             f"the scale) and give the model_arx.json it writes with --model{tail}")

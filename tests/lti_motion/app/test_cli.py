@@ -231,7 +231,7 @@ def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path
      "needs landmark sightings"),
     (["monitor", "--port", "/dev/nope"], "needs --model FILE"),
     (["monitor", "--port", "/dev/does-not-exist", "--model", "{model}"], "/dev/does-not-exist"),
-    (["monitor", "--port", "/dev/nope", "--fault", "spikes"], "needs --sim"),
+    (["monitor", "--port", "/dev/nope", "--fault", "spikes"], "needs --robot (the simulator)"),
     (["monitor", "--sim", "create2", "--nominal", "{log}"], "needs --port"),
 ])
 def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model_file, tmp_path,
@@ -303,7 +303,7 @@ def test_the_demo_says_what_its_user_can_do_about_a_missing_scale(monkeypatch, t
     assert main(["demo", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("lti-motion demo: error: the demo's ")
-    assert "--seed" in err and "'lti-motion calibrate --sim PRESET'" in err
+    assert "--seed" in err and "'lti-motion calibrate --robot NAME_OR_FILE'" in err
     for internal in ("Error", "m_per_tick", "lti_motion.", "--model"):
         assert internal not in err, internal
 
