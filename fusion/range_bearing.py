@@ -89,7 +89,7 @@ def _pose_array(pose: np.ndarray) -> np.ndarray:
 
 
 def range_bearing_terms(pose: np.ndarray, landmark_xy: np.ndarray, *,
-                        sensor: SensorPose | None = None
+                        sensor: SensorPose | np.ndarray | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The measurement model and both its Jacobians, batched: the package's one copy.
 
@@ -101,8 +101,10 @@ def range_bearing_terms(pose: np.ndarray, landmark_xy: np.ndarray, *,
         comes first).
     landmark_xy : array_like, shape (..., 2)
         Landmark positions [m], broadcast against the poses.
-    sensor : SensorPose, optional
-        The sensor's mount on the robot (default centred).
+    sensor : SensorPose or array_like of shape (..., 3), optional
+        The sensor's mount on the robot (default centred); an array holds
+        one ``(x_m, y_m, yaw_rad)`` per row, broadcast against the poses (a
+        batch of robots with different sensors).
 
     Returns
     -------
@@ -125,21 +127,39 @@ def range_bearing_terms(pose: np.ndarray, landmark_xy: np.ndarray, *,
     """
     p = _pose_array(pose)
     lxy = np.asarray(landmark_xy, dtype=float)
-    s = as_sensor_pose(sensor)
+    sx, sy, syaw = _mount_columns(sensor)
     theta = p[..., 2]
     c, sn = np.cos(theta), np.sin(theta)
-    ox, oy = c * s.x_m - sn * s.y_m, sn * s.x_m + c * s.y_m      # R(theta) (s_x, s_y)
+    ox, oy = c * sx - sn * sy, sn * sx + c * sy                  # R(theta) (s_x, s_y)
     dx = lxy[..., 0] - p[..., 0] - ox
     dy = lxy[..., 1] - p[..., 1] - oy
     q = np.maximum(dx * dx + dy * dy, MIN_RANGE_M * MIN_RANGE_M)
     r = np.sqrt(q)
-    z = np.stack([r, wrap_angle(np.arctan2(dy, dx) - theta - s.yaw_rad)], axis=-1)   # eq. 1
+    z = np.stack([r, wrap_angle(np.arctan2(dy, dx) - theta - syaw)], axis=-1)        # eq. 1
     H_pose = np.stack([np.stack([-dx / r, -dy / r, (dx * oy - dy * ox) / r], axis=-1),
                        np.stack([dy / q, -dx / q, -(dx * ox + dy * oy) / q - 1.0], axis=-1)],
                       axis=-2)                                                       # eq. 2
     H_landmark = np.stack([np.stack([dx / r, dy / r], axis=-1),
                            np.stack([-dy / q, dx / q], axis=-1)], axis=-2)           # eq. 3
     return z, H_pose, H_landmark
+
+
+def _mount_columns(sensor: SensorPose | np.ndarray | None
+                   ) -> tuple[float | np.ndarray, float | np.ndarray, float | np.ndarray]:
+    """``(s_x, s_y, s_psi)`` of one mount (floats) or of one mount per row (arrays)."""
+    if sensor is None or isinstance(sensor, SensorPose):
+        s = as_sensor_pose(sensor)
+        return s.x_m, s.y_m, s.yaw_rad
+    arr = np.asarray(sensor, dtype=float)
+    if arr.ndim < 2:
+        s = as_sensor_pose(arr)
+        return s.x_m, s.y_m, s.yaw_rad
+    if arr.shape[-1] != 3:
+        raise MeasurementShapeError(f"expected sensor mounts of shape (..., 3) (x_m, y_m, "
+                                    f"yaw_rad), got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise NonFiniteInputError("sensor mounts must be finite")
+    return arr[..., 0], arr[..., 1], arr[..., 2]
 
 
 def range_bearing(pose: np.ndarray, landmark_xy: np.ndarray, *,
