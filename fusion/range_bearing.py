@@ -51,8 +51,11 @@ table 6.4, eq. 6.40, sec. 6.6.1 and table 7.2.
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterator, Sequence
+import math
+from collections.abc import Callable, Hashable, Iterator, Sequence
 from dataclasses import dataclass
+from types import ModuleType
+from typing import NamedTuple
 
 import numpy as np
 
@@ -78,6 +81,7 @@ __all__ = [
 
 #: Below this predicted range [m] the bearing is undefined (robot on the landmark).
 MIN_RANGE_M = 1e-6
+_MIN_Q = MIN_RANGE_M * MIN_RANGE_M
 
 
 def _pose_array(pose: np.ndarray) -> np.ndarray:
@@ -128,20 +132,52 @@ def range_bearing_terms(pose: np.ndarray, landmark_xy: np.ndarray, *,
     p = _pose_array(pose)
     lxy = np.asarray(landmark_xy, dtype=float)
     sx, sy, syaw = _mount_columns(sensor)
-    theta = p[..., 2]
-    c, sn = np.cos(theta), np.sin(theta)
+    if p.ndim == 1 and lxy.shape == (2,) and isinstance(sx, float):     # one sighting
+        px, py, theta = p[:3].tolist()
+        lx, ly = lxy.tolist()
+        r, b, h, g = _terms(px, py, theta, lx, ly, sx, sy, syaw, math)
+        return (np.array([r, _wrap(b)]), np.array(h).reshape(2, 3), np.array(g).reshape(2, 2))
+    r, b, h, g = _terms(p[..., 0], p[..., 1], p[..., 2], lxy[..., 0], lxy[..., 1], sx, sy, syaw,
+                        _NUMPY)
+    return (np.stack([r, wrap_angle(b)], axis=-1),
+            np.stack(np.broadcast_arrays(*h), axis=-1).reshape((*np.shape(r), 2, 3)),
+            np.stack(np.broadcast_arrays(*g), axis=-1).reshape((*np.shape(r), 2, 2)))
+
+
+class _Functions(NamedTuple):
+    cos: Callable
+    sin: Callable
+    sqrt: Callable
+    atan2: Callable
+
+
+_NUMPY = _Functions(np.cos, np.sin, np.sqrt, np.arctan2)
+
+
+_FA = float | np.ndarray     # a float, or an array of them (broadcast)
+
+
+def _terms(px: _FA, py: _FA, theta: _FA, lx: _FA, ly: _FA, sx: _FA, sy: _FA, syaw: _FA,
+           f: _Functions | ModuleType) -> tuple[_FA, _FA, tuple[_FA, ...], tuple[_FA, ...]]:
+    """Eq. 1-3 once, on floats (``f = math``) or arrays (``f = _NUMPY``): the range, the
+    unwrapped bearing, the six pose-Jacobian entries and the four landmark ones, row-major."""
+    c, sn = f.cos(theta), f.sin(theta)
     ox, oy = c * sx - sn * sy, sn * sx + c * sy                  # R(theta) (s_x, s_y)
-    dx = lxy[..., 0] - p[..., 0] - ox
-    dy = lxy[..., 1] - p[..., 1] - oy
-    q = np.maximum(dx * dx + dy * dy, MIN_RANGE_M * MIN_RANGE_M)
-    r = np.sqrt(q)
-    z = np.stack([r, wrap_angle(np.arctan2(dy, dx) - theta - syaw)], axis=-1)        # eq. 1
-    H_pose = np.stack([np.stack([-dx / r, -dy / r, (dx * oy - dy * ox) / r], axis=-1),
-                       np.stack([dy / q, -dx / q, -(dx * ox + dy * oy) / q - 1.0], axis=-1)],
-                      axis=-2)                                                       # eq. 2
-    H_landmark = np.stack([np.stack([dx / r, dy / r], axis=-1),
-                           np.stack([-dy / q, dx / q], axis=-1)], axis=-2)           # eq. 3
-    return z, H_pose, H_landmark
+    dx, dy = lx - px - ox, ly - py - oy
+    q = dx * dx + dy * dy
+    q = q + (q < _MIN_Q) * (_MIN_Q - q)                          # floored at MIN_RANGE_M^2
+    r = f.sqrt(q)
+    b = f.atan2(dy, dx) - theta - syaw                                               # eq. 1
+    h = (-dx / r, -dy / r, (dx * oy - dy * ox) / r,
+         dy / q, -dx / q, -(dx * ox + dy * oy) / q - 1.0)                            # eq. 2
+    g = (dx / r, dy / r, -dy / q, dx / q)                                            # eq. 3
+    return r, b, h, g
+
+
+def _wrap(a_rad: float) -> float:
+    """Scalar :func:`lti_motion.kinematics.wrap_angle`: into ``(-pi, pi]``."""
+    out = math.pi - (math.pi - a_rad) % (2.0 * math.pi)
+    return out + 2.0 * math.pi if out <= -math.pi else out
 
 
 def _mount_columns(sensor: SensorPose | np.ndarray | None
@@ -221,17 +257,13 @@ def range_bearing_jacobian(pose: np.ndarray, landmark_xy: np.ndarray, *,
     >>> (range_bearing_jacobian(np.zeros(3), np.array([2.0, 0.0])).round(12) + 0.0).tolist()
     [[-1.0, 0.0, 0.0], [0.0, -0.5, -1.0]]
     """
-    p = _pose_array(pose)
-    lxy = np.asarray(landmark_xy, dtype=float)
-    s = as_sensor_pose(sensor)
-    sensor_xy, lxy = np.broadcast_arrays(s.world_xy(p), lxy)
-    near = np.hypot(*np.moveaxis(lxy - sensor_xy, -1, 0)) < MIN_RANGE_M
-    if np.any(near):
-        at = sensor_xy[near] if near.ndim else sensor_xy[None]
+    z, h_pose, _ = range_bearing_terms(pose, landmark_xy, sensor=sensor)
+    if np.any(z[..., 0] <= MIN_RANGE_M):                         # floored: on the landmark
+        at = np.broadcast_to(landmark_xy, z.shape)[z[..., 0] <= MIN_RANGE_M].reshape(-1, 2)[0]
         raise LandmarkGeometryError(
-            f"the sensor at ({at[0, 0]:.6g}, {at[0, 1]:.6g}) stands on a landmark; the "
-            f"bearing is undefined there")
-    return range_bearing_terms(p, lxy, sensor=s)[1]
+            f"the sensor stands on a landmark (at ({at[0]:.6g}, {at[1]:.6g})); the bearing "
+            f"is undefined there")
+    return h_pose
 
 
 def range_bearing_residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -41,9 +41,8 @@ import numpy as np
 
 from fusion.ekf.functions import (
     joseph_covariance,
-    landmark_jacobian,
-    landmark_measurement,
     landmark_residual,
+    landmark_terms,
 )
 from fusion.exceptions import (
     CovarianceNotPositiveDefiniteError,
@@ -264,10 +263,9 @@ class GatedUpdates:
         if not (math.isfinite(zmeas[0]) and math.isfinite(zmeas[1])):
             return self._skip("landmark", t, "non_finite", 2, landmark_id)
         lxy = self.landmarks.position(landmark_id)
-        predicted = landmark_measurement(self.x, lxy, sensor=sensor)
+        predicted, H = landmark_terms(self.x, lxy, sensor=sensor)
         if predicted[0] <= MIN_RANGE_M:                  # floored: the sensor on the landmark
             return self._skip("landmark", t, "degenerate", 2, landmark_id)
-        H = landmark_jacobian(self.x, lxy, sensor=sensor)
         R = self.landmark_noise.cov(predicted[0]) if cov is None else cov
         return self._gated("landmark", t, zmeas, landmark_residual(zmeas, predicted), H, R,
                            landmark_id)
