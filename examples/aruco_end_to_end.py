@@ -4,10 +4,11 @@
 2. Drive the EKF example's rounded square in a 5 m x 5 m room (:meth:`Room.box`) whose
    walls carry twelve 15 cm ArUco markers (``DICT_4X4_50``) at camera height, facing in.
 3. At 5 Hz (every 13th or 14th 15 ms frame) render the camera image from the robot's
-   *true* pose (:class:`fusion.landmarks.SyntheticCamera`, 640 x 480, fx 500 px: the
-   physical world) and detect the markers in it (:class:`fusion.landmarks.MarkerDetector`):
-   range, bearing and a per-detection covariance, as rows of a
-   :class:`fusion.range_bearing.RangeBearing` whose ``index`` is the image's frame. Ids not
+   *true* pose (:class:`fusion.landmarks.SyntheticCamera`, 640 x 480, fx 500 px, 0.1 m
+   ahead of the axle: the physical world) and detect the markers in it
+   (:class:`fusion.landmarks.MarkerDetector`): range and bearing from the camera and a
+   per-detection covariance, as rows of a :class:`fusion.range_bearing.RangeBearing` whose
+   ``index`` is the image's frame and whose ``sensor_pose`` is the camera's mount. Ids not
    in the map are dropped.
 4. Fuse the same detections, with the commands and encoder counts, in
    :class:`fusion.ekf.ModelEKF` (causal) and :class:`fusion.graph.IncrementalSmoother`
@@ -19,13 +20,10 @@ Run::
     python examples/aruco_end_to_end.py --out out/aruco_end_to_end [--duration-s 300]
         [--seed 0] [--short]
 
-Measurement noise: each detection's covariance ``C`` (``fusion.landmarks.aruco``, eq. 2-3) enters
-both estimators as its diagonal, ``sigma_r = sqrt(C[0, 0])`` and ``sigma_b = sqrt(C[1, 1])``
-(:func:`diagonal`), as the figures of ``docs/aruco_end_to_end.md`` were measured. The
-range-bearing correlation dropped that way is not negligible (median |rho| about 0.5,
-printed); ``run_ekf(full_covariance=True)`` keeps it (the EKF and the graph both take a full
-2 x 2 covariance per row; using it by default belongs with the measurement model's own
-issue).
+Measurement noise: each detection's full 2 x 2 covariance ``C`` (``fusion.landmarks.aruco``,
+eq. 2-3, range-bearing correlation included; median |rho| printed) enters both estimators;
+``full_covariance=False`` gives them its diagonal instead (:func:`diagonal`). Both predict
+the detections from the camera's mount on the robot (``RangeBearing.sensor_pose``).
 
 Neither estimator reads the simulator's truth: they start from the known start pose
 :data:`START_POSE` and see only commands, encoder counts and detections. The path
@@ -135,10 +133,13 @@ def wall_markers(*, per_wall: int = 3, room_m: float = ROOM_M, size_m: float = 0
     return MarkerMap(markers, marker_size_m=size_m, dictionary="DICT_4X4_50")
 
 
-def make_camera(*, fx_px: float = 500.0) -> SyntheticCamera:
-    """640 x 480 pinhole camera, 10 cm ahead of the robot centre at 20 cm, looking ahead."""
+def make_camera(*, fx_px: float = 500.0, ahead_m: float = 0.1) -> SyntheticCamera:
+    """640 x 480 pinhole camera ``ahead_m`` ahead of the robot centre at 20 cm, looking ahead.
+
+    Its detections carry the mount (``RangeBearing.sensor_pose``), which both estimators use.
+    """
     return SyntheticCamera(CameraIntrinsics.pinhole(fx_px=fx_px, width_px=640, height_px=480),
-                           mount=CameraMount(x_m=0.1, z_m=CAMERA_HEIGHT_M))
+                           mount=CameraMount(x_m=ahead_m, z_m=CAMERA_HEIGHT_M))
 
 
 def camera_frames(n_frames: int, dt_s: float, *, rate_hz: float = CAMERA_RATE_HZ) -> np.ndarray:
@@ -217,11 +218,11 @@ class EkfRun:
 def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_map: MarkerMap,
             *, initial_pose: Sequence[float] = START_POSE,
             pose_std: tuple[float, float, float] = (0.005, 0.005, 0.005),
-            full_covariance: bool = False) -> EkfRun:
+            full_covariance: bool = True) -> EkfRun:
     """:class:`ModelEKF` over one robot's frames and its detections (no truth read).
 
     ``full_covariance``: fuse each detection with its full covariance (range-bearing
-    correlation kept) instead of its diagonal (the default, as the smoother gets it).
+    correlation kept; the default), else with its diagonal.
     """
     ekf = ModelEKF(model, initial_pose=initial_pose, pose_std=pose_std,
                    initial_ticks=log.ticks[0], landmarks=marker_map.to_landmark_map(), history=0)
@@ -250,16 +251,18 @@ class SmootherRun:
 def run_smoother(model: MotionModel, log: FrameLog, detections: Detections,
                  marker_map: MarkerMap, *, initial_pose: Sequence[float] = START_POSE,
                  keyframe_every: int = KEYFRAME_EVERY, mode: str = "filtered",
-                 options: SmootherOptions = SMOOTHER_OPTIONS) -> SmootherRun:
+                 options: SmootherOptions = SMOOTHER_OPTIONS, full_covariance: bool = True
+                 ) -> SmootherRun:
     """iSAM2 over keyframes (every image, plus every ``keyframe_every`` frames).
 
-    Each detection is a range-bearing factor with its covariance's diagonal (:func:`diagonal`).
+    Each detection is a range-bearing factor with its full covariance (with
+    ``full_covariance=False`` its diagonal, :func:`diagonal`).
     """
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     kf = log_keyframes(len(u), every=keyframe_every, extra=detections.frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y)
     landmarks = marker_map.to_landmark_map()
-    sightings = diagonal(detections.sightings)
+    sightings = detections.sightings if full_covariance else diagonal(detections.sightings)
     at = sightings.with_index(np.searchsorted(kf, sightings.index)).by_index()
     sm = IncrementalSmoother(initial_pose=np.asarray(initial_pose, float), landmarks=landmarks,
                              options=options)
@@ -375,9 +378,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"{per.mean():.2f} detections per image ({np.mean(per == 0):.0%} with none), "
               f"misread ids {list(run.detections.unknown_ids)}, |range-bearing correlation| "
               f"median {np.median(np.abs(rho)) if rho.size else float('nan'):.2f}")
-        print(f"  position RMS: EKF {100 * run.ekf_rms_m:.2f} cm (all frames), "
-              f"{100 * run.ekf_rms_keyframes_m:.2f} cm (keyframes); smoother "
-              f"{100 * run.smoother_rms_m:.2f} cm (keyframes); EKF fused "
+        print(f"  position RMS: EKF {1000 * run.ekf_rms_m:.3f} mm (all frames), "
+              f"{1000 * run.ekf_rms_keyframes_m:.3f} mm (keyframes); smoother "
+              f"{1000 * run.smoother_rms_m:.3f} mm (keyframes); EKF fused "
               f"{run.ekf.fused}, gated {run.ekf.gated}")
         print("  seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in run.seconds.items())
               + f" ({1000 * run.detections.seconds_per_image:.1f} ms per image)")

@@ -2,7 +2,8 @@
 
 The base (this package's modules) holds what every wing shares: the noise types
 (:mod:`fusion.noise`), the landmark map (:mod:`fusion.landmark_map`), the
-range-bearing measurement model and observation type (:mod:`fusion.range_bearing`)
+range-bearing measurement model and observation type (:mod:`fusion.range_bearing`), the
+sensor's mount on the robot (:mod:`fusion.sensor_pose`)
 and the exceptions (:mod:`fusion.exceptions`). The wings, each a subpackage whose
 ``__init__`` re-exports its public names:
 
@@ -20,6 +21,7 @@ from fusion.exceptions import FusionError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing
+from fusion.sensor_pose import SensorPose
 
 __all__ = [
     "FusionError",
@@ -27,5 +29,6 @@ __all__ = [
     "LandmarkNoise",
     "RangeBearing",
     "ScaleErrors",
+    "SensorPose",
     "SlipNoise",
 ]

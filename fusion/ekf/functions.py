@@ -146,7 +146,13 @@ import numpy as np
 
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
 from fusion.noise import ScaleErrors, SlipNoise
-from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
+from fusion.range_bearing import (
+    range_bearing,
+    range_bearing_jacobian,
+    range_bearing_residual,
+    range_bearing_terms,
+)
+from fusion.sensor_pose import SensorPose
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import body_from_wheel, sinc_and_derivative, wrap_angle
 from lti_motion.model import MotionModel
@@ -167,6 +173,7 @@ __all__ = [
     "landmark_jacobian",
     "landmark_measurement",
     "landmark_residual",
+    "landmark_terms",
     "pose_jacobian",
     "pose_measurement",
     "pose_residual",
@@ -577,22 +584,49 @@ def span_verdict(span_ticks: np.ndarray, predicted_ticks: np.ndarray, frame_jump
     return "consistent"
 
 
-def landmark_measurement(x: np.ndarray, landmark_xy: np.ndarray) -> np.ndarray:
-    """Predicted ``(range [m], bearing [rad])`` of a landmark from the state's pose, (2,)."""
-    return range_bearing(x, landmark_xy)
+def landmark_measurement(x: np.ndarray, landmark_xy: np.ndarray, *,
+                         sensor: SensorPose | None = None) -> np.ndarray:
+    """Predicted ``(range [m], bearing [rad])`` of a landmark from the state's pose, (2,).
+
+    ``sensor`` is the sensor's mount on the robot (default centred);
+    :func:`fusion.range_bearing.range_bearing`, eq. 1.
+    """
+    return range_bearing(x, landmark_xy, sensor=sensor)
 
 
-def landmark_jacobian(x: np.ndarray, landmark_xy: np.ndarray) -> np.ndarray:
+def landmark_jacobian(x: np.ndarray, landmark_xy: np.ndarray, *,
+                      sensor: SensorPose | None = None) -> np.ndarray:
     """Jacobian of :func:`landmark_measurement`, shape (2, n): the pose columns, zeros elsewhere.
+
+    The pose columns are :func:`fusion.range_bearing.range_bearing_jacobian`
+    (eq. 2 there) for the sensor's mount ``sensor`` (default centred).
 
     Raises
     ------
     LandmarkGeometryError
-        If the robot stands on the landmark.
+        If the sensor stands on the landmark.
     """
     out = np.zeros((2, len(x)))
-    out[:, :3] = range_bearing_jacobian(x, landmark_xy)
+    out[:, :3] = range_bearing_jacobian(x, landmark_xy, sensor=sensor)
     return out
+
+
+def landmark_terms(x: np.ndarray, landmark_xy: np.ndarray, *,
+                   sensor: SensorPose | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`landmark_measurement` and :func:`landmark_jacobian` in one evaluation.
+
+    Returns
+    -------
+    z : ndarray, shape (2,)
+        ``(range [m], bearing [rad])``, the range floored at
+        :data:`fusion.range_bearing.MIN_RANGE_M` (the caller skips such a sighting).
+    H : ndarray, shape (2, n)
+        The pose columns of :func:`fusion.range_bearing.range_bearing_terms`, zeros elsewhere.
+    """
+    z, h_pose, _ = range_bearing_terms(x, landmark_xy, sensor=sensor)
+    out = np.zeros((2, len(x)))
+    out[:, :3] = h_pose
+    return z, out
 
 
 #: ``a - b`` of range-bearing vectors with the bearing wrapped (filterpy's ``residual``).

@@ -13,7 +13,9 @@ robot on the landmark) are records too (:meth:`GatedUpdates._skip`).
 Landmarks: :meth:`GatedUpdates.update_landmark` looks the id up in the
 filter's :class:`~fusion.landmark_map.LandmarkMap` and fuses ``(r, b)`` with
 the measurement model of :mod:`fusion.range_bearing` on the state's pose (its
-first three entries), with the sighting's own covariance or the filter's
+first three entries) and the sensor's mount on the robot
+(:class:`fusion.sensor_pose.SensorPose`, default centred), with the
+sighting's own full 2 x 2 covariance or the filter's
 :class:`~fusion.noise.LandmarkNoise` at the predicted range;
 :meth:`GatedUpdates.update_landmarks` fuses every row of a
 :class:`~fusion.range_bearing.RangeBearing` (one frame's sightings).
@@ -30,7 +32,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter, deque
-from collections.abc import Hashable, Mapping
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Literal
@@ -39,9 +41,8 @@ import numpy as np
 
 from fusion.ekf.functions import (
     joseph_covariance,
-    landmark_jacobian,
-    landmark_measurement,
     landmark_residual,
+    landmark_terms,
 )
 from fusion.exceptions import (
     CovarianceNotPositiveDefiniteError,
@@ -52,6 +53,7 @@ from fusion.exceptions import (
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, gate_threshold, inverse_covariance, nis
 from fusion.range_bearing import MIN_RANGE_M, RangeBearing
+from fusion.sensor_pose import SensorPose, as_sensor_pose
 
 __all__ = ["FilterStats", "GatedUpdates", "UpdateKind", "UpdateReason", "UpdateRecord"]
 
@@ -201,7 +203,8 @@ class GatedUpdates:
 
     # -- landmarks -------------------------------------------------------------------------------
     def update_landmark(self, landmark_id: Hashable, range_bearing: np.ndarray, *,
-                        cov: np.ndarray | None = None, t_s: float | None = None
+                        cov: np.ndarray | None = None, t_s: float | None = None,
+                        sensor_pose: SensorPose | Sequence[float] | None = None
                         ) -> UpdateRecord:
         """Fuse a range-bearing sighting of a landmark at a known position.
 
@@ -210,13 +213,18 @@ class GatedUpdates:
         landmark_id : hashable
             Id in the filter's :class:`~fusion.landmark_map.LandmarkMap`.
         range_bearing : array_like, shape (2,)
-            ``(r [m], b [rad])`` in the robot frame; the bearing residual is
-            wrapped to ``(-pi, pi]``. NaN or inf: skipped and counted.
+            ``(r [m], b [rad])`` from the sensor, in its frame; the bearing
+            residual is wrapped to ``(-pi, pi]``. NaN or inf: skipped and counted.
         cov : array_like, shape (2, 2), optional
-            Covariance of ``(r [m], b [rad])``, symmetric positive definite;
-            default the filter's :attr:`landmark_noise` at the predicted range.
+            Covariance of ``(r [m], b [rad])``, symmetric positive definite,
+            correlation included; default the filter's :attr:`landmark_noise`
+            at the predicted range.
         t_s : float, optional
             Time for the record (default the filter time).
+        sensor_pose : SensorPose or (x_m, y_m, yaw_rad), optional
+            The sensor's mount on the robot (default the axle centre, facing
+            the heading): the measurement model and its Jacobian are those of
+            :func:`fusion.range_bearing.range_bearing_terms` for this mount.
 
         Returns
         -------
@@ -227,9 +235,12 @@ class GatedUpdates:
         Raises
         ------
         MeasurementShapeError
-            If the sighting is not (2,) or ``cov`` not (2, 2).
+            If the sighting is not (2,), ``cov`` not (2, 2) or ``sensor_pose``
+            not three numbers.
         CovarianceNotPositiveDefiniteError
             If ``cov`` is not symmetric positive definite.
+        NonFiniteInputError
+            If ``sensor_pose`` is not finite.
         FilterOptionError
             If the filter has no landmark map.
         UnknownLandmarkError
@@ -241,6 +252,7 @@ class GatedUpdates:
                                         f"got {zmeas.shape}")
         if cov is not None:
             cov = _check_cov(cov)
+        sensor = as_sensor_pose(sensor_pose)
         if self.landmarks is None:
             raise FilterOptionError("this filter has no landmark map; pass landmarks=...")
         t = self.t_s if t_s is None else float(t_s)
@@ -254,10 +266,9 @@ class GatedUpdates:
         if not (math.isfinite(zmeas[0]) and math.isfinite(zmeas[1])):
             return self._skip("landmark", t, "non_finite", 2, landmark_id)
         lxy = self.landmarks.position(landmark_id)
-        predicted = landmark_measurement(self.x, lxy)
-        if predicted[0] < MIN_RANGE_M:
+        predicted, H = landmark_terms(self.x, lxy, sensor=sensor)
+        if predicted[0] <= MIN_RANGE_M:                  # floored: the sensor on the landmark
             return self._skip("landmark", t, "degenerate", 2, landmark_id)
-        H = landmark_jacobian(self.x, lxy)
         R = self.landmark_noise.cov(predicted[0]) if cov is None else cov
         return self._gated("landmark", t, zmeas, landmark_residual(zmeas, predicted), H, R,
                            landmark_id)
@@ -272,7 +283,8 @@ class GatedUpdates:
             The sightings of the frame just predicted (their ``index`` is not
             read: select the frame's rows first, e.g. with
             :meth:`~fusion.range_bearing.RangeBearing.by_index`); rows without
-            a covariance take the filter's :attr:`landmark_noise`.
+            a covariance take the filter's :attr:`landmark_noise`; its
+            ``sensor_pose`` is the mount of every row.
         t_s : float, optional
             Time for the records (default the filter time).
 
@@ -286,7 +298,9 @@ class GatedUpdates:
         FilterOptionError, UnknownLandmarkError
             As :meth:`update_landmark`.
         """
-        return [self.update_landmark(lid, z, cov=cov, t_s=t_s) for lid, z, cov in sightings]
+        mount = sightings.sensor_pose
+        return [self.update_landmark(lid, z, cov=cov, t_s=t_s, sensor_pose=mount)
+                for lid, z, cov in sightings]
 
     # -- the gate ------------------------------------------------------------------------------
     def _gated(self, kind: UpdateKind, t: float, zmeas: np.ndarray, innovation: np.ndarray,

@@ -196,6 +196,8 @@ class GraphBuilder:
         factors = range_bearing_factors(obs, landmark_noise=self.opts.landmark_noise,
                                         huber_k=self.opts.landmark_huber_k)
         prior = gtsam.noiseModel.Isotropic.Sigma(2, self.opts.landmark_sigma_m)
+        mount = obs.sensor_pose
+        bTs = gtsam.Pose2(mount.x_m, mount.y_m, mount.yaw_rad)     # sensor in body
         for p, lid, r, b, factor in zip(obs.index.tolist(), obs.landmark_id.tolist(),
                                         obs.range_m.tolist(), obs.bearing_rad.tolist(), factors,
                                         strict=True):
@@ -205,7 +207,8 @@ class GraphBuilder:
                     xy = self.known[lid]
                     self._add(gtsam.PriorFactorPoint2(key, xy, prior))
                 else:   # unknown landmark: where its first observation puts it
-                    xy = self.guess[p].transformFrom(np.array([r * np.cos(b), r * np.sin(b)]))
+                    xy = self.guess[p].compose(bTs).transformFrom(
+                        np.array([r * np.cos(b), r * np.sin(b)]))
                 self._values.insert(key, np.asarray(xy, dtype=float))
                 self.landmarks[lid] = None
             self._add(factor)

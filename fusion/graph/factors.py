@@ -9,12 +9,19 @@
   first order in ``c``, as IMU preintegration corrects for the bias (Forster et
   al. 2017, eq. 44), so a smoother with landmarks estimates the calibration
   online. :func:`calibration_walk_factor` lets ``c`` drift.
-- :func:`range_bearing_factors`: one native ``gtsam.BearingRangeFactor2D``
-  per row of a :class:`fusion.range_bearing.RangeBearing` (the package's one
-  observation type, the EKFs' too; ``index`` = keyframe), each with a full
-  Gaussian noise model from the row's 2 x 2 covariance (or the sensor's
+- :func:`range_bearing_factors`: one factor per row of a
+  :class:`fusion.range_bearing.RangeBearing` (the package's one observation
+  type, the EKFs' too; ``index`` = keyframe), each with a full Gaussian noise
+  model from the row's 2 x 2 covariance (or the sensor's
   :class:`fusion.noise.LandmarkNoise` at the measured range), to a landmark
   variable (known landmarks carry a prior, or a tight one for a constant).
+  A sensor at the axle centre gets the native ``gtsam.BearingRangeFactor2D``;
+  a sensor mounted elsewhere (the sightings' ``sensor_pose``) a
+  ``gtsam.CustomFactor`` (:func:`mounted_range_bearing_factor`) around the
+  package's one measurement model,
+  :func:`fusion.range_bearing.range_bearing_terms`: gtsam's Python API has
+  no bearing-range factor with a body-to-sensor transform (only
+  ``RangeFactorWithTransform2D``, range alone).
   The map is :class:`fusion.landmark_map.LandmarkMap`;
   :func:`predict_range_bearing` is the measurement model and
   :func:`observe_landmarks` a simulator of observations for experiments.
@@ -32,6 +39,13 @@ a covariance whose off-diagonal entries are below 1e-9 in absolute value for
 diagonal (gtsam ``checkIfDiagonal``, ``linear/NoiseModel.cpp``), which would
 drop the range-bearing correlation of a precise sensor (ArUco covariances are
 about 1e-8).
+
+Mounted-sensor Jacobians: gtsam perturbs a ``Pose2`` in its body frame,
+``wTb Exp(xi)``, whose position moves by ``R(theta) xi_xy`` and heading by
+``xi_theta`` at ``xi = 0``; the factor's pose Jacobian is eq. 2 of
+:mod:`fusion.range_bearing` times ``blkdiag(R(theta), 1)``, the landmark's
+eq. 3 (a ``Point2`` moves in the world frame); rows in gtsam's ``(bearing,
+range)`` order.
 
 References
 ----------
@@ -55,7 +69,8 @@ from fusion.graph.calibrated_factors import (
 from fusion.graph.preintegration import Preintegrated
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from fusion.range_bearing import RangeBearing
+from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_terms
+from fusion.sensor_pose import CENTRED, SensorPose, as_sensor_pose
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
@@ -67,6 +82,7 @@ __all__ = [
     "calibration_walk_factor",
     "landmark_key",
     "motion_factor",
+    "mounted_range_bearing_factor",
     "observe_landmarks",
     "pose_key",
     "predict_range_bearing",
@@ -141,7 +157,9 @@ def calibration_walk_factor(key_a: int, key_b: int, *, sigma_per_sqrt_s: np.ndar
                                      gtsam.noiseModel.Diagonal.Sigmas(sig))
 
 
-def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray, *,
+                          sensor_pose: SensorPose | None = None
+                          ) -> tuple[np.ndarray, np.ndarray]:
     """Bearing and range of world points seen from body poses (the measurement model).
 
     Parameters
@@ -150,11 +168,15 @@ def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.nd
         Poses ``(x [m], y [m], theta [rad])``.
     points_xy : array_like, shape (..., 2)
         World points [m], broadcast against the poses.
+    sensor_pose : SensorPose, optional
+        The sensor's mount on the robot (default centred).
 
     Returns
     -------
     bearing_rad, range_m : ndarray, shape (...)
-        ``atan2`` of the point in the body frame, wrapped to (-pi, pi], and distance.
+        ``atan2`` of the point in the sensor frame, wrapped to (-pi, pi], and
+        distance from the sensor: :func:`fusion.range_bearing.range_bearing`
+        in gtsam's order.
 
     Examples
     --------
@@ -162,16 +184,15 @@ def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray) -> tuple[np.nd
     >>> round(float(b), 12) + 0.0, round(float(r), 12)
     (0.0, 2.0)
     """
-    pose = np.asarray(wTb, dtype=float)
-    pts = np.asarray(points_xy, dtype=float)
-    dx, dy = pts[..., 0] - pose[..., 0], pts[..., 1] - pose[..., 1]
-    return wrap_angle(np.arctan2(dy, dx) - pose[..., 2]), np.hypot(dx, dy)
+    z = range_bearing(wTb, points_xy, sensor=sensor_pose)
+    return z[..., 1], z[..., 0]
 
 
 def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random.Generator,
                       bearing_sigma_rad: float, range_sigma_m: float, max_range_m: float,
                       min_range_m: float = 0.2, field_of_view_rad: float = 2 * np.pi,
-                      index: np.ndarray | None = None) -> RangeBearing:
+                      index: np.ndarray | None = None,
+                      sensor_pose: SensorPose | None = None) -> RangeBearing:
     """Simulate range-bearing observations of a map from true poses.
 
     Parameters
@@ -191,13 +212,16 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
         Full angular width of the sensor, centred on the heading.
     index : array_like of int, shape (n,), optional
         Index recorded for each pose (default ``0 .. n-1``).
+    sensor_pose : SensorPose, optional
+        The sensor's mount on the robot (default centred): ranges, bearings
+        and the field of view are the sensor's.
 
     Returns
     -------
     RangeBearing
         Every (pose, landmark) pair in view, ordered by pose, each with the
         covariance the noise was drawn with, ``diag(range_sigma_m^2,
-        bearing_sigma_rad^2)``.
+        bearing_sigma_rad^2)``, and the sensor's mount.
 
     Raises
     ------
@@ -211,7 +235,9 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     if idx.shape != (len(poses),):
         raise MeasurementShapeError(f"index has shape {idx.shape}, expected ({len(poses)},)")
     ids = landmarks.integer_ids                      # raises for non-integer ids
-    bearing, rng_m = predict_range_bearing(poses[:, None, :], landmarks.xy_m[None, :, :])
+    mount = as_sensor_pose(sensor_pose)
+    bearing, rng_m = predict_range_bearing(poses[:, None, :], landmarks.xy_m[None, :, :],
+                                           sensor_pose=mount)
     seen = ((rng_m <= max_range_m) & (rng_m >= min_range_m)
             & (np.abs(bearing) <= 0.5 * field_of_view_rad))
     rows, cols = np.nonzero(seen)
@@ -219,7 +245,7 @@ def observe_landmarks(wTb: np.ndarray, landmarks: LandmarkMap, *, rng: np.random
     noisy_r = np.abs(rng_m[rows, cols] + range_sigma_m * rng.standard_normal(rows.size))
     cov = np.diag([range_sigma_m ** 2, bearing_sigma_rad ** 2])
     return RangeBearing(idx[rows], ids[cols], noisy_r, noisy_b,
-                        cov=np.broadcast_to(cov, (rows.size, 2, 2)))
+                        cov=np.broadcast_to(cov, (rows.size, 2, 2)), sensor_pose=mount)
 
 
 def _integer_ids(observations: RangeBearing) -> np.ndarray:
@@ -248,9 +274,54 @@ def _noise_model(cov: np.ndarray, huber_k: float | None) -> gtsam.noiseModel.Bas
     return noise
 
 
+def mounted_range_bearing_factor(key_pose: int, key_landmark: int, range_m: float,
+                                 bearing_rad: float, *, sensor_pose: SensorPose,
+                                 noise: gtsam.noiseModel.Base) -> gtsam.CustomFactor:
+    """A range-bearing factor from a sensor mounted off the axle centre (a ``CustomFactor``).
+
+    Parameters
+    ----------
+    key_pose, key_landmark : int
+        Keys of the robot pose (``Pose2``, axle centre) and the landmark (``Point2``).
+    range_m, bearing_rad : float
+        The sighting, from the sensor, in its frame.
+    sensor_pose : SensorPose
+        The sensor's mount on the robot.
+    noise : gtsam.noiseModel.Base
+        Noise of the error, ordered ``(bearing, range)`` as gtsam's own
+        factor's (:func:`range_bearing_factors` builds it from a covariance).
+
+    Returns
+    -------
+    gtsam.CustomFactor
+        Unwhitened error ``(wrap(b_hat - b), r_hat - r)`` with ``(r_hat,
+        b_hat)`` from :func:`fusion.range_bearing.range_bearing_terms` and
+        its Jacobians in gtsam's tangent spaces (module notes); for a centred
+        mount it equals ``gtsam.BearingRangeFactor2D``'s error.
+    """
+    mount = as_sensor_pose(sensor_pose)
+    measured = np.array([float(bearing_rad), float(range_m)])
+    key_pose, key_landmark = int(key_pose), int(key_landmark)
+
+    def error(_: gtsam.CustomFactor, values: gtsam.Values,
+              jacobians: list[np.ndarray] | None) -> np.ndarray:
+        p = values.atPose2(key_pose)
+        theta = p.theta()
+        z, h_pose, h_landmark = range_bearing_terms(np.array([p.x(), p.y(), theta]),
+                                                    values.atPoint2(key_landmark), sensor=mount)
+        if jacobians is not None:
+            c, s = np.cos(theta), np.sin(theta)
+            body = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # d wTb Exp(xi)/d xi
+            jacobians[0] = (h_pose @ body)[::-1]
+            jacobians[1] = h_landmark[::-1]
+        return np.array([wrap_angle(z[1] - measured[0]), z[0] - measured[1]])
+
+    return gtsam.CustomFactor(noise, [key_pose, key_landmark], error)
+
+
 def range_bearing_factors(observations: RangeBearing, *, landmark_noise: LandmarkNoise,
-                          huber_k: float | None = None) -> list[gtsam.BearingRangeFactor2D]:
-    """Native range-bearing factors, one per row: pose ``X(index)`` to landmark ``L(id)``.
+                          huber_k: float | None = None) -> list[gtsam.NonlinearFactor]:
+    """Range-bearing factors, one per row: pose ``X(index)`` to landmark ``L(id)``.
 
     Parameters
     ----------
@@ -264,11 +335,14 @@ def range_bearing_factors(observations: RangeBearing, *, landmark_noise: Landmar
 
     Returns
     -------
-    list of gtsam.BearingRangeFactor2D
-        In row order. Each noise model is the row's covariance reordered to
-        gtsam's ``(bearing, range)`` (module notes): ``Diagonal`` if diagonal,
-        else a full ``Gaussian``; rows with the same covariance share one.
-        :func:`predict_range_bearing` is the measurement model.
+    list of gtsam.BearingRangeFactor2D or gtsam.CustomFactor
+        In row order: native factors for a sensor at the axle centre,
+        :func:`mounted_range_bearing_factor` for the sightings'
+        ``sensor_pose`` elsewhere. Each noise model is the row's covariance
+        reordered to gtsam's ``(bearing, range)`` (module notes):
+        ``Diagonal`` if diagonal, else a full ``Gaussian``; rows with the same
+        covariance share one. :func:`predict_range_bearing` is the
+        measurement model.
 
     Raises
     ------
@@ -287,6 +361,7 @@ def range_bearing_factors(observations: RangeBearing, *, landmark_noise: Landmar
     """
     ids = _integer_ids(observations)
     covs = observations.cov
+    mount = observations.sensor_pose
     models: dict[bytes, gtsam.noiseModel.Base] = {}
     out = []
     for j, (i, lid, r, b) in enumerate(zip(observations.index.tolist(), ids.tolist(),
@@ -297,6 +372,10 @@ def range_bearing_factors(observations: RangeBearing, *, landmark_noise: Landmar
         noise = models.get(key)
         if noise is None:
             noise = models[key] = _noise_model(cov, huber_k)
-        out.append(gtsam.BearingRangeFactor2D(pose_key(i), landmark_key(lid), gtsam.Rot2(b), r,
-                                              noise))
+        if mount == CENTRED:
+            out.append(gtsam.BearingRangeFactor2D(pose_key(i), landmark_key(lid), gtsam.Rot2(b),
+                                                  r, noise))
+        else:
+            out.append(mounted_range_bearing_factor(pose_key(i), landmark_key(lid), r, b,
+                                                    sensor_pose=mount, noise=noise))
     return out

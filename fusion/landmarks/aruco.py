@@ -1,23 +1,28 @@
-"""ArUco markers in a camera image as range-bearing observations in the robot frame.
+"""ArUco markers in a camera image as range-bearing observations from the camera's mount.
 
 Detection is OpenCV's (``cv2.aruco.ArucoDetector``, Garrido-Jurado et al.
 2014, sub-pixel corner refinement); the marker pose in the camera frame comes
 from ``cv2.solvePnP(..., flags=cv2.SOLVEPNP_IPPE_SQUARE)`` (Collins & Bartoli
 2014), polished by ``cv2.solvePnPRefineLM`` to the least-squares pose. The
-marker centre ``t`` (optical frame) goes to the robot frame
-(:mod:`fusion.landmarks.camera`: x forward, y left, z up) through the camera mount,
-``p = robot_R_camera t + robot_t_camera``, and the observation is planar:
+marker centre ``t`` (optical frame) goes to the camera's planar frame: origin
+the projection centre's foot on the ground plane, x along the optical axis's
+heading (the mount's yaw), y left, z up (:mod:`fusion.landmarks.camera`), by
+the mount's pitch alone, ``p = Ry(pitch) R0 t`` (``robot_R_camera t`` turned
+back by ``Rz(-yaw)``), and the observation is planar:
 
 .. math::
 
     r = \\sqrt{p_x^2 + p_y^2}, \\qquad b = \\operatorname{atan2}(p_y, p_x)
 
-(range from the robot centre in the ground plane [m], bearing
-counter-clockwise from the robot's heading [rad]); the height ``p_z`` is dropped.
+(range from the camera in the ground plane [m], bearing counter-clockwise
+from the camera's heading [rad]); the height ``p_z`` is dropped.
 Detections come out as the package's one observation type,
 :class:`fusion.range_bearing.RangeBearing`: one row per marker, its id, range,
 bearing and covariance (eq. 2-3 below), ``index`` the frame the image belongs
-to; the EKFs and the factor graph take it as it is.
+to, and the camera's planar mount ``(x_m, y_m, yaw_rad)`` as its
+``sensor_pose`` (:meth:`fusion.landmarks.camera.CameraMount.sensor_pose`),
+through which the EKFs, the factor graph and the scale test predict it
+(:mod:`fusion.range_bearing`, eq. 1); they take it as it is.
 
 Diagnostics
 -----------
@@ -62,7 +67,7 @@ translation block of (2) and
 .. math::
 
     G = \\begin{bmatrix} p_x / r & p_y / r \\\\ -p_y / r^2 & p_x / r^2
-    \\end{bmatrix} \\, [\\text{robot\\_R\\_camera}]_{1:2,\\,:}.   \\qquad (3)
+    \\end{bmatrix} \\, [R_y(\\text{pitch}) R_0]_{1:2,\\,:}.   \\qquad (3)
 
 It grows with range (the marker's apparent size fixes the depth and shrinks
 as ``1 / r``), with obliquity (foreshortening) and for smaller markers, through
@@ -348,13 +353,13 @@ def _measure(marker_id: int, corners_px: np.ndarray, intrinsics: CameraIntrinsic
     d = shift[_IPPE_FROM_ARUCO].ravel()         # eq. 1 (corner motion per pixel of edge bias)
     a_d = info_inv @ (j.T @ d)
     cov_pose = sigma_n ** 2 * info_inv + noise.edge_bias_sigma_px ** 2 * np.outer(a_d, a_d)  # (2)
-    robot_r_cam = mount.robot_R_camera()
-    p = robot_r_cam @ tvec[:, 0] + mount.robot_t_camera
+    level_r_cam = mount.level_R_camera()
+    p = level_r_cam @ tvec[:, 0]                # the camera's planar frame (module docstring)
     q = p[0] * p[0] + p[1] * p[1]
     if q < _MIN_RANGE_M ** 2:
-        raise MarkerPoseError(f"marker {marker_id} is right above the robot centre: no bearing")
+        raise MarkerPoseError(f"marker {marker_id} is right above the camera: no bearing")
     r = math.sqrt(q)
-    g = np.array([[p[0] / r, p[1] / r], [-p[1] / q, p[0] / q]]) @ robot_r_cam[:2, :]   # eq. 3
+    g = np.array([[p[0] / r, p[1] / r], [-p[1] / q, p[0] / q]]) @ level_r_cam[:2, :]   # eq. 3
     cov = g @ cov_pose[3:, 3:] @ g.T
     cov = 0.5 * (cov + cov.T)
     # The outward normal is -z of the pose frame; the line of sight to the camera is -t.
@@ -394,10 +399,11 @@ def observation_from_corners(marker_id: int, corners_px: np.ndarray,
     Returns
     -------
     RangeBearing
-        One row: ``range_m`` (ground-plane distance from the robot centre to
-        the marker centre [m]), ``bearing_rad`` (``atan2(y, x)`` of the
-        marker centre in the robot frame, in ``(-pi, pi]``) and ``cov``, the
-        covariance of ``(range, bearing)`` (module docstring, eq. 2-3).
+        One row: ``range_m`` (ground-plane distance from the camera to the
+        marker centre [m]), ``bearing_rad`` (``atan2(y, x)`` of the marker
+        centre in the camera's planar frame, in ``(-pi, pi]``), ``cov``, the
+        covariance of ``(range, bearing)`` (module docstring, eq. 2-3), and
+        ``sensor_pose``, the camera's planar mount.
 
     Raises
     ------
@@ -415,11 +421,14 @@ def observation_from_corners(marker_id: int, corners_px: np.ndarray,
     >>> o = observation_from_corners(0, c, cam, marker_size_m=0.1, mount=CameraMount(z_m=0.0),
     ...                              noise=CornerNoise(edge_bias_px=0.0, edge_bias_at_20px=0.0))
     >>> round(float(o.range_m[0]), 6), round(float(o.bearing_rad[0]), 6) + 0.0, o.cov.shape
-    (1.1, 0.0, (1, 2, 2))
+    (1.0, 0.0, (1, 2, 2))
+    >>> o.sensor_pose                          # the camera, 0.1 m ahead of the axle
+    SensorPose(x_m=0.1, y_m=0.0, yaw_rad=0.0)
     """
     m = _measure(marker_id, corners_px, intrinsics, marker_size_m=marker_size_m, mount=mount,
                  noise=noise)
-    return RangeBearing(index, [int(marker_id)], [m.range_m], [m.bearing_rad], cov=[m.cov])
+    return RangeBearing(index, [int(marker_id)], [m.range_m], [m.bearing_rad], cov=[m.cov],
+                        sensor_pose=mount.sensor_pose())
 
 
 def detection_diagnostics(corners_px: np.ndarray, intrinsics: CameraIntrinsics, *,
@@ -623,7 +632,8 @@ class MarkerDetector:
         -------
         RangeBearing
             The markers in OpenCV's order, ``cov`` set (module docstring,
-            eq. 2-3); ids the map may not hold (a misread code) included
+            eq. 2-3), ``sensor_pose`` the camera's planar mount; ids the map
+            may not hold (a misread code) included
             (:meth:`fusion.landmarks.MarkerMap.split_known` sorts them out).
             Markers whose pose is degenerate (:class:`MarkerPoseError`) are
             skipped and logged at debug level. Their apparent size and
@@ -646,7 +656,8 @@ class MarkerDetector:
         if not rows:
             return RangeBearing.empty()
         return RangeBearing(index, [i for i, _ in rows], [m.range_m for _, m in rows],
-                            [m.bearing_rad for _, m in rows], cov=[m.cov for _, m in rows])
+                            [m.bearing_rad for _, m in rows], cov=[m.cov for _, m in rows],
+                            sensor_pose=self.mount.sensor_pose())
 
 
 def detect_markers(image: np.ndarray, camera_matrix: np.ndarray, dist_coeffs: np.ndarray | None,
@@ -744,8 +755,8 @@ def observations_from_pose(camera: SyntheticCamera, marker_map: MarkerMap,
     >>> cam = SyntheticCamera(CameraIntrinsics.pinhole(fx_px=500.0))
     >>> [(marker_id, z, cov)] = observations_from_pose(cam, mm, np.zeros(3),
     ...                                                np.random.default_rng(1), index=7)
-    >>> marker_id, round(float(z[0]), 1), round(math.degrees(z[1]), 1), cov.shape
-    (3, 2.1, 14.0, (2, 2))
+    >>> marker_id, round(float(z[0]), 2), round(math.degrees(z[1]), 1), cov.shape
+    (3, 1.96, 14.7, (2, 2))
     """
     if detector is None:
         detector = MarkerDetector.for_map(camera.intrinsics, marker_map, mount=camera.mount)

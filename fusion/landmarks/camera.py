@@ -52,6 +52,7 @@ import cv2
 import numpy as np
 
 from fusion.exceptions import CameraOptionError, CameraShapeError
+from fusion.sensor_pose import SensorPose
 
 if TYPE_CHECKING:
     from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
@@ -280,10 +281,28 @@ class CameraMount:
     def robot_R_camera(self) -> np.ndarray:
         """Rotation from the optical frame to the robot frame, ``Rz(yaw) Ry(pitch) R0``, (3, 3)."""
         cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
-        cp, sp = math.cos(self.pitch_rad), math.sin(self.pitch_rad)
         rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+        return rz @ self.level_R_camera()
+
+    def level_R_camera(self) -> np.ndarray:
+        """Rotation from the optical frame to the camera's planar frame, ``Ry(pitch) R0``, (3, 3).
+
+        The planar frame is the robot frame turned by the mount's yaw (x along
+        the optical axis's heading, z up): ``robot_R_camera = Rz(yaw) level_R_camera``.
+        """
+        cp, sp = math.cos(self.pitch_rad), math.sin(self.pitch_rad)
         ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-        return rz @ ry @ OPTICAL_TO_ROBOT
+        return ry @ OPTICAL_TO_ROBOT
+
+    def sensor_pose(self) -> SensorPose:
+        """The camera's planar mount ``(x_m, y_m, yaw_rad)``: what its range-bearing rows carry.
+
+        Examples
+        --------
+        >>> CameraMount(x_m=0.15, z_m=0.2, pitch_rad=0.1).sensor_pose()
+        SensorPose(x_m=0.15, y_m=0.0, yaw_rad=0.0)
+        """
+        return SensorPose(self.x_m, self.y_m, self.yaw_rad)
 
     @property
     def robot_t_camera(self) -> np.ndarray:

@@ -9,7 +9,8 @@ import numpy as np
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from fusion.range_bearing import RangeBearing
+from fusion.range_bearing import RangeBearing, range_bearing
+from fusion.sensor_pose import SensorPose, as_sensor_pose
 from lti_motion.kinematics import wrap_angle
 
 __all__ = [
@@ -26,6 +27,7 @@ def synthetic_observations(
     rate_hz: float = 2.0,
     noise: LandmarkNoise | None = None,
     max_range_m: float = math.inf,
+    sensor_pose: SensorPose | None = None,
 ) -> RangeBearing:
     """Noisy range-bearing observations of every landmark from a sequence of poses.
 
@@ -50,19 +52,24 @@ def synthetic_observations(
         Noise standard deviations; default 2% of the range (with a 5 mm
         floor) and 1 degree.
     max_range_m : float
-        Landmarks farther than this are not seen.
+        Landmarks farther than this (from the sensor) are not seen.
+    sensor_pose : SensorPose, optional
+        Where the sensor sits on the robot (default the axle centre): ranges
+        and bearings are drawn from the sensor's true position and axis
+        (:func:`fusion.range_bearing.range_bearing`, eq. 1), and the result
+        carries the mount.
 
     Returns
     -------
     RangeBearing
         ``index`` = frame, in frame order (frame 0 is never observed: the
         filter starts there), without covariances: the estimator's own
-        :class:`LandmarkNoise` applies.
+        :class:`LandmarkNoise` applies; ``sensor_pose`` the mount.
 
     Raises
     ------
     MeasurementShapeError
-        If ``poses`` is not ``(n, 3)``.
+        If ``poses`` is not ``(n, 3)`` or ``sensor_pose`` not three numbers.
     FilterOptionError
         If ``rate_hz`` or ``dt_s`` is not positive.
     """
@@ -72,6 +79,7 @@ def synthetic_observations(
     if not (rate_hz > 0 and dt_s > 0):
         raise FilterOptionError(f"rate_hz and dt_s must be positive, got {rate_hz}, {dt_s}")
     noise = noise or LandmarkNoise()
+    mount = as_sensor_pose(sensor_pose)
     stride = max(1, round(1.0 / (rate_hz * dt_s)))
     ids = landmarks.ids
     frames, keys, values = [], [], []
@@ -79,10 +87,7 @@ def synthetic_observations(
     for j, key in enumerate(ids):
         offset = j * stride // max(1, len(ids))
         ks = k_all[(k_all + offset) % stride == 0]
-        lxy = landmarks.position(key)
-        d = lxy[None, :] - poses[ks, :2]
-        r = np.hypot(d[:, 0], d[:, 1])
-        b = np.arctan2(d[:, 1], d[:, 0]) - poses[ks, 2]
+        r, b = range_bearing(poses[ks], landmarks.position(key), sensor=mount).T
         sr = np.maximum(noise.range_std_m, noise.range_std_frac * r)
         r_obs = r + sr * rng.standard_normal(len(ks))
         b_obs = wrap_angle(b + noise.bearing_std_rad * rng.standard_normal(len(ks)))
@@ -93,4 +98,5 @@ def synthetic_observations(
     frame = np.concatenate(frames) if frames else np.zeros(0, int)
     rb = np.concatenate(values) if values else np.zeros((0, 2))
     order = np.argsort(frame, kind="stable")
-    return RangeBearing(frame[order], [keys[i] for i in order], rb[order, 0], rb[order, 1])
+    return RangeBearing(frame[order], [keys[i] for i in order], rb[order, 0], rb[order, 1],
+                        sensor_pose=mount)

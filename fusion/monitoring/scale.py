@@ -353,8 +353,9 @@ class ScaleMonitor:
             Each robot's sightings at this frame, one :class:`RangeBearing` per
             robot (their ``index`` is not read); ids not in the map count as
             ``unknown_landmark``, rows without a covariance take
-            :attr:`landmark_noise`. The ``k``-th sightings of all robots are
-            fused together.
+            :attr:`landmark_noise`, each robot's ``sensor_pose`` is the mount
+            of its sensor (:mod:`fusion.range_bearing`, eq. 1). The ``k``-th
+            sightings of all robots are fused together.
 
         Returns
         -------
@@ -391,6 +392,7 @@ class ScaleMonitor:
                                         f"{len(observations)}")
         alarms: list[ScaleAlarm] = []
         per_robot = [list(obs) for obs in observations]
+        mounts = [obs.sensor_pose for obs in observations]
         for k in range(max((len(o) for o in per_robot), default=0)):
             robots, lxy, zs, covs = [], [], [], []
             for i, rows in enumerate(per_robot):
@@ -405,12 +407,16 @@ class ScaleMonitor:
                     zs.append(rb)
                     covs.append(cov)
             if robots:
-                alarms += self._test(t, np.array(robots), np.array(lxy), np.array(zs), covs)
+                sensor = np.array([(mounts[i].x_m, mounts[i].y_m, mounts[i].yaw_rad)
+                                   for i in robots])
+                alarms += self._test(t, np.array(robots), np.array(lxy), np.array(zs), covs,
+                                     sensor)
         return alarms
 
     def _test(self, t: float, robots: np.ndarray, lxy: np.ndarray, zs: np.ndarray,
-              covs: list[np.ndarray | None]) -> list[ScaleAlarm]:
-        """Main and shadow updates, eq. 1, alarms; ``covs`` the sightings' own covariances."""
+              covs: list[np.ndarray | None], sensor: np.ndarray) -> list[ScaleAlarm]:
+        """Main and shadow updates, eq. 1, alarms; ``covs`` the sightings' own covariances,
+        ``sensor`` the robots' sensor mounts ``(x_m, y_m, yaw_rad)``, (m, 3)."""
         n, m, w = self.n_robots, len(robots), self.options.n_shadows
         rows = (np.arange(1 + w)[:, None] * n + robots[None, :]).ravel()
         cov = None
@@ -419,7 +425,7 @@ class ScaleMonitor:
                           (1 + w, 1, 1))
         x, P, ok, ll = landmark_update(self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)),
                                        np.tile(zs, (1 + w, 1)), self.landmark_noise, self._gate,
-                                       cov=cov)
+                                       cov=cov, sensor=np.tile(sensor, (1 + w, 1)))
         self._x[rows], self._P[rows] = x, P
         ok, ll = ok.reshape(1 + w, m), ll.reshape(1 + w, m)
         self.counts["updates"] += int(ok[0].sum())

@@ -24,7 +24,8 @@ the pose and to ``g`` (:func:`lti_motion.kinematics.pose_step_jacobians`)::
          [0,   I                   ]]          [0,                       diag(q_c)]]
 
 Landmark sightings ``(r, b)`` update the pose with the range-bearing model
-(Thrun, Burgard & Fox 2005, table 7.2; :mod:`fusion.range_bearing`), gated on
+from the sensor's mount on the robot (:func:`fusion.range_bearing.range_bearing_terms`,
+eq. 1-2, the EKFs' one copy; Thrun, Burgard & Fox 2005, table 7.2), gated on
 the NIS, in Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18), with each
 sighting's own covariance or the sensor's :class:`~fusion.noise.LandmarkNoise`
 at the predicted range.
@@ -44,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusion.noise import LandmarkNoise, SlipNoise
-from fusion.range_bearing import MIN_RANGE_M
+from fusion.range_bearing import range_bearing_terms
 from lti_motion.kinematics import body_from_wheel, pose_step, pose_step_jacobians, wrap_angle
 
 __all__ = [
@@ -111,9 +112,9 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
 
 
-def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`~fusion.landmark_map.range_bearing` and its Jacobian, batched over rows.
+def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray, *,
+                        sensor: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~fusion.range_bearing.range_bearing_terms` on the states, batched over rows.
 
     Parameters
     ----------
@@ -121,15 +122,19 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
         States, the pose first.
     landmark_xy : ndarray, shape (n, 2)
         Landmark of each row [m].
+    sensor : ndarray, shape (n, 3) or (3,), optional
+        Each row's sensor mount ``(x_m, y_m, yaw_rad)`` on the robot, or one
+        for all (:class:`fusion.sensor_pose.SensorPose` too); default centred.
 
     Returns
     -------
     pred : ndarray, shape (n, 2)
         ``(r [m], b [rad])``, ``b`` wrapped.
     H : ndarray, shape (n, 2, 5)
-        Pose columns ``[[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]`` (Thrun et
-        al. 2005, table 7.2), zeros for the scales. Ranges are floored at
-        :data:`~fusion.landmark_map.MIN_RANGE_M`.
+        Pose columns: :mod:`fusion.range_bearing` eq. 2 (for a centred
+        sensor ``[[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]``, Thrun et al.
+        2005, table 7.2), zeros for the scales. Ranges are floored at
+        :data:`~fusion.range_bearing.MIN_RANGE_M`.
 
     Examples
     --------
@@ -137,19 +142,15 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray
     >>> (pred.round(12) + 0.0).tolist(), (H[0, :, :3].round(12) + 0.0).tolist()
     ([[2.0, 0.0]], [[-1.0, 0.0, 0.0], [0.0, -0.5, -1.0]])
     """
-    dx, dy = landmark_xy[:, 0] - x[:, 0], landmark_xy[:, 1] - x[:, 1]
-    q = np.maximum(dx * dx + dy * dy, MIN_RANGE_M ** 2)
-    r = np.sqrt(q)
-    pred = np.stack([r, wrap_angle(np.arctan2(dy, dx) - x[:, 2])], axis=1)
+    pred, h_pose, _ = range_bearing_terms(x[:, :3], landmark_xy, sensor=sensor)
     H = np.zeros((len(x), 2, 5))
-    H[:, 0, 0], H[:, 0, 1] = -dx / r, -dy / r
-    H[:, 1, 0], H[:, 1, 1], H[:, 1, 2] = dy / q, -dx / q, -1.0
+    H[:, :, :3] = h_pose
     return pred, H
 
 
 def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
                     range_bearing: np.ndarray, noise: LandmarkNoise, gate: float, *,
-                    cov: np.ndarray | None = None
+                    cov: np.ndarray | None = None, sensor: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Range-bearing updates of every row, gated on the NIS, Joseph form.
 
@@ -166,8 +167,11 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
     gate : float
         NIS gate: rows with ``nu^T S^-1 nu`` above it are not fused.
     cov : ndarray, shape (n, 2, 2), optional
-        A sighting's own covariance of ``(r [m], b [rad])`` per row, replacing
-        ``noise``; rows of NaN take ``noise``.
+        A sighting's own full covariance of ``(r [m], b [rad])`` per row,
+        replacing ``noise``; rows of NaN take ``noise``.
+    sensor : ndarray, shape (n, 3) or (3,), optional
+        The sensor's mount ``(x_m, y_m, yaw_rad)`` per row or for all
+        (:func:`range_bearing_batch`); default centred.
 
     Returns
     -------
@@ -178,7 +182,7 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
         ``-0.5 (min(nis, gate) + ln det S)``: ``ln N(nu; 0, S)`` without the
         ``2 pi`` constant, the NIS clipped at the gate.
     """
-    pred, H = range_bearing_batch(x, landmark_xy)
+    pred, H = range_bearing_batch(x, landmark_xy, sensor=sensor)
     nu = range_bearing - pred
     nu[:, 1] = wrap_angle(nu[:, 1])
     R = np.zeros((len(x), 2, 2))

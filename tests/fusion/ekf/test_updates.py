@@ -19,6 +19,7 @@ from fusion.exceptions import (
 )
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
+from fusion.sensor_pose import SensorPose
 from lti_motion.fir import FirFit
 from lti_motion.model import MotionModel
 
@@ -67,6 +68,47 @@ def test_one_landmark_update_matches_the_kalman_equations(model, which):
     assert rec.nis == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-12)
     np.testing.assert_allclose(ekf.x, x + K @ nu, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(ekf.P, ikh @ P @ ikh.T + K @ COV @ K.T, rtol=1e-9, atol=1e-15)
+
+
+MOUNT = SensorPose(0.22, -0.04, 0.3)
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_a_mounted_sensor_update_matches_the_kalman_equations(model, which):
+    """The sensor's mount in h and H (fusion.range_bearing eq. 1-2), full covariance."""
+    ekf = _filters(model)[which]
+    x, P = ekf.x.copy(), ekf.P.copy()
+    lxy = np.array(LANDMARKS[1])
+    z = range_bearing(x, lxy, sensor=MOUNT) + np.array([0.02, 0.015])
+    rec = ekf.update_landmark(1, z, cov=COV, sensor_pose=MOUNT)
+    H = ef.landmark_jacobian(x, lxy, sensor=MOUNT)
+    num = np.zeros_like(H)
+    for j in range(3):
+        e = np.zeros(len(x))
+        e[j] = 1e-6
+        num[:, j] = ef.landmark_residual(range_bearing(x + e, lxy, sensor=MOUNT),
+                                         range_bearing(x - e, lxy, sensor=MOUNT)) / 2e-6
+    np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-9)
+    S = H @ P @ H.T + COV
+    K = P @ H.T @ np.linalg.inv(S)
+    nu = ef.landmark_residual(z, range_bearing(x, lxy, sensor=MOUNT))
+    assert rec.accepted
+    np.testing.assert_allclose(rec.innovation, nu, rtol=1e-12)
+    np.testing.assert_allclose(ekf.x, x + K @ nu, rtol=1e-12, atol=1e-15)
+    ikh = np.eye(len(x)) - K @ H
+    np.testing.assert_allclose(ekf.P, ikh @ P @ ikh.T + K @ COV @ K.T, rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize("which", [0, 1])
+def test_update_landmarks_takes_the_mount_the_sightings_carry(model, which):
+    a, b, c = (_filters(model)[which] for _ in range(3))
+    z = range_bearing(a.x, np.array(LANDMARKS[2]), sensor=MOUNT) + np.array([0.01, -0.01])
+    a.update_landmarks(RangeBearing(0, [2], [z[0]], [z[1]], cov=[COV], sensor_pose=MOUNT))
+    b.update_landmark(2, z, cov=COV, sensor_pose=MOUNT)
+    c.update_landmarks(RangeBearing(0, [2], [z[0]], [z[1]], cov=[COV]))     # taken as centred
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.P, b.P)
+    assert not np.allclose(a.x, c.x)
 
 
 @pytest.mark.parametrize("which", [0, 1])

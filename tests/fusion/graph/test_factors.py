@@ -24,6 +24,7 @@ from fusion.graph.factors import (
     calibration_walk_factor,
     landmark_key,
     motion_factor,
+    mounted_range_bearing_factor,
     observe_landmarks,
     pose_key,
     predict_range_bearing,
@@ -41,6 +42,7 @@ from fusion.graph.preintegration import (
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
+from fusion.sensor_pose import SensorPose
 from lti_motion.arx import ArxFit
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import integrate_poses
@@ -521,3 +523,54 @@ def test_group_factor_jacobians_match_numerical_derivatives(group):
         numeric = numericalDerivative11(error_at, x0)
         np.testing.assert_allclose(analytic[:, 3 * m:3 * m + numeric.shape[1]], numeric,
                                    atol=1e-8)
+
+
+MOUNTS = [SensorPose(0.15, 0.0, 0.0), SensorPose(-0.1, 0.06, 0.5)]
+
+
+@pytest.mark.parametrize("mount", MOUNTS, ids=repr)
+@pytest.mark.parametrize("cov", [None, [[4e-4, 1.5e-4], [1.5e-4, 1e-4]]])
+def test_mounted_range_bearing_factor_jacobians_match_numerical_derivatives(mount, cov):
+    rng = np.random.default_rng(21)
+    for _ in range(5):
+        pose = gtsam.Pose2(*rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi))
+        point = rng.uniform(-4, 4, 2)
+        obs = RangeBearing(0, [3], [2.0], [0.3], cov=None if cov is None else [cov],
+                           sensor_pose=mount)
+        [f] = range_bearing_factors(obs, landmark_noise=LandmarkNoise())
+        assert isinstance(f, gtsam.CustomFactor)
+        values = _pose_and_point_values(pose, point)
+        sqrt_info = np.linalg.cholesky(np.linalg.inv(f.noiseModel().covariance())).T
+        a_whitened, _ = f.linearize(values).jacobian()
+        analytic = np.linalg.solve(sqrt_info, a_whitened)          # unwhiten
+        for key, sl, x0 in ((pose_key(0), slice(0, 3), pose),
+                            (landmark_key(3), slice(3, 5), point)):
+            def error_at(x, key=key, values=values, f=f):
+                moved = gtsam.Values(values)
+                moved.update(key, x)
+                return f.unwhitenedError(moved)
+
+            np.testing.assert_allclose(analytic[:, sl], numericalDerivative11(error_at, x0),
+                                       atol=1e-8)
+
+
+def test_mounted_factor_is_zero_at_the_truth_and_centred_it_is_gtsams_own():
+    pose, point = gtsam.Pose2(0.3, -0.2, 0.4), np.array([2.0, 1.0])
+    values = _pose_and_point_values(pose, point)
+    mount = MOUNTS[1]
+    b, r = predict_range_bearing(np.array([0.3, -0.2, 0.4]), point, sensor_pose=mount)
+    sensor = pose.compose(gtsam.Pose2(mount.x_m, mount.y_m, mount.yaw_rad))
+    assert float(b) == pytest.approx(sensor.bearing(point).theta(), abs=1e-12)
+    assert float(r) == pytest.approx(sensor.range(point), abs=1e-12)
+    [f] = range_bearing_factors(RangeBearing(0, [3], [float(r)], [float(b)], sensor_pose=mount),
+                                landmark_noise=LandmarkNoise())
+    np.testing.assert_allclose(f.unwhitenedError(values), 0.0, atol=1e-12)
+    noise = gtsam.noiseModel.Gaussian.Covariance(np.array([[1e-4, 2e-5], [2e-5, 4e-4]]), False)
+    ours = mounted_range_bearing_factor(pose_key(0), landmark_key(3), 2.3, 0.1,
+                                        sensor_pose=SensorPose(), noise=noise)
+    native = gtsam.BearingRangeFactor2D(pose_key(0), landmark_key(3), gtsam.Rot2(0.1), 2.3, noise)
+    np.testing.assert_allclose(ours.unwhitenedError(values), native.unwhitenedError(values),
+                               atol=1e-12)
+    a, _ = ours.linearize(values).jacobian()
+    n, _ = native.linearize(values).jacobian()
+    np.testing.assert_allclose(a, n, rtol=1e-9, atol=1e-9)

@@ -31,7 +31,8 @@ from fusion.landmarks.aruco import (
 )
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap, load_marker_map, save_marker_map
-from fusion.range_bearing import RangeBearing
+from fusion.range_bearing import RangeBearing, range_bearing
+from fusion.sensor_pose import SensorPose
 
 K500 = CameraIntrinsics.pinhole(fx_px=500.0)           # 640 x 480, centred, no distortion
 MOUNT = CameraMount(x_m=0.1, z_m=0.2)                  # 0.1 m forward, 0.2 m up, looking forward
@@ -46,10 +47,16 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _true_range_bearing(pose: np.ndarray, m: MarkerLandmark) -> tuple[float, float]:
-    """Range and bearing of a marker centre from the map and the rendering pose only."""
-    dx, dy = m.x_m - pose[0], m.y_m - pose[1]
-    return math.hypot(dx, dy), _wrap(math.atan2(dy, dx) - pose[2])
+def _true_range_bearing(pose: np.ndarray, m: MarkerLandmark,
+                        mount: CameraMount = MOUNT) -> tuple[float, float]:
+    """Range and bearing of a marker centre from the camera: from the map, the rendering pose
+    and the camera's mount only (the camera's foot at pose + R(theta) (x_m, y_m), its axis
+    at theta + yaw_rad)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    cam_x = pose[0] + c * mount.x_m - s * mount.y_m
+    cam_y = pose[1] + s * mount.x_m + c * mount.y_m
+    dx, dy = m.x_m - cam_x, m.y_m - cam_y
+    return math.hypot(dx, dy), _wrap(math.atan2(dy, dx) - pose[2] - mount.yaw_rad)
 
 
 def _random_scene(rng: np.random.Generator) -> tuple[np.ndarray, MarkerMap]:
@@ -144,8 +151,15 @@ GEOMETRIES = [  # range [m], bearing [rad], turn away from facing the camera [ra
 ]
 
 
+def _marker_xy(r, b, mount=MOUNT):
+    """Where a marker at range r and bearing b from the camera is, the robot at the origin."""
+    return (mount.x_m + r * math.cos(mount.yaw_rad + b),
+            mount.y_m + r * math.sin(mount.yaw_rad + b))
+
+
 def _exact_corners(r, b, turn, z, mount=MOUNT, intr=K500):
-    m = MarkerLandmark(1, r * math.cos(b), r * math.sin(b), z_m=z, yaw_rad=b + math.pi + turn)
+    m = MarkerLandmark(1, *_marker_xy(r, b, mount), z_m=z,
+                       yaw_rad=mount.yaw_rad + b + math.pi + turn)
     cam = SyntheticCamera(intr, mount=mount)
     return cam.visible_corners_px(MarkerMap([m], marker_size_m=SIZE_M), np.zeros(3))[1]
 
@@ -164,12 +178,13 @@ def test_exact_corners_give_the_exact_range_bearing_and_obliquity(r, b, turn, z)
                                              noise=NO_BIAS)
     assert o.range_m[0] == pytest.approx(r, abs=1e-9)
     assert o.bearing_rad[0] == pytest.approx(b, abs=1e-9)
+    assert o.sensor_pose == MOUNT.sensor_pose()
     cam_xy = np.array([MOUNT.x_m, 0.0])
-    marker_xy = r * np.array([math.cos(b), math.sin(b)])
+    marker_xy = np.array(_marker_xy(r, b))
     to_cam = cam_xy - marker_xy
     to_cam3 = np.append(to_cam, MOUNT.z_m - z)
     normal = np.array([math.cos(b + math.pi + turn), math.sin(b + math.pi + turn), 0.0])
-    expected = math.acos(normal @ to_cam3 / np.linalg.norm(to_cam3))
+    expected = math.acos(min(1.0, normal @ to_cam3 / np.linalg.norm(to_cam3)))
     assert obliquity_rad == pytest.approx(expected, abs=1e-6)
 
 
@@ -201,7 +216,10 @@ def test_an_exactly_symmetric_view_still_gives_a_pose():
                     [305.5341623937994, 281.0516299852051],
                     [221.21523696611615, 281.7527280118952]])
     o = observation_from_corners(1, raw, K500, marker_size_m=SIZE_M, mount=MOUNT)
-    assert o.range_m[0] == pytest.approx(1.0, abs=0.01) and abs(o.bearing_rad[0] - 0.1) < 1e-3
+    # the marker 1.0 m from the axle centre, 0.1 rad left (from the camera 0.1 m ahead)
+    x = MOUNT.x_m + o.range_m[0] * math.cos(o.bearing_rad[0])
+    y = o.range_m[0] * math.sin(o.bearing_rad[0])
+    assert math.hypot(x, y) == pytest.approx(1.0, abs=0.01) and abs(math.atan2(y, x) - 0.1) < 1e-3
 
 
 def test_covariance_grows_with_range_and_obliquity():
@@ -234,13 +252,23 @@ def test_edge_bias_correction_is_linear_and_invertible(rng):
 
 
 def test_a_mount_yaw_turns_the_bearing():
-    """Yawing the camera 0.3 rad left and the marker with it keeps the camera-frame view."""
-    mount = CameraMount(x_m=0.0, z_m=0.2, yaw_rad=0.3)
-    c = _exact_corners(2.0, 0.3, 0.0, 0.2, mount=mount)
+    """A camera yawed 0.3 rad left, 0.15 m ahead, sees a marker 0.3 rad left of the robot's
+    heading (from the camera) at the image centre: bearing 0 in its own frame, and its
+    mount carried, through which the measurement model puts the marker back."""
+    mount = CameraMount(x_m=0.15, y_m=0.05, z_m=0.2, yaw_rad=0.3, pitch_rad=0.1)
+    m = MarkerLandmark(1, *_marker_xy(2.0, 0.0, mount), z_m=0.2 + 2.0 * math.tan(-0.1),
+                       yaw_rad=0.3 + math.pi)
+    c = SyntheticCamera(K500, mount=mount).visible_corners_px(
+        MarkerMap([m], marker_size_m=SIZE_M), np.zeros(3))[1]
+    assert np.allclose(c.mean(axis=0), K500.camera_matrix[:2, 2], atol=1.0)   # image centre
     o = observation_from_corners(1, c, K500, marker_size_m=SIZE_M, mount=mount,
                                  noise=NO_BIAS)
-    assert o.bearing_rad[0] == pytest.approx(0.3, abs=1e-9)
-    assert np.allclose(c.mean(axis=0), K500.camera_matrix[:2, 2], atol=1.0)   # image centre
+    assert o.bearing_rad[0] == pytest.approx(0.0, abs=1e-9)
+    assert o.range_m[0] == pytest.approx(2.0, abs=1e-9)
+    assert o.sensor_pose == SensorPose(0.15, 0.05, 0.3)
+    np.testing.assert_allclose(
+        range_bearing(np.zeros(3), np.array([m.x_m, m.y_m]), sensor=o.sensor_pose),
+        [o.range_m[0], o.bearing_rad[0]], atol=1e-9)
 
 
 # --- distortion ---------------------------------------------------------------------------

@@ -35,7 +35,13 @@ from fusion.monitoring.scale_odometry import (
     range_bearing_batch,
 )
 from fusion.noise import LandmarkNoise, SlipNoise
-from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_jacobian
+from fusion.range_bearing import (
+    RangeBearing,
+    range_bearing,
+    range_bearing_jacobian,
+    range_bearing_terms,
+)
+from fusion.sensor_pose import SensorPose
 from lti_motion.app.route import ROUTE_LANDMARKS
 from lti_motion.kinematics import pose_step
 
@@ -63,6 +69,24 @@ def test_range_bearing_batch_agrees_with_the_scalar_functions(pose, landmark):
     np.testing.assert_allclose(H[0, :, :3], range_bearing_jacobian(np.array(pose),
                                                                    np.array(landmark)))
     assert np.all(H[0, :, 3:] == 0.0)
+
+
+def test_range_bearing_batch_takes_one_sensor_mount_per_row(rng):
+    """Rows of robots with different sensors: each row is the one model for its mount
+    (fusion.range_bearing eq. 1-2), the pose Jacobian a numerical derivative's."""
+    x = np.column_stack([rng.uniform(-2, 2, (6, 2)), rng.uniform(-3, 3, 6), np.zeros((6, 2))])
+    lxy = rng.uniform(-5, 5, (6, 2))
+    mounts = np.column_stack([rng.uniform(-0.3, 0.3, (6, 2)), rng.uniform(-1, 1, 6)])
+    pred, H = range_bearing_batch(x, lxy, sensor=mounts)
+    for i in range(6):
+        z, h_pose, _ = range_bearing_terms(x[i], lxy[i], sensor=SensorPose(*mounts[i]))
+        np.testing.assert_allclose(pred[i], z, atol=1e-12)
+        np.testing.assert_allclose(H[i, :, :3], h_pose, atol=1e-12)
+        num = np.stack([(range_bearing_batch(x[i:i + 1] + e, lxy[i:i + 1], sensor=mounts[i:i + 1])
+                         [0][0] - range_bearing_batch(x[i:i + 1] - e, lxy[i:i + 1],
+                                                      sensor=mounts[i:i + 1])[0][0]) / 2e-6
+                        for e in 1e-6 * np.eye(5)], axis=1)
+        np.testing.assert_allclose(H[i], num, rtol=1e-6, atol=1e-8)
 
 
 def _mean_step(x, deltas, m_per_tick):
@@ -137,9 +161,10 @@ def test_threshold_follows_the_false_alarm_budget():
         pytest.approx(math.log(3600.0))
 
 
-def _straight_drive(ratio_after, *, change_k=400, steps=1000, noise_rng=None):
+def _straight_drive(ratio_after, *, change_k=400, steps=1000, noise_rng=None, mount=None):
     """0.25 m/s along x past two landmarks; after ``change_k`` the ground travel is
-    ``ratio_after`` times the encoders'. Sightings noise-free unless ``noise_rng``."""
+    ``ratio_after`` times the encoders'. Sightings noise-free unless ``noise_rng``, from a
+    sensor at ``mount`` (default centred) which they carry."""
     mon = ScaleMonitor(5e-4, WHEEL_BASE_M, LANDMARKS, initial_pose=(0.0, 0.0, 0.0))
     x_m, found = 0.0, []
     noise = LandmarkNoise()
@@ -148,10 +173,10 @@ def _straight_drive(ratio_after, *, change_k=400, steps=1000, noise_rng=None):
         seen = RangeBearing.empty()
         if k % 8 == 0:
             j = 1 + k // 8 % 2
-            rb = range_bearing(np.array([x_m, 0.0, 0.0]), LANDMARKS.position(j))
+            rb = range_bearing(np.array([x_m, 0.0, 0.0]), LANDMARKS.position(j), sensor=mount)
             if noise_rng is not None:
                 rb = rb + noise_rng.normal(0.0, 1.0, 2) * [0.02 * rb[0], noise.bearing_std_rad]
-            seen = RangeBearing(k, [j], rb[:1], rb[1:])
+            seen = RangeBearing(k, [j], rb[:1], rb[1:], sensor_pose=mount)
         found += mon.update(0.015 * k, np.array([7.5, 7.5]), [seen])
     return mon, found
 
@@ -173,6 +198,16 @@ def test_a_scale_change_on_a_straight_line_is_found_with_its_size_and_onset(rati
 def test_no_change_no_alarm(rng):
     _, found = _straight_drive(1.0, noise_rng=rng)
     assert found == []
+
+
+def test_a_sensor_ahead_of_the_axle_finds_the_change_as_a_centred_one(rng):
+    mount = SensorPose(0.22, 0.0, 0.0)
+    mon, found = _straight_drive(0.96, noise_rng=rng, mount=mount)
+    assert len(found) == 1 and 6.0 < found[0].t_s < 16.0
+    assert abs(found[0].scale_ratio - 0.96) < 3.0 * found[0].scale_ratio_std
+    assert mon.counts["gated"] <= 2
+    quiet, none = _straight_drive(1.0, noise_rng=rng, mount=mount)
+    assert none == [] and quiet.counts["gated"] <= 2
 
 
 # -- the simulator ---------------------------------------------------------------------------
