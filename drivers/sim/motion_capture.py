@@ -57,7 +57,7 @@ def motion_capture(log: FrameLog, *, rng: np.random.Generator, rate_hz: float = 
 
 
 def intrinsics_drive(dt_s: float, *, speed_m_s: float = 0.2, run_m: float = 2.0,
-                     turn_rad_s: float = 0.5, accel_m_s2: float = 0.2,
+                     turn_rad_s: float = 0.5, accel_m_s2: float = 0.1,
                      wheel_base_m: float = 0.235, repeats: int = 2) -> np.ndarray:
     """Wheel commands of a calibration drive: straight runs and turns both ways.
 

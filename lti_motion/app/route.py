@@ -29,6 +29,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.frames import SensorFrame
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -77,15 +78,25 @@ class Odometry:
 
     Parameters
     ----------
-    m_per_tick : float
-        Encoder scale [m/tick] (calibrated by rotation, or nominal).
-    wheel_base_m : float
+    m_per_tick : float, optional
+        Encoder scale of both wheels [m/tick] (calibrated by rotation, or nominal).
+    wheel_base_m : float, optional
         Nominal wheel base [m].
+    intrinsics : OdometryIntrinsics, optional
+        Each wheel's scale and the wheel base (:mod:`lti_motion.intrinsics_calibration`),
+        instead of the two above.
     """
 
-    def __init__(self, *, m_per_tick: float, wheel_base_m: float) -> None:
-        self.m_per_tick = m_per_tick
-        self.wheel_base_m = wheel_base_m
+    def __init__(self, *, m_per_tick: float | None = None, wheel_base_m: float | None = None,
+                 intrinsics: OdometryIntrinsics | None = None) -> None:
+        if intrinsics is None:
+            if m_per_tick is None or wheel_base_m is None:
+                raise ValueError("Odometry needs m_per_tick and wheel_base_m, or intrinsics")
+            intrinsics = OdometryIntrinsics.symmetric(m_per_tick=m_per_tick,
+                                                      wheel_base_m=wheel_base_m)
+        self.intrinsics = intrinsics
+        self.m_per_tick = intrinsics.m_per_tick
+        self.wheel_base_m = intrinsics.wheel_base_m
 
     def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
         self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
@@ -97,7 +108,7 @@ class Odometry:
         if self._ticks is None:
             self._ticks = ticks
             return self.pose
-        d = _tick_step(self._ticks, ticks) * self.m_per_tick
+        d = self.intrinsics.wheel_travel_m(_tick_step(self._ticks, ticks))
         self._ticks = ticks
         # displacement [m] and turn [rad] over the period
         v, w = body_from_wheel(d, wheel_base_m=self.wheel_base_m).T

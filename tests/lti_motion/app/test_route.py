@@ -137,3 +137,25 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
     est.step(frame, np.zeros((2, 2)), seen)
     assert est.dropped_observations == 1
     assert est.smoothers[0].n_poses == 2 and est.smoothers[1].n_poses == 1
+
+
+def test_odometry_with_per_wheel_intrinsics_turns_as_its_wheels_say():
+    from lti_motion.frames import SensorFrame
+    from lti_motion.intrinsics import OdometryIntrinsics
+
+    k = OdometryIntrinsics(1.01e-3, 1.0e-3, 0.25)
+    est = Odometry(intrinsics=k)
+    assert est.m_per_tick == pytest.approx(1.005e-3) and est.wheel_base_m == 0.25
+    est.reset(1, np.zeros((1, 3)))
+
+    def frame(ticks):
+        return SensorFrame(t_s=0.0, ticks=np.array([ticks]), light_bump=np.zeros((1, 6), int),
+                           bumps=np.zeros((1, 2), bool), cmd_m_s=np.zeros((1, 2)),
+                           valid=np.array([True]))
+
+    est.step(frame([100, 100]), np.zeros((1, 2)))
+    pose = est.step(frame([1100, 1100]), np.zeros((1, 2)))
+    # equal counts, the left wheel 1% longer per tick: a clockwise turn of 0.01 m / b
+    assert pose[0, 2] == pytest.approx(-0.01 / 0.25, rel=1e-9)
+    with pytest.raises(ValueError, match="m_per_tick and wheel_base_m, or intrinsics"):
+        Odometry(m_per_tick=1e-3)
