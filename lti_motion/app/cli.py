@@ -7,7 +7,9 @@ demo
     (Table II) for every estimator; writes a report folder.
 calibrate
     Run the calibration manoeuvres on the simulator or a real robot, fit the
-    encoder scale, FIR and ARX models, save them and their plots.
+    encoder scale, FIR and ARX models, save them and their plots; or, with
+    ``--log LOG --reference FILE.tum``, both wheels' scale and the wheel base of a
+    recorded drive against a pose reference (``docs/intrinsics.md``).
 replay
     Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
     there is ground truth, TUM trajectories for ``evo``, plots.
@@ -34,6 +36,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from drivers.sim.config import FLOORS, load_robot
+from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
@@ -50,6 +53,12 @@ FLOOR_HELP = "simulated floor (default: the robot's)"
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.log:                                    # odometry intrinsics of a recorded drive
+        from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
+
+        return run_intrinsics_calibration(args)
+    if args.reference:
+        raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
     from drivers.sim.calibration import (
         calibrate_simulator,
         print_progress,
@@ -226,6 +235,10 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
                        help=f"calibrate {ROBOT_HELP}")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    where.add_argument("--log", metavar="LOG.npz",
+                       help="a recorded drive: with --reference, calibrate both wheels' scale "
+                            "and the wheel base")
+    add_intrinsics_arguments(cal)
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "
