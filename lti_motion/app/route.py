@@ -188,8 +188,12 @@ class ArxHybrid:
         if self._ticks is None:
             y_meas = y_hat
         else:
-            d = _tick_step(self._ticks, ticks) * (m.m_per_tick / m.dt_s)
-            y_meas = body_from_wheel(d, wheel_base_m=m.wheel_base_m)
+            step = _tick_step(self._ticks, ticks)
+            if m.intrinsics is None:
+                d, base = step * (m.m_per_tick / m.dt_s), m.wheel_base_m
+            else:                                   # each wheel's own scale
+                d, base = m.intrinsics.wheel_travel_m(step) / m.dt_s, m.intrinsics.wheel_base_m
+            y_meas = body_from_wheel(d, wheel_base_m=base)
         self._ticks = ticks
         self.z = self.z @ self._a.T + cmd_m_s @ self._b.T + y_meas @ m.K.T
         self.pose = pose_step(self.pose, y_hat[:, 0], y_hat[:, 1], m.dt_s)
