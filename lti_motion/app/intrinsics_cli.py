@@ -36,6 +36,9 @@ def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor-pose", action="store_true",
                         help="the reference tracks a sensor off the axle centre: estimate its "
                              "pose on the robot too")
+    parser.add_argument("--into-model", metavar="MODEL.json",
+                        help="with --log: also write a copy of this model file carrying the "
+                             "intrinsics (model_intrinsics.json in --out)")
     parser.add_argument("--encoders", choices=("commanded", "quadrature"), default="commanded",
                         help="encoder type: commanded (Roomba / Create 2, default) or quadrature")
 
@@ -98,7 +101,17 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
         "sensor_pose": cal.sensor_pose.tolist(), "covariance": cal.covariance.tolist(),
         "undetermined": list(cal.report.undetermined), "log": str(args.log),
         "reference": str(args.reference)}, indent=2) + "\n")
+    written = [path]
+    if args.into_model:
+        from lti_motion.model import MotionModel
+
+        if not Path(args.into_model).is_file():
+            raise FileNotFoundError(f"no model file {args.into_model}")
+        model = MotionModel.load(args.into_model)
+        k = cal.intrinsics
+        written.append(model.updated(intrinsics=k, m_per_tick=k.m_per_tick).save(
+            out / "model_intrinsics.json"))
     for line in _summary(cal):
         print(line)
-    print(f"wrote {path}")
+    print(f"wrote {', '.join(str(p) for p in written)}")
     return 0

@@ -58,6 +58,28 @@ def test_bad_input_is_one_line_and_exit_2(drive, capsys, extra, message):
     assert "Error:" not in err and "PoseReferenceError" not in err
 
 
+def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, capsys):
+    from lti_motion.fir import FirFit
+    from lti_motion.model import MotionModel
+
+    fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
+                 residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps")
+    model = MotionModel.from_fir(fit, dt_s=0.015, wheel_base_m=0.235, m_per_tick=4.4e-4,
+                                 calibrated_at="2026-01-01T00:00:00+00:00")
+    path = model.save(tmp_path / "model.json")
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--into-model", str(path), "--out", str(tmp_path / "o")]) == 0
+    loaded = MotionModel.load(tmp_path / "o" / "model_intrinsics.json")
+    assert loaded.intrinsics is not None
+    assert loaded.intrinsics.diameter_ratio == pytest.approx(1.01, rel=2e-3)
+    assert loaded.m_per_tick == pytest.approx(loaded.intrinsics.m_per_tick)
+    assert np.array_equal(loaded.A, model.A)
+    capsys.readouterr()
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--into-model", str(tmp_path / "none.json"), "--out", str(tmp_path / "p")]) == 2
+    assert "no model file" in capsys.readouterr().err
+
+
 def test_reference_without_log_is_refused(capsys):
     assert main(["calibrate", "--robot", "create2", "--reference", "x.tum"]) == 2
     assert "--reference goes with --log" in capsys.readouterr().err
