@@ -24,17 +24,27 @@ Figures:
     The same robot and route with the demo's rotation-calibrated scale (no target).
 ``intrinsics.default_odometry_tile_m``
     The default robot's odometry row on tile (no target): what the floor alone costs.
+``intrinsics.landmarks_*``
+    The same calibration drive with the reference the EKF with landmarks instead of
+    motion capture (an ARX model calibrated on this robot, the route's four landmarks
+    at 2 Hz): worst errors over 10 seeds, and the route closure of 5 of them (no targets).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+from types import SimpleNamespace
+
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark
+from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import RobotParams, Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive, motion_capture
 from drivers.sim.simulator import Simulator
-from lti_motion.app.route import Odometry, drive_route
+from fusion.noise import LandmarkNoise
+from lti_motion.app.route import ROUTE_LANDMARKS, EkfEstimator, Odometry, _observe, drive_route
+from lti_motion.calibration import CalibrationPlan
 from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
 from lti_motion.excitation import rotation_in_place
 from lti_motion.intrinsics import OdometryIntrinsics
@@ -45,6 +55,7 @@ FLOOR = "tile"
 ROUTE_SEEDS = range(30)
 CAL_SEEDS = range(20)
 CLOSURE_CAL_SEEDS = range(5)
+LANDMARK_SEEDS = range(10)
 REPEATS = 6
 
 
@@ -95,6 +106,35 @@ def straight_line_truth(params: RobotParams, log, cmd: np.ndarray) -> np.ndarray
     return np.array([*(travel * params.period_s / counts), b])
 
 
+def landmark_calibration_run(params: RobotParams, seed: int, model
+                             ) -> tuple[OdometryIntrinsics, np.ndarray]:
+    """As :func:`calibration_run`, the reference the EKF with landmarks (the route's four
+    landmarks, range-bearing at 2 Hz, the route's sensor noise) over the same drive."""
+    cmd = intrinsics_drive(params.period_s, repeats=REPEATS)
+    start = np.array([[0.5, 0.5, 0.0]])
+    sim = Simulator(params, seed=[seed], floor=FLOOR, room=Room.empty(), initial_pose=start)
+    ekf = EkfEstimator(model, landmarks=ROUTE_LANDMARKS)
+    ekf.reset(1, start)
+    rng = np.random.default_rng([seed, 0x1A4D])
+    stride = round(1.0 / (2.0 * params.period_s))
+    t_s, ticks, body, poses = [], [], [], []
+    for k in range(len(cmd)):
+        frame = sim.step(cmd[k:k + 1])
+        # the landmark sensor is the physical world's side: it reads the truth
+        obs = _observe(ROUTE_LANDMARKS, frame.true_pose, k + 1, stride=stride,
+                       noise=LandmarkNoise(), rng=rng)
+        seen = replace(frame, true_pose=None, true_body_m_s=None)
+        poses.append(ekf.step(seen, np.round(cmd[k:k + 1] * 1000.0) / 1000.0, obs)[0].copy())
+        t_s.append(frame.t_s[0])
+        ticks.append(frame.ticks[0])
+        body.append(frame.true_body_m_s[0])             # for scoring only
+    t_s, ticks, poses = np.array(t_s), np.array(ticks), np.array(poses)
+    cal = calibrate_intrinsics(t_s, ticks, t_s[::7], poses[::7], sensor_pose=False,
+                               encoders="commanded", position_std_m=0.02, heading_std_rad=0.02)
+    truth_log = SimpleNamespace(true_body_m_s=np.array(body), ticks=ticks)
+    return cal.intrinsics, straight_line_truth(params, truth_log, cmd)
+
+
 def closure(params: RobotParams, odometry: Odometry, *, floor: str = FLOOR) -> np.ndarray:
     """Closure offsets [m] of encoder odometry on the route, one per route seed."""
     res = drive_route(params, odometry, seeds=list(ROUTE_SEEDS), floor=floor)
@@ -121,7 +161,23 @@ def run() -> list[Figure]:
                                      wheel_base_m=default.wheel_base_m), floor=own)
     base_tile = closure(default, Odometry(m_per_tick=rotation_scale(default),
                                           wheel_base_m=default.wheel_base_m))
+    model = calibrate_simulator(params, seed=0, floor=FLOOR,
+                                plan=CalibrationPlan(seed=2, excitation_s=60.0)).arx
+    lm_errors, lm_closure = [], []
+    for seed in LANDMARK_SEEDS:
+        est, truth = landmark_calibration_run(params, seed, model)
+        got = np.array([est.m_per_tick_left, est.m_per_tick_right, est.wheel_base_m])
+        lm_errors.append(np.abs(100.0 * (got / truth - 1.0)))
+        if seed in CLOSURE_CAL_SEEDS:
+            lm_closure.append(closure(params, Odometry(intrinsics=est)))
+    lm_errors = np.array(lm_errors)
     return [
+        Figure("intrinsics.landmarks_wheel_scale_error_pct", float(lm_errors[:, :2].max()), "%",
+               better="lower"),
+        Figure("intrinsics.landmarks_wheel_base_error_pct", float(lm_errors[:, 2].max()), "%",
+               better="lower"),
+        Figure("intrinsics.landmarks_odometry_closure_m", float(np.mean(lm_closure)), "m",
+               better="lower"),
         Figure("intrinsics.wheel_scale_error_pct", float(errors[:, :2].max()), "%",
                target=0.1, better="lower"),
         Figure("intrinsics.wheel_base_error_pct", float(errors[:, 2].max()), "%",
