@@ -25,6 +25,7 @@ import numpy as np
 from lti_motion.encoder_scale import RotationPeriod, encoder_scale_m_per_tick, rotation_period_ticks
 from lti_motion.excitation import random_held_normal, rotation_in_place, step_sequence
 from lti_motion.frames import FrameLog, SensorFrame
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.odometry import body_speeds_from_ticks, stream_clock, unwrap_ticks
 
@@ -187,7 +188,9 @@ def drive(robot: Robot, cmd_m_s: np.ndarray, *,
     return FrameLog.from_frames(frames, dt_s=robot.dt_s, meta=meta)
 
 
-def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
+def speeds_from_log(log: FrameLog, *, m_per_tick: float | None = None,
+                    wheel_base_m: float | None = None,
+                    intrinsics: OdometryIntrinsics | None = None,
                     encoders: Literal["quadrature", "commanded"] = "commanded",
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Commands and encoder body speeds, aligned for identification.
@@ -196,7 +199,8 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     start; the body speeds ``y[k]`` are the encoder speeds over that period,
     timed on the robot's sensor clock (:func:`~lti_motion.odometry.stream_clock`).
     ``encoders="commanded"`` (the default, for the Roomba / Create 2 and the
-    simulator) restores the wheels' direction around reversals.
+    simulator) restores the wheels' direction around reversals. The encoder scale is
+    ``m_per_tick`` and ``wheel_base_m``, or each wheel's in ``intrinsics``.
 
     Returns
     -------
@@ -207,7 +211,7 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     """
     t_s = stream_clock(log.t_s, log.dt_s)
     y = body_speeds_from_ticks(log.ticks, t_s, m_per_tick=m_per_tick, wheel_base_m=wheel_base_m,
-                               encoders=encoders)
+                               intrinsics=intrinsics, encoders=encoders)
     return log.cmd_m_s[1:], y
 
 

@@ -155,7 +155,8 @@ def body_speeds_from_ticks(
         deltas = unfold_commanded_direction(deltas)
     elif encoders != "quadrature":
         raise ValueError(f"encoders must be 'quadrature' or 'commanded', got {encoders!r}")
-    wheel = intrinsics.wheel_travel_m(deltas) / dt[:, None]
+    scale = np.array([intrinsics.m_per_tick_left, intrinsics.m_per_tick_right])
+    wheel = deltas * (scale / dt[:, None])         # the same rounding as one m_per_tick
     return body_from_wheel(wheel, wheel_base_m=intrinsics.wheel_base_m)
 
 
