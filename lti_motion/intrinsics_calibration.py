@@ -50,11 +50,13 @@ __all__ = ["IdentifiabilityReport", "IntrinsicsCalibration", "calibrate_intrinsi
 
 _log = logging.getLogger(__name__)
 
-#: A reference interval counts as a turn above this rotation [rad] ...
-_TURN_RAD = 0.2
-#: ... and as a straight run below this rotation [rad] over at least _STRAIGHT_M [m].
-_STRAIGHT_RAD = 0.05
-_STRAIGHT_M = 0.1
+#: The report looks at the reference in windows of this length [s]: a window counts as
+#: a turn above _TURN_RAD [rad], as a straight run below _STRAIGHT_RAD [rad] over at
+#: least _STRAIGHT_M [m].
+_WINDOW_S = 1.0
+_TURN_RAD = 0.1
+_STRAIGHT_RAD = 0.03
+_STRAIGHT_M = 0.05
 #: Above this condition number the rotation cannot separate the two wheels.
 _MAX_CONDITION = 1e3
 
@@ -66,9 +68,10 @@ class IdentifiabilityReport:
     Attributes
     ----------
     turns_left, turns_right : int
-        Reference intervals turning counter-clockwise / clockwise by more than 0.2 rad.
+        1 s windows of the reference turning counter-clockwise / clockwise by more
+        than 0.1 rad.
     straight_runs : int
-        Intervals turning less than 0.05 rad while travelling at least 0.1 m.
+        1 s windows turning less than 0.03 rad while travelling at least 0.05 m.
     rotation_condition : float
         Condition number of the rotation step's design matrix (tick increments,
         columns scaled to unit norm); large means the wheels are not separated.
@@ -221,9 +224,12 @@ def _sensor_motion(o: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.stack([cl * px + sl * py, -sl * px + cl * py, o[:, 2]], axis=1)
 
 
-def _report(iv: _Intervals) -> IdentifiabilityReport:
-    rot = iv.ref_motion[:, 2]
-    dist = np.hypot(iv.ref_motion[:, 0], iv.ref_motion[:, 1])
+def _report(iv: _Intervals, rt: np.ndarray, rp: np.ndarray) -> IdentifiabilityReport:
+    """Turns and straight runs counted over 1 s windows of the reference (independent of
+    the interval length), and the rotation step's condition number."""
+    step = max(1, round(_WINDOW_S / float(np.median(np.diff(rt)))))
+    rot = np.diff(np.unwrap(rp[:, 2])[::step])
+    dist = np.hypot(*np.diff(rp[::step, :2], axis=0).T)
     left, right = int(np.sum(rot > _TURN_RAD)), int(np.sum(rot < -_TURN_RAD))
     straight = int(np.sum((np.abs(rot) < _STRAIGHT_RAD) & (dist >= _STRAIGHT_M)))
     x = iv.dn_total / np.maximum(np.linalg.norm(iv.dn_total, axis=0), 1e-12)
@@ -397,15 +403,17 @@ def calibrate_intrinsics(
     if not np.any(d):
         raise UnidentifiableError("the encoders did not move: nothing to calibrate")
     iv = _intervals(t, counts, rt, rp, interval_s, overlap=overlap)
-    report = _report(iv)
+    report = _report(iv, rt, rp)
     if report.turns_left + report.turns_right == 0:
         raise UnidentifiableError("the reference shows no turns: the wheel base and the "
                                   "left/right scale ratio are not determined; turn the robot "
                                   "(both ways) during the drive")
     if report.rotation_condition > _MAX_CONDITION:
         raise UnidentifiableError(
-            f"the wheels always moved in one proportion (condition {report.rotation_condition:.3g}"
-            "): add straight runs to the turns, or turns to the straight runs")
+            f"over intervals of {interval_s:g} s the wheels always moved in one proportion "
+            f"(condition {report.rotation_condition:.3g}): add straight runs to the turns or "
+            "turns to the straight runs, or give a shorter interval_s if the manoeuvres "
+            "alternate faster than that")
     closed, pose = _closed_form(iv, sensor_pose=sensor_pose)
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
     p, cov, rms = _refine(iv, closed, pose, sensor_pose=sensor_pose, sigma=sigma)

@@ -134,3 +134,24 @@ def test_reference_of_another_robot_is_rejected(rng):
 def test_errors_are_calibration_and_value_errors():
     assert issubclass(PoseReferenceError, CalibrationError)
     assert issubclass(UnidentifiableError, ValueError)
+
+
+def test_turns_in_place_both_ways_cannot_separate_the_wheels(rng):
+    t, ticks, poses = _drive([[-250, 250], [250, -250]] * 3, [3.0, 3.0] * 3)
+    rt, rp = _reference(rng, poses, t)
+    with pytest.raises(UnidentifiableError, match="one proportion"):
+        calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=2.0)
+
+
+def test_arcs_both_ways_without_straight_runs_work_and_say_so(rng):
+    t, ticks, poses = _drive([[500, 300], [300, 500]] * 3, [3.0, 3.0] * 3)
+    rt, rp = _reference(rng, poses, t)
+    cal = calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=2.0,
+                               position_std_m=0.003, heading_std_rad=0.0052)
+    assert cal.report.turns_left > 0 and cal.report.turns_right > 0
+    assert cal.report.straight_runs == 0
+    assert any("no straight runs" in note for note in cal.report.undetermined)
+    assert cal.intrinsics.diameter_ratio == pytest.approx(TRUE.diameter_ratio, rel=3e-3)
+    # manoeuvres alternating as fast as the intervals: the message says what to change
+    with pytest.raises(UnidentifiableError, match="shorter interval_s"):
+        calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=6.0)
