@@ -33,6 +33,7 @@ from lti_motion.excitation import (
     step_sequence,
 )
 from lti_motion.frames import FrameLog, SensorFrame
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.odometry import unwrap_ticks
 from lti_motion.recording import Recording
@@ -198,7 +199,9 @@ def drive(robot: Robot, cmd_m_s: np.ndarray, *,
     return FrameLog.from_frames(frames, dt_s=robot.dt_s, meta=meta)
 
 
-def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
+def speeds_from_log(log: FrameLog, *, m_per_tick: float | None = None,
+                    wheel_base_m: float | None = None,
+                    intrinsics: OdometryIntrinsics | None = None,
                     encoders: Literal["quadrature", "commanded"] = "commanded",
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Commands and encoder body speeds, aligned for identification.
@@ -210,7 +213,8 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     duplicated frames never raise). Frames marked invalid (lost) are skipped:
     the next valid frame's counts span the gap (:func:`lti_motion.resample.on_grid`).
     ``encoders="commanded"`` (the default, for the Roomba / Create 2 and the
-    simulator) restores the wheels' direction around reversals.
+    simulator) restores the wheels' direction around reversals. The encoder scale is
+    ``m_per_tick`` and ``wheel_base_m``, or each wheel's in ``intrinsics``.
 
     Returns
     -------
@@ -220,6 +224,9 @@ def speeds_from_log(log: FrameLog, *, m_per_tick: float, wheel_base_m: float,
     speeds : ndarray, shape (P, 2)
         Body speeds (v [m/s], w [rad/s]) over the same periods.
     """
+    if intrinsics is not None:                      # each wheel's own scale
+        m_per_tick = np.array([intrinsics.m_per_tick_left, intrinsics.m_per_tick_right])
+        wheel_base_m = intrinsics.wheel_base_m
     grid = on_grid(Recording.from_frame_log(log), wheel_base_m=wheel_base_m,
                    m_per_tick=m_per_tick, encoders=encoders)
     return grid.cmd_m_s, grid.speeds

@@ -17,7 +17,9 @@ __all__ = [
     "NonFiniteError",
     "NotExcitedError",
     "NotPeriodicError",
+    "PoseReferenceError",
     "ShapeError",
+    "UnidentifiableError",
     "UnstableModelError",
 ]
 
@@ -61,6 +63,16 @@ class CalibrationShapeError(ShapeError, CalibrationError):
 class CalibrationNonFiniteError(NonFiniteError, CalibrationError):
     """Calibration inputs hold NaN or infinite samples; both a ``NonFiniteError`` and a
     ``CalibrationError``."""
+
+
+class UnidentifiableError(CalibrationError):
+    """The motion cannot determine the odometry intrinsics (e.g. no turns, or turns one way
+    only with no straight runs); the message says what the drive lacks."""
+
+
+class PoseReferenceError(CalibrationError):
+    """A pose reference does not fit the encoder record (no time overlap, non-finite poses,
+    another robot's trajectory)."""
 
 
 class LogFileError(ModelFileError):

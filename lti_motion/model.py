@@ -56,6 +56,7 @@ from lti_motion.exceptions import (
 from lti_motion.excitation import DEFAULT_MAX_CONDITION, StepSequence, check_runs
 from lti_motion.fir import FirFit, StateSpace, fir_state_space, simulate_state_space
 from lti_motion.fir_steps import fir_from_steps
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import integrate_poses
 from lti_motion.metrics import fit_percent
 from lti_motion.persistence import decode_array, encode_array, read_document, write_document
@@ -63,6 +64,7 @@ from lti_motion.persistence import decode_array, encode_array, read_document, wr
 __all__ = [
     "COVARIANCE_JITTER",
     "FORMAT",
+    "READ_VERSIONS",
     "VERSION",
     "MotionModel",
     "fit_arx",
@@ -77,9 +79,11 @@ _log = logging.getLogger(__name__)
 #: Added to the diagonals of ``Q`` and ``R`` so both are positive definite:
 #: a standard deviation of 1e-6 (m/s or rad/s), far below encoder resolution.
 COVARIANCE_JITTER = 1e-12
-#: Format name and version of saved models.
+#: Format name and version of saved models. Version 2 adds ``"intrinsics"`` (each
+#: wheel's scale and the wheel base, or null); version 1 files are still read.
 FORMAT = "lti-motion/motion-model"
-VERSION = 1
+VERSION = 2
+READ_VERSIONS = (1, 2)
 
 
 def noise_covariances(k: np.ndarray, r: np.ndarray, *, q_scale: float = 1.0
@@ -209,6 +213,10 @@ class MotionModel:
         ISO 8601 time of the calibration.
     m_per_tick : float or None
         Encoder scale [m/tick] (paper eq. 13), when measured.
+    intrinsics : OdometryIntrinsics or None
+        Each wheel's scale and the wheel base (:mod:`lti_motion.intrinsics_calibration`),
+        when calibrated against a pose reference; :attr:`encoder_intrinsics` falls back
+        on ``m_per_tick`` and ``wheel_base_m``.
     floor : str or None
         The surface the model was calibrated on.
     q_scale : float
@@ -272,6 +280,7 @@ class MotionModel:
     m_per_tick: float | None = None
     floor: str | None = None
     q_scale: float = 1.0
+    intrinsics: OdometryIntrinsics | None = None
     diagnostics: Mapping[str, float] = field(default_factory=dict)
     selection: ArxSelection | None = field(default=None, repr=False)
 
@@ -303,6 +312,9 @@ class MotionModel:
             if not (np.isfinite(self.m_per_tick) and self.m_per_tick > 0):
                 raise ValueError(f"m_per_tick must be positive or None, got {self.m_per_tick}")
             setf(self, "m_per_tick", float(self.m_per_tick))
+        if self.intrinsics is not None and not isinstance(self.intrinsics, OdometryIntrinsics):
+            raise ValueError(f"intrinsics must be an OdometryIntrinsics or None, got "
+                             f"{type(self.intrinsics).__name__}")
         datetime.fromisoformat(self.calibrated_at)  # ValueError if not ISO 8601
         mags = np.abs(np.linalg.eigvals(self.A)) if nz else np.zeros(0)
         if mags.size and mags.max() >= 1:
@@ -321,6 +333,17 @@ class MotionModel:
     def n_states(self) -> int:
         """State dimension ``nz``."""
         return self.A.shape[0]
+
+    @property
+    def encoder_intrinsics(self) -> OdometryIntrinsics | None:
+        """The counts-to-travel mapping: :attr:`intrinsics`, else both wheels at
+        ``m_per_tick`` with ``wheel_base_m``; None without an encoder scale."""
+        if self.intrinsics is not None:
+            return self.intrinsics
+        if self.m_per_tick is None:
+            return None
+        return OdometryIntrinsics.symmetric(m_per_tick=self.m_per_tick,
+                                            wheel_base_m=self.wheel_base_m)
 
     @property
     def S(self) -> np.ndarray:
@@ -532,6 +555,7 @@ class MotionModel:
             "orders": dict(self.orders), "diagnostics": dict(self.diagnostics),
             "coefficients": {k: encode_array(v) for k, v in self.coefficients.items()},
             "matrices": {n: encode_array(getattr(self, n)) for n in "ABCDKQR"},
+            "intrinsics": None if self.intrinsics is None else self.intrinsics.as_dict(),
         }
         return write_document(path, payload, fmt=FORMAT, version=VERSION)
 
@@ -547,17 +571,23 @@ class MotionModel:
             If the file is damaged or truncated, of another format or version,
             lacks keys, or holds an invalid model.
         """
-        doc = read_document(path, fmt=FORMAT, versions=(VERSION,))
+        doc = read_document(path, fmt=FORMAT, versions=READ_VERSIONS)
         keys = ("kind", "dt_s", "wheel_base_m", "m_per_tick", "floor", "calibrated_at",
                 "q_scale", "orders", "diagnostics", "coefficients", "matrices")
         matrices = doc.get("matrices") if isinstance(doc.get("matrices"), dict) else {}
         missing = [k for k in keys if k not in doc]
         missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in matrices]
+        if doc["version"] >= 2 and "intrinsics" not in doc:
+            missing.append("intrinsics")
         if missing:
             raise ModelFileError(f"{path} lacks the keys {missing}; it is not a model file "
                                  "that lti-motion wrote")
         try:
+            intrinsics = doc.get("intrinsics")
+            if intrinsics is not None:
+                intrinsics = OdometryIntrinsics(**intrinsics)
             return cls(
+                intrinsics=intrinsics,
                 kind=doc["kind"], dt_s=doc["dt_s"], wheel_base_m=doc["wheel_base_m"],
                 m_per_tick=doc["m_per_tick"], floor=doc["floor"],
                 calibrated_at=doc["calibrated_at"], q_scale=doc["q_scale"],

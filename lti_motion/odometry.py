@@ -15,6 +15,7 @@ import numpy as np
 
 from lti_motion.clocks import assign_periods
 from lti_motion.exceptions import ShapeError
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel
 
 __all__ = [
@@ -87,8 +88,9 @@ def body_speeds_from_ticks(
     ticks: np.ndarray,
     t_s: np.ndarray,
     *,
-    m_per_tick: float,
-    wheel_base_m: float,
+    m_per_tick: float | None = None,
+    wheel_base_m: float | None = None,
+    intrinsics: OdometryIntrinsics | None = None,
     encoders: Literal["quadrature", "commanded"] = "quadrature",
 ) -> np.ndarray:
     """Body speeds (v, w) over each frame interval from raw encoder counts.
@@ -99,10 +101,13 @@ def body_speeds_from_ticks(
         Raw counts (left, right) of consecutive frames.
     t_s : ndarray, shape (n,)
         Frame timestamps [s].
-    m_per_tick : float
-        Encoder scale [m/tick] (paper eq. 13).
-    wheel_base_m : float
+    m_per_tick : float, optional
+        Encoder scale of both wheels [m/tick] (paper eq. 13); with ``wheel_base_m``,
+        or give ``intrinsics`` instead.
+    wheel_base_m : float, optional
         Distance between the wheels' contact points [m].
+    intrinsics : OdometryIntrinsics, optional
+        Each wheel's scale and the wheel base (unequal wheels); excludes the two above.
     encoders : {"quadrature", "commanded"}
         ``"commanded"`` for encoders that count in the commanded direction
         (Roomba / Create 2): the sign around reversals is restored with
@@ -119,8 +124,23 @@ def body_speeds_from_ticks(
     ShapeError
         If the shapes do not match.
     ValueError
-        If timestamps do not increase, or ``wheel_base_m`` is not positive.
+        If timestamps do not increase, ``wheel_base_m`` is not positive, or the
+        scales are given both ways or not at all.
+
+    Examples
+    --------
+    >>> k = OdometryIntrinsics(1e-3, 1e-3, 0.25)
+    >>> body_speeds_from_ticks(np.array([[0, 0], [10, 30]]), np.array([0.0, 0.1]),
+    ...                        intrinsics=k).round(9).tolist()
+    [[0.2, 0.8]]
     """
+    if intrinsics is None:
+        if m_per_tick is None or wheel_base_m is None:
+            raise ValueError("give the encoder scale: m_per_tick and wheel_base_m, or intrinsics")
+        intrinsics = OdometryIntrinsics.symmetric(m_per_tick=m_per_tick,
+                                                  wheel_base_m=wheel_base_m)
+    elif m_per_tick is not None or wheel_base_m is not None:
+        raise ValueError("give either intrinsics or m_per_tick and wheel_base_m, not both")
     ticks = np.asarray(ticks)
     t_s = np.asarray(t_s, dtype=float)
     if ticks.ndim != 2 or ticks.shape[1] != 2 or t_s.shape != (ticks.shape[0],):
@@ -136,8 +156,9 @@ def body_speeds_from_ticks(
         deltas = unfold_commanded_direction(deltas)
     elif encoders != "quadrature":
         raise ValueError(f"encoders must be 'quadrature' or 'commanded', got {encoders!r}")
-    wheel = deltas * (m_per_tick / dt[:, None])
-    return body_from_wheel(wheel, wheel_base_m=wheel_base_m)
+    scale = np.array([intrinsics.m_per_tick_left, intrinsics.m_per_tick_right])
+    wheel = deltas * (scale / dt[:, None])         # the same rounding as one m_per_tick
+    return body_from_wheel(wheel, wheel_base_m=intrinsics.wheel_base_m)
 
 
 def stream_clock(t_s: np.ndarray, dt_s: float) -> np.ndarray:

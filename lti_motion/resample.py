@@ -86,7 +86,7 @@ class GridSignals:
 
 
 def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
-                m_per_tick: float | None, wheel_radius_m: float | None,
+                m_per_tick: float | np.ndarray | None, wheel_radius_m: float | None,
                 encoders: str) -> np.ndarray:
     """Cumulative wheel travel [m] (or body travel [m, rad]) at the used frames."""
     v = rec.wheel.values[used]
@@ -160,7 +160,8 @@ def _pose_at(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray) -> np.ndar
                     axis=1)
 
 
-def on_grid(rec: Recording, *, wheel_base_m: float, m_per_tick: float | None = None,
+def on_grid(rec: Recording, *, wheel_base_m: float,
+            m_per_tick: float | np.ndarray | None = None,
             wheel_radius_m: float | None = None,
             encoders: Literal["quadrature", "commanded"] = "quadrature",
             max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S) -> GridSignals:
@@ -172,8 +173,9 @@ def on_grid(rec: Recording, *, wheel_base_m: float, m_per_tick: float | None = N
         Any wheel and command kind.
     wheel_base_m : float
         Distance between the wheels' contact points [m].
-    m_per_tick : float, optional
-        Encoder scale [m/tick] (paper eq. 13); needed for counts.
+    m_per_tick : float or ndarray of shape (2,), optional
+        Encoder scale [m/tick] (paper eq. 13), or each wheel's (left, right)
+        (:class:`lti_motion.intrinsics.OdometryIntrinsics`); needed for counts.
     wheel_radius_m : float, optional
         Wheel radius [m]; needed for wheel angles and speeds in rad/s.
     encoders : {"quadrature", "commanded"}

@@ -357,7 +357,10 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
         raise MissingEncoderScaleError.needed_by("smoothing a log (speeds from its counts)")
     if method not in ("isam2", "batch"):
         raise ValueError(f"method must be 'isam2' or 'batch', got {method!r}")
-    u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
+    if model.intrinsics is None:
+        u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
+    else:                                   # each wheel's own scale (docs/intrinsics.md)
+        u, y = speeds_from_log(log, intrinsics=model.intrinsics)
     frames = np.zeros(0, np.int64) if observations is None else observations.index
     kf = log_keyframes(len(u), every=keyframe_every, extra=frames)
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y,

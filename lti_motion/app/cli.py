@@ -9,6 +9,8 @@ calibrate
     Run the calibration manoeuvres on the simulator or a real robot, fit the
     encoder scale, FIR and ARX models, save them and their plots; or, with
     ``--log``, fit the ARX model offline on any recorded drive.
+    ``--log LOG --reference FILE.tum``, both wheels' scale and the wheel base of a
+    recorded drive against a pose reference (``docs/intrinsics.md``).
 replay
     Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
     there is ground truth, TUM trajectories for ``evo``, plots.
@@ -36,6 +38,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from drivers.sim.config import FLOORS, load_robot
+from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
@@ -78,6 +81,10 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.log and args.reference:                 # odometry intrinsics of a recorded drive
+        from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
+
+        return run_intrinsics_calibration(args)
     if args.log:
         return _cmd_calibrate_log(args)
     from lti_motion.app.calibrate_run import run_calibrate
@@ -225,11 +232,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="calibrate the ARX model offline from a recorded drive of any "
                             "differential drive (.npz, docs/log_format.md); prints an "
                             "excitation report; the encoder scale then comes from "
-                            "--m-per-tick, --wheel-radius or --robot")
+                            "--m-per-tick, --wheel-radius or --robot; with --reference, both "
+                            "wheels' scale and the wheel base instead (docs/intrinsics.md)")
     cal.add_argument("--m-per-tick", type=float, default=None,
                      help="with --log: encoder scale [m/tick] from the robot description")
     cal.add_argument("--wheel-radius", type=float, default=None,
                      help="with --log: wheel radius [m] for wheel angles or speeds in rad/s")
+    add_intrinsics_arguments(cal)
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "
@@ -398,6 +407,8 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     if not (args.sim or args.port or args.log):
         raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot) "
                          "or --log FILE (a recorded drive)")
+    if args.reference and not args.log:
+        raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
     described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
     if described and not (args.port or args.log) and args.wheel_base is not None:
         raise ValueError(f"--wheel-base is for --port and --log; the simulated {args.sim} has "

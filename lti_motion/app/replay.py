@@ -72,12 +72,13 @@ def _expand(src: ReplaySource) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
-    if model.m_per_tick is None:
+    k = model.encoder_intrinsics             # each wheel's scale, else the one m_per_tick
+    if k is None:
         raise MissingEncoderScaleError.needed_by("encoder odometry")
     rows = np.flatnonzero(src.valid)
-    d = tick_deltas(src.ticks[rows], axis=0) * model.m_per_tick      # wheel travel [m]
+    d = k.wheel_travel_m(tick_deltas(src.ticks[rows], axis=0))       # wheel travel [m]
     # displacement and turn over each interval, integrated with unit steps (paper eq. 11)
-    moves = body_from_wheel(d, wheel_base_m=model.wheel_base_m)
+    moves = body_from_wheel(d, wheel_base_m=k.wheel_base_m)
     at_valid = integrate_poses(moves, 1.0, initial_pose=pose0)
     # frames whose readings were lost keep the last pose
     return at_valid[np.maximum(np.searchsorted(rows, np.arange(len(src)), side="right") - 1, 0)]

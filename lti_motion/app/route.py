@@ -29,6 +29,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.frames import SensorFrame
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -82,15 +83,25 @@ class Odometry:
 
     Parameters
     ----------
-    m_per_tick : float
-        Encoder scale [m/tick] (calibrated by rotation, or nominal).
-    wheel_base_m : float
+    m_per_tick : float, optional
+        Encoder scale of both wheels [m/tick] (calibrated by rotation, or nominal).
+    wheel_base_m : float, optional
         Nominal wheel base [m].
+    intrinsics : OdometryIntrinsics, optional
+        Each wheel's scale and the wheel base (:mod:`lti_motion.intrinsics_calibration`),
+        instead of the two above.
     """
 
-    def __init__(self, *, m_per_tick: float, wheel_base_m: float) -> None:
-        self.m_per_tick = m_per_tick
-        self.wheel_base_m = wheel_base_m
+    def __init__(self, *, m_per_tick: float | None = None, wheel_base_m: float | None = None,
+                 intrinsics: OdometryIntrinsics | None = None) -> None:
+        if intrinsics is None:
+            if m_per_tick is None or wheel_base_m is None:
+                raise ValueError("Odometry needs m_per_tick and wheel_base_m, or intrinsics")
+            intrinsics = OdometryIntrinsics.symmetric(m_per_tick=m_per_tick,
+                                                      wheel_base_m=wheel_base_m)
+        self.intrinsics = intrinsics
+        self.m_per_tick = intrinsics.m_per_tick
+        self.wheel_base_m = intrinsics.wheel_base_m
 
     def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
         self.pose = np.array(initial_pose, dtype=float).reshape(n_robots, 3)
@@ -103,7 +114,7 @@ class Odometry:
         valid = _valid(frame, len(ticks))
         # a lost frame is skipped: the next valid frame's counts span the gap
         use = valid & self._anchored
-        d = _tick_step(self._ticks, ticks) * self.m_per_tick
+        d = self.intrinsics.wheel_travel_m(_tick_step(self._ticks, ticks))
         d[~use] = 0.0
         self._ticks = np.where(valid[:, None], ticks, self._ticks)
         self._anchored |= valid
@@ -187,9 +198,13 @@ class ArxHybrid:
         self._since[self._since > 0] += 1
         use = valid & (self._since > 0)
         # over a gap of lost frames: the mean speed since the last valid frame
-        d = _tick_step(self._ticks, ticks) * (m.m_per_tick / m.dt_s)
+        step = _tick_step(self._ticks, ticks)
+        if m.intrinsics is None:
+            d, base = step * (m.m_per_tick / m.dt_s), m.wheel_base_m
+        else:                                   # each wheel's own scale
+            d, base = m.intrinsics.wheel_travel_m(step) / m.dt_s, m.intrinsics.wheel_base_m
         d /= np.maximum(self._since - 1, 1)[:, None]
-        y_meas = np.where(use[:, None], body_from_wheel(d, wheel_base_m=m.wheel_base_m), y_hat)
+        y_meas = np.where(use[:, None], body_from_wheel(d, wheel_base_m=base), y_hat)
         self._ticks = np.where(valid[:, None], ticks, self._ticks)
         self._since[valid] = 1
         self.z = self.z @ self._a.T + cmd_m_s @ self._b.T + y_meas @ m.K.T

@@ -203,7 +203,7 @@ def test_save_load_round_trip_is_exact_and_atomic(kind, arx_model, fir_model, tm
     _same(m, loaded)
     assert loaded.selection is None
     doc = json.loads(path.read_text())
-    assert doc["format"] == FORMAT and doc["version"] == 1
+    assert doc["format"] == FORMAT and doc["version"] == 2
 
 
 def test_failed_write_keeps_the_old_file(arx_model, fir_model, tmp_path, monkeypatch):
@@ -226,7 +226,7 @@ def test_damaged_files_raise_model_file_error(arx_model, tmp_path):
         "truncated": (text[: len(text) // 2], "damaged or truncated"),
         "garbage": ("\x00\xff binary", "damaged or truncated"),
         "edited": (text.replace('"tiles"', '"carpet"'), "checksum"),
-        "version": (text.replace('"version": 1', '"version": 99'), "version 99"),
+        "version": (text.replace('"version": 2', '"version": 99'), "version 99"),
         "format": (text.replace(FORMAT, "something-else"), "not a"),
         "list": ("[1, 2, 3]", "not a"),
     }
@@ -287,3 +287,31 @@ def test_bad_inputs_raise_clear_errors(runs, arx_model):
         arx_model.simulate(np.zeros((10, 3)))
     with pytest.raises(ShapeError, match="speeds has shape"):
         arx_model.predict_one_step(u, y[:-1])
+
+
+def test_model_file_carries_the_intrinsics_and_reads_version_1(arx_model, tmp_path):
+    from lti_motion.intrinsics import OdometryIntrinsics
+
+    k = OdometryIntrinsics(4.49e-4, 4.4455e-4, 0.236)
+    with_k = arx_model.updated(intrinsics=k, m_per_tick=k.m_per_tick)
+    loaded = MotionModel.load(with_k.save(tmp_path / "v2.json"))
+    assert loaded.intrinsics == k and loaded.encoder_intrinsics == k
+    # a version-1 file (no "intrinsics" key) still loads, on its one scale
+    doc = json.loads(arx_model.save(tmp_path / "x.json").read_text())
+    payload = {key: v for key, v in doc.items()
+               if key not in ("format", "version", "sha256", "intrinsics")}
+    write_document(tmp_path / "v1.json", payload, fmt=FORMAT, version=1)
+    old = MotionModel.load(tmp_path / "v1.json")
+    assert old.intrinsics is None
+    if old.m_per_tick is not None:
+        assert old.encoder_intrinsics == OdometryIntrinsics.symmetric(
+            m_per_tick=old.m_per_tick, wheel_base_m=old.wheel_base_m)
+    # a version-2 file without the key, or with nonsense in it, is refused
+    write_document(tmp_path / "v2bad.json", payload, fmt=FORMAT, version=2)
+    with pytest.raises(ModelFileError, match=r"lacks the keys \['intrinsics'\]"):
+        MotionModel.load(tmp_path / "v2bad.json")
+    payload["intrinsics"] = {"m_per_tick_left": -1.0, "m_per_tick_right": 4e-4,
+                             "wheel_base_m": 0.2}
+    write_document(tmp_path / "v2neg.json", payload, fmt=FORMAT, version=2)
+    with pytest.raises(ModelFileError, match="m_per_tick_left must be a positive"):
+        MotionModel.load(tmp_path / "v2neg.json")

@@ -469,3 +469,18 @@ def test_example_runs_on_a_short_horizon(example, model, phi, tmp_path):
     summary = example.run(seed=1, duration_s=20.0, out=out, model=model, speed_covariance=phi)
     assert out.stat().st_size > 10_000
     assert summary["ate_smoother_m"] < 0.02 < summary["ate_dead_reckoning_m"]
+
+
+def test_a_model_with_intrinsics_smooths_on_each_wheels_scale(model, phi, landmarks, nominal):
+    from lti_motion.intrinsics import OdometryIntrinsics
+
+    run = nominal[0]
+    kwargs = dict(initial_pose=run.log.true_pose[0], observations=run.obs, landmarks=landmarks,
+                  speed_covariance=phi, method="batch", mode="one_step")   # encoder-aided
+    plain = smooth_log(model, run.log, **kwargs)
+    same = smooth_log(model.updated(intrinsics=OdometryIntrinsics.symmetric(
+        m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)), run.log, **kwargs)
+    np.testing.assert_array_equal(same.poses, plain.poses)
+    skew = smooth_log(model.updated(intrinsics=OdometryIntrinsics(
+        1.02 * model.m_per_tick, model.m_per_tick, model.wheel_base_m)), run.log, **kwargs)
+    assert np.abs(skew.poses - plain.poses).max() > 1e-4

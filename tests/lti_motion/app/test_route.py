@@ -137,3 +137,61 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
     est.step(frame, np.zeros((2, 2)), seen)
     assert est.dropped_observations == 1
     assert est.smoothers[0].n_poses == 2 and est.smoothers[1].n_poses == 1
+
+
+def test_odometry_with_per_wheel_intrinsics_turns_as_its_wheels_say():
+    from lti_motion.frames import SensorFrame
+    from lti_motion.intrinsics import OdometryIntrinsics
+
+    k = OdometryIntrinsics(1.01e-3, 1.0e-3, 0.25)
+    est = Odometry(intrinsics=k)
+    assert est.m_per_tick == pytest.approx(1.005e-3) and est.wheel_base_m == 0.25
+    est.reset(1, np.zeros((1, 3)))
+
+    def frame(ticks):
+        return SensorFrame(t_s=0.0, ticks=np.array([ticks]), light_bump=np.zeros((1, 6), int),
+                           bumps=np.zeros((1, 2), bool), cmd_m_s=np.zeros((1, 2)),
+                           valid=np.array([True]))
+
+    est.step(frame([100, 100]), np.zeros((1, 2)))
+    pose = est.step(frame([1100, 1100]), np.zeros((1, 2)))
+    # equal counts, the left wheel 1% longer per tick: a clockwise turn of 0.01 m / b
+    assert pose[0, 2] == pytest.approx(-0.01 / 0.25, rel=1e-9)
+    with pytest.raises(ValueError, match="m_per_tick and wheel_base_m, or intrinsics"):
+        Odometry(m_per_tick=1e-3)
+
+
+def test_models_with_intrinsics_map_counts_per_wheel(cal):
+    from lti_motion.app.replay import _odometry
+    from lti_motion.app.replay_sources import ReplaySource
+    from lti_motion.frames import SensorFrame
+    from lti_motion.intrinsics import OdometryIntrinsics
+
+    model = cal.arx
+    same = model.updated(intrinsics=OdometryIntrinsics.symmetric(
+        m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m))
+    skew = model.updated(intrinsics=OdometryIntrinsics(
+        1.01 * model.m_per_tick, model.m_per_tick, model.wheel_base_m))
+    n = 200
+    ticks = np.cumsum(np.full((n, 2), 20), axis=0)
+    src = ReplaySource(name="t", t_s=np.arange(n) * 0.015, periods=np.ones(n, int),
+                       cmd_m_s=np.full((n, 2), 0.2), valid=np.ones(n, bool), dt_s=0.015,
+                       ticks=ticks)
+    pose0 = np.zeros(3)
+    np.testing.assert_allclose(_odometry(src, same, pose0), _odometry(src, model, pose0),
+                               rtol=0, atol=1e-12)
+    turned = _odometry(src, skew, pose0)[-1, 2]        # equal counts, larger left wheel
+    assert turned == pytest.approx(-0.01 * model.m_per_tick * 20 * (n - 1) / model.wheel_base_m,
+                                   rel=1e-9)
+    runs = {}
+    for name, m in (("plain", model), ("same", same), ("skew", skew)):
+        est = ArxHybrid(m)
+        est.reset(1, np.zeros((1, 3)))
+        for k in range(50):
+            frame = SensorFrame(t_s=k * 0.015, ticks=ticks[k:k + 1] % 65536,
+                                light_bump=np.zeros((1, 6), int), bumps=np.zeros((1, 2), bool),
+                                cmd_m_s=np.full((1, 2), 0.2), valid=np.array([True]))
+            pose = est.step(frame, np.full((1, 2), 0.2))
+        runs[name] = pose.copy()
+    np.testing.assert_allclose(runs["same"], runs["plain"], rtol=0, atol=1e-9)
+    assert abs(runs["skew"][0, 2] - runs["plain"][0, 2]) > 1e-6

@@ -1,0 +1,93 @@
+"""``lti-motion calibrate --log LOG --reference FILE.tum``: a recorded drive and a motion
+capture give both wheels' scale; bad input is one line and exit 2."""
+
+import json
+
+import numpy as np
+import pytest
+
+from drivers.sim.config import Room, get_preset
+from drivers.sim.motion_capture import intrinsics_drive, motion_capture
+from drivers.sim.simulator import Simulator
+from lti_motion.app.cli import main
+from lti_motion.logfile import save_log
+from lti_motion.tum import write_tum
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("intrinsics")
+    params = get_preset("create2", wheel_diameter_errors=(0.01, 0.0))
+    log = Simulator(params, seed=4, room=Room.empty(), initial_pose=(0, 0, 0)).run(
+        intrinsics_drive(params.period_s, repeats=1))
+    t, poses = motion_capture(log, rng=np.random.default_rng(4))
+    return {"log": save_log(folder / "drive.npz", log),
+            "ref": write_tum(folder / "mocap.tum", t, poses),
+            "late": write_tum(folder / "late.tum", t + 1e4, poses),
+            "straight": write_tum(folder / "straight.tum", t, np.zeros_like(poses)),
+            "folder": folder, "params": params}
+
+
+def test_writes_intrinsics_and_prints_them(drive, capsys):
+    out = drive["folder"] / "out"
+    code = main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--out", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "left wheel" in text and "wheel base" in text
+    result = json.loads((out / "intrinsics.json").read_text())["intrinsics"]
+    ratio = result["m_per_tick_left"] / result["m_per_tick_right"]
+    assert ratio == pytest.approx(1.01, rel=2e-3)
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--reference", "late"], "overlap"),
+    (["--reference", "straight"], "no turns"),
+    (["--reference", "missing"], "missing.tum"),
+])
+def test_bad_input_is_one_line_and_exit_2(drive, capsys, extra, message):
+    args = ["calibrate", "--log", str(drive["log"]), "--out", str(drive["folder"] / "bad")]
+    if extra:
+        name = extra[1]
+        path = drive.get(name, drive["folder"] / f"{name}.tum")
+        args += ["--reference", str(path)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert "Error:" not in err and "PoseReferenceError" not in err
+
+
+def test_a_reference_without_a_log_is_one_line_and_exit_2(drive, capsys):
+    # --log alone is the offline model calibration; --reference needs the drive it refers to
+    assert main(["calibrate", "--robot", "create2", "--reference", str(drive["folder"] / "x.tum"),
+                 "--out", str(drive["folder"] / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "--reference goes with --log" in err and err.count("\n") == 1
+    assert not (drive["folder"] / "bad").exists()
+
+
+def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, capsys):
+    from lti_motion.fir import FirFit
+    from lti_motion.model import MotionModel
+
+    fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
+                 residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps")
+    model = MotionModel.from_fir(fit, dt_s=0.015, wheel_base_m=0.235, m_per_tick=4.4e-4,
+                                 calibrated_at="2026-01-01T00:00:00+00:00")
+    path = model.save(tmp_path / "model.json")
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--into-model", str(path), "--out", str(tmp_path / "o")]) == 0
+    loaded = MotionModel.load(tmp_path / "o" / "model_intrinsics.json")
+    assert loaded.intrinsics is not None
+    assert loaded.intrinsics.diameter_ratio == pytest.approx(1.01, rel=2e-3)
+    assert loaded.m_per_tick == pytest.approx(loaded.intrinsics.m_per_tick)
+    assert np.array_equal(loaded.A, model.A)
+    capsys.readouterr()
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--into-model", str(tmp_path / "none.json"), "--out", str(tmp_path / "p")]) == 2
+    assert "no model file" in capsys.readouterr().err
+
+
+def test_reference_without_log_is_refused(capsys):
+    assert main(["calibrate", "--robot", "create2", "--reference", "x.tum"]) == 2
+    assert "--reference goes with --log" in capsys.readouterr().err
