@@ -141,8 +141,13 @@ class DynamicsAlarm:
         Start of the window at which that CUSUM last left zero (for the
         start test: the anchor window of that start) [s].
     lag_periods : float
-        Least-squares lag since the onset, ``sum a / sum b`` [periods]
-        (NaN without lag information).
+        Least-squares lag since the lag CUSUM last left zero, ``sum a / sum b``
+        [periods] (NaN without lag information).
+    lag_std_periods : float
+        Its standard deviation ``1 / sqrt(sum b)`` [periods] (``a ~ N(theta b, b)``,
+        module docstring); NaN without lag information. A window without a
+        transient carries ``b ~ 0``: after such windows only, the lag is
+        meaningless (its deviation is huge).
     """
 
     robot: int
@@ -151,6 +156,7 @@ class DynamicsAlarm:
     threshold: float
     onset_s: float
     lag_periods: float
+    lag_std_periods: float = math.nan
 
 
 class DynamicsMonitor:
@@ -309,9 +315,12 @@ class DynamicsMonitor:
         out = []
         for i in np.flatnonzero(np.any(g_new > thresholds, axis=1)):
             j = int(np.argmax(g_new[i] - thresholds))
-            lag = self._ab[i, 0] / self._ab[i, 1] if self._ab[i, 1] > 0 else math.nan
+            info = self._ab[i, 1]
+            lag, lag_std = ((self._ab[i, 0] / info, 1.0 / math.sqrt(info)) if info > 0
+                            else (math.nan, math.nan))
             alarm = DynamicsAlarm(int(i), ("lag", "covariance", "start")[j], float(g_new[i, j]),
-                                  float(thresholds[j]), float(self._left[i, j]), float(lag))
+                                  float(thresholds[j]), float(self._left[i, j]), float(lag),
+                                  float(lag_std))
             self.alarms.append(alarm)
             out.append(alarm)
             self._g[i] = 0.0

@@ -204,6 +204,15 @@ class MonitorOptions:
     refractory_s : float
         After an alarm, the same kind on the same stream is not raised again
         for this long (its statistics restart) [s].
+    startup_s : float
+        Start-up handling of the chi-square gate: encoder innovations within
+        this long after a start from rest (a period whose wheel commands leave
+        zero, :meth:`ResidualMonitor.update_counts`) are counted as
+        ``"startup"`` and tested by none of the innovation tests (gate, bursts,
+        windowed NIS, CUSUM) when the encoder gate is the chi-square one: a
+        linear model misses a start from rest by more than the chi-square tail
+        allows (``docs/monitor.md``). A Phase-I gate (``encoder_gate_nis``)
+        already holds nominal starts; then the option does nothing [s].
     """
 
     dt_s: float = 0.015
@@ -220,6 +229,7 @@ class MonitorOptions:
     stuck_ticks: float = 6.0
     stuck_periods: int = 3
     refractory_s: float = 5.0
+    startup_s: float = 1.0
 
     def __post_init__(self) -> None:
         checks = {"dt_s": self.dt_s > 0, "false_alarms_per_hour": self.false_alarms_per_hour > 0,
@@ -233,7 +243,7 @@ class MonitorOptions:
                   "nis_window": self.nis_window >= 1,
                   "landmark_rate_hz": self.landmark_rate_hz > 0,
                   "stuck_ticks": self.stuck_ticks > 0, "stuck_periods": self.stuck_periods >= 1,
-                  "refractory_s": self.refractory_s >= 0}
+                  "refractory_s": self.refractory_s >= 0, "startup_s": self.startup_s >= 0}
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
             raise FilterOptionError(f"MonitorOptions out of range: {', '.join(bad)} "
@@ -407,8 +417,10 @@ class ResidualMonitor:
     events : list of AlarmEvent
         Every alarm so far, in time order.
     counts : dict of str to int
-        ``"samples"``, ``"glitches"``, ``"missing"`` (NaN innovations) and
-        ``"skipped"`` (records of readings never compared: anchors, gaps).
+        ``"samples"``, ``"glitches"``, ``"missing"`` (NaN innovations),
+        ``"skipped"`` (records of readings never compared: anchors, gaps) and
+        ``"startup"`` (encoder innovations left out after a start from rest,
+        :attr:`MonitorOptions.startup_s`).
 
     Examples
     --------
@@ -447,13 +459,15 @@ class ResidualMonitor:
                                                   * opt.landmark_rate_hz), "scale_changed"),
         }
         self.events: list[AlarmEvent] = []
-        self.counts = {"samples": 0, "glitches": 0, "missing": 0, "skipped": 0}
+        self.counts = {"samples": 0, "glitches": 0, "missing": 0, "skipped": 0, "startup": 0}
         self._t_last = -math.inf
         self._flat = np.zeros(2)             # predicted ticks while the count stayed flat
         self._flat_n = np.zeros(2, dtype=int)
         self._flat_t0 = np.full(2, math.nan)
         self._last_ticks: np.ndarray | None = None
         self._stuck_alarm_t = -math.inf
+        self._at_rest = True                 # the last period's wheel commands were both zero
+        self._start_t = -math.inf            # time of the last start from rest [s]
 
     def thresholds(self, stream: StreamKind = "encoders") -> Thresholds:
         """The thresholds of ``stream``."""
@@ -509,6 +523,9 @@ class ResidualMonitor:
             return []
         w = whiten(nu, S)
         st = self._streams[stream]
+        if stream == "encoders" and self._in_startup(t):
+            self.counts["startup"] += 1
+            return []
         self.counts["samples"] += 1
         st.n_samples += 1
         if st.g_pos is None or st.g_pos.size != w.size:
@@ -525,6 +542,11 @@ class ResidualMonitor:
         raised += self._nis_window(st, t, value, w.size)
         raised += self._cusum(st, t, w)
         return self._emit(raised)
+
+    def _in_startup(self, t: float) -> bool:
+        """Within ``startup_s`` of a start from rest, with the chi-square encoder gate."""
+        return (self.options.encoder_gate_nis is None
+                and t - self._start_t < self.options.startup_s)
 
     def update_commands(self, t_s: float, cmd_m_s: np.ndarray, tick_deltas: np.ndarray
                         ) -> list[AlarmEvent]:
@@ -617,7 +639,8 @@ class ResidualMonitor:
             them a period's evidence is the travel that the command and the
             prediction agree on (Notes); without them, the predicted travel
             alone, which raises false alarms where a stop command meets a
-            model that lags the real stop (``docs/monitor.md``).
+            model that lags the real stop (``docs/monitor.md``). They also
+            mark starts from rest (:attr:`MonitorOptions.startup_s`).
 
         Returns
         -------
@@ -659,6 +682,11 @@ class ResidualMonitor:
         if not (np.all(np.isfinite(d)) and np.all(np.isfinite(v)) and np.all(np.isfinite(c))):
             self.counts["missing"] += 1
             return []
+        if cmd_m_s is not None:
+            moving = bool(np.any(c != 0.0))
+            if moving and self._at_rest:
+                self._start_t = t - self.options.dt_s     # the period began a frame ago
+            self._at_rest = not moving
         # the speed the command and the prediction agree on (Notes); v itself without commands
         v = np.where(np.sign(v) == np.sign(c), np.minimum(np.abs(v), np.abs(c)), 0.0)
         opt = self.options

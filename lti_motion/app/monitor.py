@@ -33,9 +33,11 @@ from types import MappingProxyType
 import numpy as np
 
 from fusion.landmark_map import LandmarkMap
+from fusion.monitoring.dynamics import DynamicsAlarm
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.noise import gate_threshold
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
@@ -45,9 +47,11 @@ from lti_motion.app.monitor_setup import (
     sightings,
 )
 from lti_motion.frames import SensorFrame
+from lti_motion.kinematics import wrap_angle
 from lti_motion.model import MotionModel
 
-__all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames",
+__all__ = ["FAULTS", "MEANINGFUL_LAG_STD_PERIODS", "MonitorRun", "dynamics_detail", "fault_for",
+           "format_alarm", "heading_deg", "monitor_frames",
            "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
            "run_on_simulator"]
 
@@ -63,6 +67,30 @@ FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProx
 })
 
 _WHEEL = MappingProxyType({0: "left wheel", 1: "right wheel"})
+
+#: A dynamics alarm's lag is printed when its standard deviation is at most this [periods]:
+#: ``a ~ N(theta b, b)`` per window (:mod:`fusion.monitoring.dynamics`), so a lag summed
+#: over windows without transients (``b ~ 0``) is noise, however large.
+MEANINGFUL_LAG_STD_PERIODS = 1.0
+
+
+def dynamics_detail(alarm: DynamicsAlarm) -> str:
+    """The sub-test of a dynamics alarm and, from the lag test, its lag when meaningful.
+
+    ``"(lag test, lag 2.4 +- 0.3 periods)"``, ``"(covariance test)"``; the lag only
+    for the lag test and when its standard deviation is at most
+    :data:`MEANINGFUL_LAG_STD_PERIODS` [periods].
+    """
+    lag, std = alarm.lag_periods, alarm.lag_std_periods
+    if (alarm.test == "lag" and math.isfinite(lag) and math.isfinite(std)
+            and std <= MEANINGFUL_LAG_STD_PERIODS):
+        return f"({alarm.test} test, lag {lag:.1f} +- {std:.1f} periods)"
+    return f"({alarm.test} test)"
+
+
+def heading_deg(theta_rad: float) -> float:
+    """A heading [rad], unwrapped or not, in degrees in ``(-180, 180]``."""
+    return math.degrees(float(wrap_angle(theta_rad)))
 
 
 def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
@@ -108,9 +136,15 @@ class MonitorRun:
     events : list of AlarmEvent
         The alarms, in time order.
     counts : dict
-        The monitor's counts (samples, glitches, missing, skipped).
+        The monitor's counts (samples, glitches, missing, skipped, startup).
+    glitch_gate_nis : float
+        The monitor's per-sample glitch gate on the encoder innovations (NIS):
+        a reading above it is a glitch, counted towards a burst.
     encoders_gated : int
-        Encoder readings the EKF's gate rejected.
+        Encoder readings the EKF's own fusion gate kept out of the estimate.
+    fusion_gate_nis : float
+        That gate (NIS; chi-square, ``gate_probability`` of the EKF): a reading
+        above it is not fused, and is no alarm on its own.
     final_pose : ndarray, shape (3,)
         The EKF's last pose (x [m], y [m], theta [rad]) from the origin.
     tests : list of str
@@ -121,7 +155,9 @@ class MonitorRun:
     duration_s: float = 0.0
     events: list[AlarmEvent] = field(default_factory=list)
     counts: dict = field(default_factory=dict)
+    glitch_gate_nis: float = math.nan
     encoders_gated: int = 0
+    fusion_gate_nis: float = math.nan
     final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tests: list[str] = field(default_factory=list)
 
@@ -130,15 +166,20 @@ class MonitorRun:
         by_kind = Counter(e.kind for e in self.events)
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(by_kind.items())) or "none"
         x, y, th = self.final_pose
+        startup = self.counts.get("startup", 0)
         return [
             *self.tests,
             f"monitored {self.frames} frames ({self.duration_s:.1f} s): "
             f"{self.counts.get('samples', 0)} encoder innovations tested, "
-            f"{self.counts.get('glitches', 0)} glitches, {self.counts.get('missing', 0)} "
-            f"missing, {self.encoders_gated} readings gated by the EKF",
+            f"{self.counts.get('missing', 0)} missing"
+            + (f", {startup} left untested after starts from rest" if startup else ""),
+            f"two gates: {self.counts.get('glitches', 0)} glitches above the monitor's glitch "
+            f"gate (NIS {self.glitch_gate_nis:.4g}; 3 within 20 readings make a burst); "
+            f"{self.encoders_gated} readings not fused by the EKF (its own fusion gate, "
+            f"NIS {self.fusion_gate_nis:.3g}; no alarm)",
             f"alarms: {len(self.events)} ({kinds})",
-            f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {math.degrees(th):.1f} deg "
-            "(from the start)",
+            f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {heading_deg(th):.1f} deg "
+            "(from the start, in (-180, 180])",
         ]
 
 
@@ -192,15 +233,15 @@ def monitor_frames(model: MotionModel,
 
     def relay(event: AlarmEvent) -> None:
         if on_alarm_line is not None:
-            a = event.dynamics
-            detail = "" if a is None else f"({a.test} test, lag {a.lag_periods:.1f} periods)"
+            detail = "" if event.dynamics is None else dynamics_detail(event.dynamics)
             on_alarm_line(format_alarm(event, detail=detail))
         if on_alarm is not None:
             on_alarm(event)
 
     mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
                          fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
-    run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks))
+    run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
+                     glitch_gate_nis=mf.monitor.thresholds().gate)
     for item in frames:
         frame, seen = item if isinstance(item, tuple) else (item, None)
         if on_frame is not None:
@@ -210,6 +251,8 @@ def monitor_frames(model: MotionModel,
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
+        if mf.ekf.gate_probability is not None:
+            run.fusion_gate_nis = gate_threshold(mf.ekf.gate_probability, 2)
         run.final_pose = mf.ekf.pose
     run.events = list(mf.events)
     run.counts = dict(mf.monitor.counts)
@@ -222,16 +265,17 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     gate = mon.thresholds().gate
     lines = []
     if nominal is None:
-        lines.append(f"tests: encoder gate NIS {gate:.1f} (chi-square) with glitch bursts, "
+        lines.append(f"tests: glitch gate NIS {gate:.4g} (chi-square) with glitch bursts, "
                      "stuck encoder, windowed NIS and CUSUM on the encoder innovations "
                      "(no nominal drives: dynamics tests off)")
     else:
-        lines.append(f"tests: encoder gate NIS {gate:.0f} (nominal maximum "
+        dyn = mon.dynamics
+        ratio = gate / nominal.max_nominal_nis if nominal.max_nominal_nis > 0 else math.inf
+        lines.append(f"tests: glitch gate NIS {gate:.4g} ({ratio:.3g} x the nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
-                     f"dynamics lag and covariance CUSUMs and start test (thresholds "
-                     f"{mon.dynamics.lag_threshold:.2f}, {mon.dynamics.covariance_threshold:.1f}"
-                     f", start {mon.dynamics.start_threshold:.2f};"
-                     f" null from {nominal.n_drives} nominal drives, "
+                     f"dynamics CUSUM thresholds: lag {dyn.lag_threshold:.2f} (from the "
+                     f"nominal drives), covariance {dyn.covariance_threshold:.1f}, start "
+                     f"{dyn.start_threshold:.2f} (null from {nominal.n_drives} nominal drives, "
                      f"{nominal.duration_s / 60.0:.1f} min)")
     if landmarks is not None:
         lines.append(f"       scale test on {len(landmarks.ids)} landmarks at 2 Hz (threshold "

@@ -136,6 +136,8 @@ def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
     out = capsys.readouterr().out
     assert f"driving the robot on {vr.device_path}" in out and "monitored" in out
     assert driven > 200                      # 4 s at 15 ms, robot time
+    # a healthy drive: its start from rest (at 1 s) is no glitch burst, no dynamics change
+    assert "ALARM" not in out and "alarms: 0 (none)" in out, out
 
 
 def test_monitor_port_fits_phase_one_on_recorded_nominal_drives(model_file, tmp_path, capsys):
