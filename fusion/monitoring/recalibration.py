@@ -47,7 +47,8 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   better. The encoder-speed fit [%] of a rescaled model is the old one's
   (both measured and predicted speeds scale), so the record holds the scale
   and wheel base before and after instead.
-- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``): no recalibration;
+- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``): no
+  recalibration;
   recorded as ``"ignored"``.
 
 Every decision is a frozen :class:`RecalibrationRecord` in

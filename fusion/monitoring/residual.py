@@ -26,7 +26,9 @@ Tests on the residual stream, per stream ("encoders" or "landmark"):
    stays flat while the wheel travel that the command and the model's
    prediction agree on (the smaller speed when both point the same way; the
    prediction alone without commands) adds up to ``stuck_ticks`` ticks over
-   at least ``stuck_periods`` periods.
+   at least ``stuck_periods`` periods. With the motor currents, the alarm is
+   ``"stalled_wheel"`` when they say the wheel is blocked
+   (:mod:`fusion.monitoring.wheel_check`).
 
 Tests 4 and 5 raise ``"dynamics_changed"`` on the encoder stream and
 ``"scale_changed"`` on the landmark stream. Optional replacements:
@@ -100,6 +102,7 @@ from fusion.exceptions import (
 from fusion.monitoring.cusum import cusum_threshold
 from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
+from fusion.monitoring.wheel_check import WheelCheck, WheelCheckOptions, WheelVerdict
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
@@ -117,7 +120,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-AlarmKind = Literal["glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed"]
+AlarmKind = Literal["glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed",
+                    "scale_changed"]
 StreamKind = Literal["encoders", "landmark"]
 
 
@@ -133,8 +137,11 @@ class AlarmEvent:
     ----------
     t_s : float
         Time of the sample that raised it [s].
-    kind : {"glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed"}
-        What changed.
+    kind : str
+        What changed: ``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``,
+        ``"dynamics_changed"`` or ``"scale_changed"`` (``"stalled_wheel"``: a
+        stuck check whose wheel's motor current says the wheel is blocked,
+        :mod:`fusion.monitoring.wheel_check`).
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
         ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics) or
@@ -152,6 +159,9 @@ class AlarmEvent:
     dynamics : DynamicsAlarm or None
         For ``"integrated"``: the dynamics test's alarm, with its sub-test
         (lag, covariance or start) and lag estimate.
+    wheel : WheelVerdict or None
+        For ``"stuck"``: what the motor current said (stalled wheel or stuck
+        encoder, and on what evidence).
     """
 
     t_s: float
@@ -163,6 +173,7 @@ class AlarmEvent:
     channel: int | None = None
     scale: ScaleAlarm | None = None
     dynamics: DynamicsAlarm | None = None
+    wheel: WheelVerdict | None = None
 
 
 @dataclass(frozen=True)
@@ -411,6 +422,9 @@ class ResidualMonitor:
         The landmark scale test (:mod:`fusion.monitoring.scale`, one robot), fed
         by :meth:`update_landmarks`. When given, it replaces the windowed NIS
         and CUSUM on the *landmark* innovations; their gate and bursts stay.
+    wheel_check : WheelCheckOptions, optional
+        Settings of the stalled-wheel / stuck-encoder call on motor currents
+        (:mod:`fusion.monitoring.wheel_check`; default settings).
 
     Attributes
     ----------
@@ -440,7 +454,8 @@ class ResidualMonitor:
     def __init__(self, options: MonitorOptions | None = None, *, m_per_tick: float | None = None,
                  on_alarm: Callable[[AlarmEvent], None] | None = None,
                  dynamics: DynamicsMonitor | None = None,
-                 scale: ScaleMonitor | None = None) -> None:
+                 scale: ScaleMonitor | None = None,
+                 wheel_check: WheelCheckOptions | None = None) -> None:
         self.options = options or MonitorOptions()
         self.dynamics = dynamics
         if scale is not None and scale.n_robots != 1:
@@ -466,6 +481,7 @@ class ResidualMonitor:
         self._flat_t0 = np.full(2, math.nan)
         self._last_ticks: np.ndarray | None = None
         self._stuck_alarm_t = -math.inf
+        self._wheel_check = WheelCheck(wheel_check)
         self._at_rest = True                 # the last period's wheel commands were both zero
         self._start_t = -math.inf            # time of the last start from rest [s]
 
@@ -622,7 +638,9 @@ class ResidualMonitor:
 
     def update_counts(self, t_s: float, tick_deltas: np.ndarray,
                       predicted_wheel_m_s: np.ndarray, *,
-                      cmd_m_s: np.ndarray | None = None) -> list[AlarmEvent]:
+                      cmd_m_s: np.ndarray | None = None,
+                      motor_current_a: np.ndarray | None = None,
+                      wheel_overcurrent: np.ndarray | None = None) -> list[AlarmEvent]:
         """Stuck-encoder check on one period's count changes, predicted speeds and commands.
 
         Parameters
@@ -641,13 +659,21 @@ class ResidualMonitor:
             alone, which raises false alarms where a stop command meets a
             model that lags the real stop (``docs/monitor.md``). They also
             mark starts from rest (:attr:`MonitorOptions.startup_s`).
+        motor_current_a : array_like, shape (2,), optional
+            (left, right) wheel motor currents of the period [A], where the
+            robot reports them: a flat count with a blocked wheel's current
+            is a ``"stalled_wheel"`` (:mod:`fusion.monitoring.wheel_check`).
+        wheel_overcurrent : array_like of bool, shape (2,), optional
+            (left, right) overcurrent flags of the period (Open Interface packet 14).
 
         Returns
         -------
         list of AlarmEvent
-            A ``"stuck_encoder"`` alarm when a wheel's count stayed flat while
-            the evidence reached ``stuck_ticks`` over at least
-            ``stuck_periods`` periods.
+            A ``"stuck_encoder"`` or ``"stalled_wheel"`` alarm (test
+            ``"stuck"``) when a wheel's count stayed flat while the evidence
+            reached ``stuck_ticks`` over at least ``stuck_periods`` periods and
+            the motor current decided which (:attr:`AlarmEvent.wheel`; a
+            blocked wheel's current is awaited up to ``decide_periods``).
 
         Raises
         ------
@@ -698,13 +724,17 @@ class ResidualMonitor:
         self._flat_t0[start] = t - opt.dt_s            # the flat period began a frame ago
         self._flat = np.where(flat, self._flat + predicted_ticks, 0.0)
         self._flat_n = np.where(flat, self._flat_n + 1, 0)
+        self._wheel_check.update(flat, d, motor_current_a, wheel_overcurrent)
         raised = []
         if t - self._stuck_alarm_t >= opt.refractory_s:
             for wheel in np.flatnonzero((self._flat >= opt.stuck_ticks)
                                         & (self._flat_n >= opt.stuck_periods)):
-                raised.append(AlarmEvent(t, "stuck_encoder", "stuck", float(self._flat[wheel]),
+                verdict = self._wheel_check.verdict(int(wheel))
+                if verdict is None:                 # a high current: wait for a stall
+                    continue
+                raised.append(AlarmEvent(t, verdict.kind, "stuck", float(self._flat[wheel]),
                                          opt.stuck_ticks, float(self._flat_t0[wheel]),
-                                         int(wheel)))
+                                         int(wheel), wheel=verdict))
                 self._stuck_alarm_t = t
                 break
         return self._emit(raised)
@@ -722,8 +752,10 @@ class ResidualMonitor:
             st.glitch_t.popleft()
         if len(st.glitch_idx) < opt.burst_count or not self._allowed(st, "glitch_burst", t):
             return []
-        # a stuck encoder explains its own glitches: one alarm, not two
-        if t - self._stuck_alarm_t < opt.refractory_s and stream == "encoders":
+        # a stuck encoder or a stalled wheel explains its own glitches: one alarm, not two
+        # (also while the stuck check awaits the motor current's verdict)
+        stuck_now = np.any((self._flat >= opt.stuck_ticks) & (self._flat_n >= opt.stuck_periods))
+        if stream == "encoders" and (t - self._stuck_alarm_t < opt.refractory_s or stuck_now):
             return []
         st.last_alarm["glitch_burst"] = t
         onset = st.glitch_t[0]

@@ -37,6 +37,7 @@ from fusion.monitoring.dynamics import DynamicsAlarm
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.monitoring.wheel_check import WheelVerdict
 from fusion.noise import gate_threshold
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
@@ -50,14 +51,27 @@ from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import wrap_angle
 from lti_motion.model import MotionModel
 
-__all__ = ["FAULTS", "MEANINGFUL_LAG_STD_PERIODS", "MonitorRun", "dynamics_detail", "fault_for",
-           "format_alarm", "heading_deg", "monitor_frames",
-           "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
-           "run_on_simulator"]
+__all__ = [
+    "FAULTS",
+    "MEANINGFUL_LAG_STD_PERIODS",
+    "MonitorRun",
+    "dynamics_detail",
+    "fault_for",
+    "format_alarm",
+    "heading_deg",
+    "monitor_frames",
+    "monitor_route",
+    "nominal_from_logs",
+    "nominal_on_simulator",
+    "run_on_port",
+    "run_on_simulator",
+    "wheel_detail",
+]
 
 #: ``--fault`` choices -> (simulator fault kind, its parameters, the alarm expected).
 FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProxyType({
     "stuck-encoder": ("stuck_encoder", MappingProxyType({"wheel": "left"}), "stuck_encoder"),
+    "stall": ("stall", MappingProxyType({"wheel": "left", "duration_s": 2.0}), "stalled_wheel"),
     "spikes": ("encoder_spikes", MappingProxyType({"rate_hz": 20.0, "duration_s": 1.0}),
                "glitch_burst"),
     "payload": ("payload", MappingProxyType({"payload_kg": 1.8}), "dynamics_changed"),
@@ -88,6 +102,24 @@ def dynamics_detail(alarm: DynamicsAlarm) -> str:
     return f"({alarm.test} test)"
 
 
+def wheel_detail(verdict: WheelVerdict) -> str:
+    """Why a flat count is a stalled wheel or a stuck encoder, in a person's words."""
+    if verdict.evidence == "no currents":
+        return "(no motor currents reported: a blocked wheel would look the same)"
+    if verdict.evidence == "overcurrent":
+        return "(the robot reports a wheel overcurrent: the wheel is blocked)"
+    low, ref = verdict.min_current_a * 1000.0, verdict.reference_current_a * 1000.0
+    running = f" against {ref:.0f} mA while driving" if math.isfinite(ref) else ""
+    if verdict.kind == "stalled_wheel":
+        return f"(motor current {low:.0f} mA{running}: the wheel is blocked)"
+    return f"(motor current {low:.0f} mA{running}: the wheel turns, its encoder does not count)"
+
+
+def _nis(value: float) -> str:
+    """A NIS gate as printed: one decimal below 1000 (55.3), none above (2667)."""
+    return f"{value:.1f}" if value < 1000 else f"{value:.0f}"
+
+
 def heading_deg(theta_rad: float) -> float:
     """A heading [rad], unwrapped or not, in degrees in ``(-180, 180]``."""
     return math.degrees(float(wrap_angle(theta_rad)))
@@ -112,15 +144,18 @@ def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
     where = ""
     if event.channel is not None:
         where = (_WHEEL.get(event.channel, f"channel {event.channel}")
-                 if event.kind == "stuck_encoder" else f"channel {event.channel}")
+                 if event.test == "stuck" else f"channel {event.channel}")
+    if event.wheel is not None:
+        where = " ".join(part for part in (where, wheel_detail(event.wheel)) if part)
     if event.scale is not None:
         a = event.scale
         where = (f"travel x{a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f}, turn "
                  f"x{a.yaw_ratio:.4f} +- {a.yaw_ratio_std:.4f}")
     tail = " ".join(part for part in (where, detail) if part)
+    onset = f"onset {event.onset_s:.3f} s"
     return (f"ALARM t={event.t_s:8.3f} s  {event.kind:16s} test {event.test:10s} "
             f"statistic {event.statistic:9.3g} (threshold {event.threshold:.3g})  "
-            f"onset {event.onset_s:.3f} s  {tail}").rstrip()
+            f"{onset}  {tail}").rstrip()
 
 
 @dataclass
@@ -174,7 +209,7 @@ class MonitorRun:
             f"{self.counts.get('missing', 0)} missing"
             + (f", {startup} left untested after starts from rest" if startup else ""),
             f"two gates: {self.counts.get('glitches', 0)} glitches above the monitor's glitch "
-            f"gate (NIS {self.glitch_gate_nis:.4g}; 3 within 20 readings make a burst); "
+            f"gate (NIS {_nis(self.glitch_gate_nis)}; 3 within 20 readings make a burst); "
             f"{self.encoders_gated} readings not fused by the EKF (its own fusion gate, "
             f"NIS {self.fusion_gate_nis:.3g}; no alarm)",
             f"alarms: {len(self.events)} ({kinds})",
@@ -247,7 +282,9 @@ def monitor_frames(model: MotionModel,
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
-        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen)
+        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen,
+                motor_current_a=frame.motor_current_a,
+                wheel_overcurrent=frame.wheel_overcurrent)
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
@@ -265,13 +302,13 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     gate = mon.thresholds().gate
     lines = []
     if nominal is None:
-        lines.append(f"tests: glitch gate NIS {gate:.4g} (chi-square) with glitch bursts, "
+        lines.append(f"tests: glitch gate NIS {_nis(gate)} (chi-square) with glitch bursts, "
                      "stuck encoder, windowed NIS and CUSUM on the encoder innovations "
                      "(no nominal drives: dynamics tests off)")
     else:
         dyn = mon.dynamics
         ratio = gate / nominal.max_nominal_nis if nominal.max_nominal_nis > 0 else math.inf
-        lines.append(f"tests: glitch gate NIS {gate:.4g} ({ratio:.3g} x the nominal maximum "
+        lines.append(f"tests: glitch gate NIS {_nis(gate)} ({ratio:.3g} x the nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
                      f"dynamics CUSUM thresholds: lag {dyn.lag_threshold:.2f} (from the "
                      f"nominal drives), covariance {dyn.covariance_threshold:.1f}, start "
@@ -361,7 +398,9 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
                 full = SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
                                    light_bump=log.light_bump[k], bumps=log.bumps[k],
                                    cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
-                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k])
+                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k],
+                                   motor_current_a=log.motor_current_a[k],
+                                   wheel_overcurrent=log.wheel_overcurrent[k])
                 if record:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
@@ -370,7 +409,9 @@ def run_on_simulator(model: MotionModel, *, preset: str = "create2", duration_s:
                 n += 1
                 # the filter and the monitor get what a robot reports: no truth
                 yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,
-                                   full.cmd_m_s, valid=full.valid), seen)
+                                   full.cmd_m_s, valid=full.valid,
+                                   motor_current_a=full.motor_current_a,
+                                   wheel_overcurrent=full.wheel_overcurrent), seen)
 
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
