@@ -137,6 +137,9 @@ def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
 def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
     """One line a person reads: time, kind, test, statistic / threshold, onset, channel.
 
+    A dynamics alarm's onset is its posterior change time with the interval it
+    states (:mod:`fusion.monitoring.change_time`).
+
     A scale alarm adds its new scale (ground travel and turn per encoder travel
     and turn, with standard deviations); ``detail`` is appended (the dynamics
     sub-test and lag).
@@ -153,6 +156,9 @@ def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
                  f"x{a.yaw_ratio:.4f} +- {a.yaw_ratio_std:.4f}")
     tail = " ".join(part for part in (where, detail) if part)
     onset = f"onset {event.onset_s:.3f} s"
+    d = event.dynamics
+    if d is not None and math.isfinite(d.onset_lo_s) and math.isfinite(d.onset_hi_s):
+        onset += f" (between {d.onset_lo_s:.2f} and {d.onset_hi_s:.2f} s)"
     return (f"ALARM t={event.t_s:8.3f} s  {event.kind:16s} test {event.test:10s} "
             f"statistic {event.statistic:9.3g} (threshold {event.threshold:.3g})  "
             f"{onset}  {tail}").rstrip()

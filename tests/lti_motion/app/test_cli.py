@@ -115,8 +115,8 @@ def test_monitor_sim_runs_the_dynamics_and_scale_tests_after_phase_one(model_fil
                  "--fault", "carpet", "--fault-at", "15", "--nominal-drives", "8"]) == 0
     out = capsys.readouterr().out
     assert "phase I: fitting the dynamics null and the encoder gate on 8 nominal drives" in out
-    assert "dynamics lag and covariance CUSUMs" in out and "scale test on 4 landmarks" in out
-    gate = float(out.split("encoder gate NIS ")[1].split()[0])
+    assert "dynamics CUSUM thresholds: lag" in out and "scale test on 4 landmarks" in out
+    gate = float(out.split("glitch gate NIS ")[1].split()[0])
     assert gate > 55.3                                  # set from the nominal drives
     scale = [line for line in out.splitlines()
              if line.startswith("ALARM") and "scale_changed" in line]
