@@ -51,7 +51,7 @@ from lti_motion.model import MotionModel
 DURATION_S = 60.0
 NOMINAL_H = 10.0
 BATCH = 60
-KINDS = ("glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed")
+KINDS = ("glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed", "scale_changed")
 
 
 def drives(model: MotionModel, seeds: Sequence[int], faults: Sequence[Fault] = ()) -> list:
@@ -71,7 +71,9 @@ def monitored(model: MotionModel, nominal: NominalFit, log, seed: int) -> list[A
     def frames():
         for k in range(len(log.t_s)):
             frame = SensorFrame(float(log.t_s[k]), log.ticks[k], log.light_bump[k],
-                                log.bumps[k], log.cmd_m_s[k], valid=bool(log.valid[k]))
+                                log.bumps[k], log.cmd_m_s[k], valid=bool(log.valid[k]),
+                                motor_current_a=log.motor_current_a[k],
+                                wheel_overcurrent=log.wheel_overcurrent[k])
             yield frame, sightings(log.true_pose[k], k, rng, dt_s=model.dt_s)
 
     return monitor_frames(model, frames(), nominal=nominal, landmarks=MONITOR_LANDMARKS).events

@@ -66,6 +66,12 @@ class SensorFrame:
         Simulator only: true pose (x [m], y [m], heading [rad]).
     true_body_m_s : ndarray, shape (2,), or None
         Simulator only: true body speeds (v [m/s], w [rad/s]).
+    motor_current_a : ndarray, shape (2,), or None
+        Wheel motor currents (left, right) [A], where the robot reports them
+        (Open Interface packets 54-55, the simulator); ``None`` otherwise.
+    wheel_overcurrent : ndarray of bool, shape (2,), or None
+        Wheel overcurrent flags (left, right) where the robot reports them
+        (Open Interface packet 14, the simulator); ``None`` otherwise.
     """
 
     t_s: float
@@ -77,6 +83,8 @@ class SensorFrame:
     valid: bool | np.ndarray = True
     true_pose: np.ndarray | None = None
     true_body_m_s: np.ndarray | None = None
+    motor_current_a: np.ndarray | None = None
+    wheel_overcurrent: np.ndarray | None = None
 
 
 _PER_SAMPLE = MappingProxyType({
@@ -88,6 +96,8 @@ _PER_SAMPLE = MappingProxyType({
     "valid": (),
     "true_pose": (3,),
     "true_body_m_s": (2,),
+    "motor_current_a": (2,),
+    "wheel_overcurrent": (2,),
 })
 
 
@@ -120,6 +130,9 @@ class FrameLog:
         Simulator ground truth, shapes ``(..., n, 3)`` and ``(..., n, 2)``.
     meta : dict
         Free-form description (preset, floor, seed, ...), JSON-serialisable.
+    motor_current_a, wheel_overcurrent : ndarray or None
+        Optional: wheel motor currents [A] and overcurrent flags (bool), shape
+        ``(..., n, 2)``, where the robot reports them (:class:`SensorFrame`).
     """
 
     t_s: np.ndarray
@@ -132,6 +145,8 @@ class FrameLog:
     true_pose: np.ndarray | None = None
     true_body_m_s: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    motor_current_a: np.ndarray | None = None
+    wheel_overcurrent: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         lead = np.shape(self.t_s)
@@ -201,6 +216,10 @@ class FrameLog:
                 cmd_m_s=self.cmd_m_s[k],
                 true_pose=None if self.true_pose is None else self.true_pose[k],
                 true_body_m_s=None if self.true_body_m_s is None else self.true_body_m_s[k],
+                motor_current_a=(None if self.motor_current_a is None
+                                 else self.motor_current_a[k]),
+                wheel_overcurrent=(None if self.wheel_overcurrent is None
+                                   else self.wheel_overcurrent[k]),
             )
 
     @classmethod
@@ -218,6 +237,8 @@ class FrameLog:
         if not frames:
             raise ValueError("FrameLog.from_frames needs at least one frame")
         truth = all(f.true_pose is not None for f in frames)
+        current = all(f.motor_current_a is not None for f in frames)
+        overcurrent = all(f.wheel_overcurrent is not None for f in frames)
         return cls(
             t_s=np.array([f.t_s for f in frames], dtype=float),
             ticks=np.array([f.ticks for f in frames], dtype=np.int64),
@@ -229,4 +250,8 @@ class FrameLog:
             true_pose=np.array([f.true_pose for f in frames]) if truth else None,
             true_body_m_s=np.array([f.true_body_m_s for f in frames]) if truth else None,
             meta=dict(meta or {}),
+            motor_current_a=(np.array([f.motor_current_a for f in frames], dtype=float)
+                             if current else None),
+            wheel_overcurrent=(np.array([f.wheel_overcurrent for f in frames], dtype=bool)
+                               if overcurrent else None),
         )

@@ -735,6 +735,10 @@ class Roomba:
             cmd = (v[self._i_req[0]] / 1000.0, v[self._i_req[1]] / 1000.0)
         t_s = (k * STREAM_PERIOD_S if self.clock == "stream"
                else (host_s - self.t0_monotonic_s) * self.clock_rate)
+        fields = self.layout.field_ids
+        current = (np.array((v[fields.index(54)], v[fields.index(55)]), dtype=float) / 1000.0
+                   if 54 in fields and 55 in fields else None)
+        over = v[fields.index(14)] if 14 in fields else None      # bit4 left, bit3 right
         return SensorFrame(
             t_s=t_s,
             ticks=np.array((v[self._i_ticks[0]], v[self._i_ticks[1]]), dtype=np.int64),
@@ -742,6 +746,9 @@ class Roomba:
             bumps=np.array((b & 2, b & 1), dtype=bool),
             cmd_m_s=np.array(cmd, dtype=float),
             oi_mode=self._mode_of(sf),
+            motor_current_a=current,
+            wheel_overcurrent=(None if over is None
+                               else np.array((over & 0x10, over & 0x08), dtype=bool)),
         )
 
     def _check_mode(self, frame: SensorFrame) -> None:

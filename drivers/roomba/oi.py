@@ -115,12 +115,13 @@ BAUD_RATES: tuple[int, ...] = (300, 600, 1200, 2400, 4800, 9600, 14400, 19200, 2
                                38400, 57600, 115200)
 _BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop bits (spec §4.1 "Bandwidth limit")
 
-#: The sensor packets this project streams: bumps & wheel drops 7, battery
-#: voltage 22 / current 23 / charge 25 / capacity 26, OI mode 35, requested
-#: right/left velocity 41/42, encoder counts 43/44, light bumper 45, light bump
-#: signals 46-51, left/right motor currents 54/55 and stasis 58. The frame is
-#: 59 bytes, within the 172.8-byte budget at 115200 baud (spec §4.1).
-DEFAULT_STREAM_IDS: tuple[int, ...] = (7, 22, 23, 25, 26, 35, 41, 42, 43, 44, 45,
+#: The sensor packets this project streams: bumps & wheel drops 7, wheel
+#: overcurrents 14, battery voltage 22 / current 23 / charge 25 / capacity 26,
+#: OI mode 35, requested right/left velocity 41/42, encoder counts 43/44, light
+#: bumper 45, light bump signals 46-51, left/right motor currents 54/55 and
+#: stasis 58. The frame is 61 bytes, within the 172.8-byte budget at 115200
+#: baud (spec §4.1).
+DEFAULT_STREAM_IDS: tuple[int, ...] = (7, 14, 22, 23, 25, 26, 35, 41, 42, 43, 44, 45,
                                        46, 47, 48, 49, 50, 51, 54, 55, 58)
 
 
@@ -381,7 +382,7 @@ def stream_frame_size(ids: Iterable[int]) -> int:
     Examples
     --------
     >>> stream_frame_size([7, 43, 44]), stream_frame_size(DEFAULT_STREAM_IDS)
-    (11, 59)
+    (11, 61)
     """
     return PacketLayout.from_ids(ids, what="Stream (148)").frame_size
 

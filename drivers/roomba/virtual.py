@@ -654,7 +654,11 @@ class VirtualRoomba:
         v[45] = sum(1 << i for i, s in enumerate(light) if s > self.light_bumper_threshold)
         v[8] = (v[45] >> 5) & 1
         v[27] = min(light[5], 1023)
-        v[54], v[55] = _motor_current_ma(left), _motor_current_ma(right)
+        # the simulated motors' currents [mA, int16] and overcurrent flags (packet 14)
+        v[54], v[55] = (max(-32768, min(32767, round(1000.0 * float(a))))
+                        for a in frame.motor_current_a)
+        v[14] = (0x10 if frame.wheel_overcurrent[0] else 0) | (
+            0x08 if frame.wheel_overcurrent[1] else 0)
         v[23] = -(300 + abs(v[54]) + abs(v[55]))
         moving = frame.true_body_m_s is not None and abs(float(frame.true_body_m_s[0])) > 0.01
         v[58] = (k & 1) if moving else 0
@@ -705,11 +709,6 @@ def _drive_to_wheels(velocity: int, radius: int) -> tuple[int, int]:
     r = float(max(-2000, min(2000, radius)))
     half = _WHEEL_BASE_MM / 2
     return (_clip_speed(round(v * (r - half) / r)), _clip_speed(round(v * (r + half) / r)))
-
-
-def _motor_current_ma(mm_s: int) -> int:
-    """A plausible wheel-motor current for a commanded speed [mA] (not modelled)."""
-    return 0 if mm_s == 0 else int(math.copysign(60 + 0.5 * abs(mm_s), mm_s))
 
 
 def _base_values() -> dict[int, int]:

@@ -17,7 +17,14 @@ Model, per wheel ``i`` (left 0, right 1), all at the wheel rim:
   clipped to the supply, with conditional integration (anti-windup: the
   integrator holds while the output saturates in the direction of the error);
 - DC motor, quasi-static armature: ``i = clip((V - g k u) / R, +-i_max)``,
-  force ``g k i``, where ``g`` is the motor's health (1 = nominal);
+  force ``g k i``, where ``g`` is the motor's health (1 = nominal): the
+  armature current from the applied voltage less the back-EMF ``g k u``
+  (Franklin, Powell & Emami-Naeini, "Feedback Control of Dynamic Systems",
+  section 2.3, DC motor with negligible inductance). A frame reports each
+  motor's mean current over the period and the Open Interface's wheel
+  overcurrent flag (packet 14), set once the current has stayed at the
+  driver's limit for :data:`OVERCURRENT_S` (a blocked wheel; a start from
+  rest reaches the limit only briefly);
 - wheel: ``m_w du/dt = F_motor - F_gear(u) - (1 - c) F_trac + F_rough``;
 - contact: slip speed ``s = (1 - c) u - v_c`` with the contact point's speed
   ``v_c = v -+ w b / 2``, slip ratio ``kappa = s / max(|(1 - c) u|, |v_c|, 0.05)``
@@ -48,7 +55,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["N_NOISE", "N_PARAMS", "N_PERIOD", "N_STATE", "QUEUE_LEN", "run_periods"]
+__all__ = ["N_NOISE", "N_PARAMS", "N_PERIOD", "N_STATE", "OVERCURRENT_S", "QUEUE_LEN",
+           "run_periods"]
 
 GRAVITY = 9.81
 
@@ -62,7 +70,8 @@ SP0 = 13        # setpoints in effect 13, 14 [m/s]
 OFF0 = 15       # ticks lost while an encoder was stuck 15, 16
 T_NOW = 17      # simulation time [s]
 LAST_EFF = 18   # effective time of the newest queued command [s]
-N_STATE = 19
+LIMIT0 = 19     # time each motor's current has stayed at the limit 19, 20 [s]
+N_STATE = 21
 
 # --- parameter columns (one row per robot) -------------------------------------
 (P_B, P_DIAM, P_TPR, P_MASS, P_I0, P_RPAY, P_FRAC, P_MW, P_K, P_R, P_ILIM, P_VSUP,
@@ -85,6 +94,8 @@ N_NOISE = 9     # jitter U(-1/2, 1/2), roughness N(0,1) L/R, IR N(0,1) x 6
 F_MU, F_KAPPA, F_CRR, F_COMP, F_ROUGH, F_SCRUB = range(6)
 
 QUEUE_LEN = 32
+#: Time at the current limit after which a wheel's overcurrent flag is set [s].
+OVERCURRENT_S = 0.5
 N_MECH = 4
 V_SLIP_REF = 0.05     # speed below which slip is measured against this speed [m/s]
 
@@ -170,7 +181,8 @@ def _contacts(st, p, walls, bumps):
 
 @njit(cache=True)
 def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_period,
-                noise, out_ticks, out_light, out_bumps, out_pose, out_body):
+                noise, out_ticks, out_light, out_bumps, out_pose, out_body, out_current,
+                out_overcurrent):
     """Advance every robot through ``cmd.shape[1]`` sensor periods, in place.
 
     Parameters
@@ -190,8 +202,10 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
     per_period : (N, n, N_PERIOD) float64
     noise : (N, n, N_NOISE) float64
     out_ticks : (N, n, 2) int64, out_light : (N, n, 6) int64,
-    out_bumps : (N, n, 2) bool, out_pose : (N, n, 3), out_body : (N, n, 2)
-        Filled with the frame taken at the end of each period.
+    out_bumps : (N, n, 2) bool, out_pose : (N, n, 3), out_body : (N, n, 2),
+    out_current : (N, n, 2), out_overcurrent : (N, n, 2) bool
+        Filled with the frame taken at the end of each period (the motor
+        currents [A] are means over the period).
     """
     n_rob, n_per = cmd.shape[0], cmd.shape[1]
     for i in range(n_rob):
@@ -234,6 +248,8 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
             roll_wheel = fl[F_CRR] * normal
             roll_caster = fl[F_CRR] * (1.0 - p[P_FRAC]) * mass * GRAVITY
             t_scrub = fl[F_SCRUB] * mass * GRAVITY * half_b
+            out_current[i, k, 0] = 0.0
+            out_current[i, k, 1] = 0.0
             for s in range(nsub):
                 t = t_k + s * dt
                 while count > 0 and queue[i, head, 0] <= t + 1e-12:
@@ -273,6 +289,11 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                         kmot = p[P_K] * pp[PP_GAIN0 + wh] * (1.0 if wh == 0 else p[P_BAL])
                         volt = volt0 if wh == 0 else volt1
                         cur = min(p[P_ILIM], max(-p[P_ILIM], (volt - kmot * u) / p[P_R]))
+                        out_current[i, k, wh] += cur * h / period
+                        if abs(cur) >= p[P_ILIM] * (1.0 - 1e-9):
+                            st[LIMIT0 + wh] += h
+                        else:
+                            st[LIMIT0 + wh] = 0.0
                         f_gear = p[P_BG] * u + p[P_FC] * math.tanh(u / 0.005)
                         side = -1.0 if wh == 0 else 1.0
                         contact = st[V] + side * half_b * st[W]
@@ -321,6 +342,7 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
             for wh in range(2):
                 raw = math.floor(st[TICK0 + wh] - st[OFF0 + wh])
                 out_ticks[i, k, wh] = int(raw) % 65536
+                out_overcurrent[i, k, wh] = st[LIMIT0 + wh] >= OVERCURRENT_S - 1e-9
             _light_bumps(st, p, walls, nz, out_light[i, k])
             out_pose[i, k, 0] = st[X]
             out_pose[i, k, 1] = st[Y]
@@ -337,4 +359,6 @@ def empty_outputs(n_robots: int, n_periods: int) -> tuple[np.ndarray, ...]:
         np.zeros((n_robots, n_periods, 2), np.bool_),
         np.zeros((n_robots, n_periods, 3)),
         np.zeros((n_robots, n_periods, 2)),
+        np.zeros((n_robots, n_periods, 2)),
+        np.zeros((n_robots, n_periods, 2), np.bool_),
     )

@@ -11,7 +11,8 @@ a quarter of a 1 ms controller step; frames come out once per sensor period.
 A frame carries what a real Create 2 streams (raw 16-bit encoder counts that
 count wheel rotation in the commanded direction, six light-bump IR signals of
 the walls and boxes of a :class:`~drivers.sim.config.Room`, bump flags, the
-commands in effect) plus the simulator's ground truth. Estimators must never
+commands in effect, the wheel motors' currents and overcurrent flags) plus the
+simulator's ground truth. Estimators must never
 read the truth; tests and experiments compare against it.
 
 Determinism: all randomness comes from per-robot seeds, drawn in fixed blocks
@@ -270,6 +271,8 @@ class Simulator:
             t_s=out.t_s[take], ticks=out.ticks[take], light_bump=out.light_bump[take],
             bumps=out.bumps[take], cmd_m_s=out.cmd_m_s[take], valid=out.valid[take],
             true_pose=out.true_pose[take], true_body_m_s=out.true_body_m_s[take],
+            motor_current_a=out.motor_current_a[take],
+            wheel_overcurrent=out.wheel_overcurrent[take],
         )
 
     def run(self, cmd_m_s: np.ndarray) -> FrameLog:
@@ -375,10 +378,10 @@ class Simulator:
         per, spikes, valid = self._schedule(k0, n)
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
         latency = self._noise.draw(1, k0, n)[..., 5]
-        ticks, light, bumps, pose, body = K.empty_outputs(self.n, n)
+        ticks, light, bumps, pose, body, current, overcurrent = K.empty_outputs(self.n, n)
         K.run_periods(self._state, self._queue, self._qinfo, self._params, self._floors,
                       self._regions, self._walls, np.ascontiguousarray(cmd), per, noise,
-                      ticks, light, bumps, pose, body)
+                      ticks, light, bumps, pose, body, current, overcurrent)
         ticks = (ticks + np.round(spikes).astype(np.int64)) % 65536
         # host timestamps: end of each period plus a jittered, never negative latency
         lat_mean = np.array([p.latency_s for p in self.params])[:, None]
@@ -389,7 +392,8 @@ class Simulator:
         self._k += n
         return FrameLog(
             t_s=t_s, ticks=ticks, light_bump=light, bumps=bumps, cmd_m_s=cmd, valid=valid,
-            dt_s=self.dt_s, true_pose=pose, true_body_m_s=body,
+            dt_s=self.dt_s, true_pose=pose, true_body_m_s=body, motor_current_a=current,
+            wheel_overcurrent=overcurrent,
             meta={"preset": [p.name for p in self.params], "seeds": list(self.seeds),
                   "floor": self.floor_map.default, "k0": k0},
         )

@@ -5,6 +5,10 @@
 - :mod:`fusion.monitoring.cusum`: CUSUM run lengths and thresholds;
 - :mod:`fusion.monitoring.dynamics` (with ``dynamics_null`` and ``dynamics_start``):
   dynamics-change tests on integrated encoder residuals;
+- :mod:`fusion.monitoring.change_time`: the posterior change time (with its
+  interval) that dates a dynamics alarm;
+- :mod:`fusion.monitoring.wheel_check`: a flat encoder count called a stalled wheel
+  or a stuck encoder from the motor currents;
 - :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test;
 - :mod:`fusion.monitoring.recalibration`, :mod:`fusion.monitoring.rescale`: the
   policy that answers alarms;

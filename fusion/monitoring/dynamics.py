@@ -59,6 +59,11 @@ driving (peaks over threshold,
 of route driving (seeds 5000-5649, ``python -m benchmarks monitor_threshold``).
 It is a property of the null and the route: refit it for other driving.
 
+**Onset.** An alarm is dated by the posterior change time of the tripping test's
+increments since the previous alarm, with an interval
+(:mod:`fusion.monitoring.change_time`); the window at which the CUSUM last left
+zero is kept as :attr:`DynamicsAlarm.cusum_onset_s`.
+
 Budget: ``F_lag + F_start + F_cov = 0.25 + 0.1 + 0.05 = 0.4`` false alarms an
 hour by design, against a target of 1; the rates measured on nominal driving
 (``python -m benchmarks monitor``) are in ``docs/monitor.md``.
@@ -82,6 +87,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion.exceptions import FilterOptionError
+from fusion.monitoring.change_time import ChangeTimeRule, ChangeTimeTracker
 from fusion.monitoring.cusum import cusum_llr_threshold, lag_cusum_threshold
 from fusion.monitoring.dynamics_null import (
     DynamicsNull,
@@ -138,11 +144,23 @@ class DynamicsAlarm:
     statistic, threshold : float
         Its value and threshold [nats].
     onset_s : float
-        Start of the window at which that CUSUM last left zero (for the
-        start test: the anchor window of that start) [s].
+        The posterior change time (:mod:`fusion.monitoring.change_time`): the
+        median of the change window given the tripping test's evidence over
+        the windows since the previous alarm [s].
     lag_periods : float
-        Least-squares lag since the onset, ``sum a / sum b`` [periods]
-        (NaN without lag information).
+        Least-squares lag since the lag CUSUM last left zero, ``sum a / sum b``
+        [periods] (NaN without lag information).
+    lag_std_periods : float
+        Its standard deviation ``1 / sqrt(sum b)`` [periods] (``a ~ N(theta b, b)``,
+        module docstring); NaN without lag information. A window without a
+        transient carries ``b ~ 0``: after such windows only, the lag is
+        meaningless (its deviation is huge).
+    onset_lo_s, onset_hi_s : float
+        The change time's interval at its rule's level [s].
+    cusum_onset_s : float
+        Start of the window at which the tripping CUSUM last left zero (for
+        the start test: the anchor window of that start) [s]: the first
+        design's onset, often long before the change.
     """
 
     robot: int
@@ -151,6 +169,10 @@ class DynamicsAlarm:
     threshold: float
     onset_s: float
     lag_periods: float
+    lag_std_periods: float = math.nan
+    onset_lo_s: float = math.nan
+    onset_hi_s: float = math.nan
+    cusum_onset_s: float = math.nan
 
 
 class DynamicsMonitor:
@@ -182,6 +204,8 @@ class DynamicsMonitor:
         ``q_clip``.
     glitch_ticks : float
         See :class:`fusion.monitoring.dynamics_null.WindowIntegrator`.
+    change_time : ChangeTimeRule, optional
+        How an alarm's onset is dated (:mod:`fusion.monitoring.change_time`).
 
     Attributes
     ----------
@@ -200,7 +224,8 @@ class DynamicsMonitor:
                  lag_false_alarms_per_hour: float = 0.25,
                  covariance_false_alarms_per_hour: float = 0.05, variance_ratio: float = 4.0,
                  clip: float = 16.0, glitch_ticks: float = 25.0, start_shift_sigma: float = 3.0,
-                 start_threshold: float = START_THRESHOLD) -> None:
+                 start_threshold: float = START_THRESHOLD,
+                 change_time: ChangeTimeRule | None = None) -> None:
         if not (variance_ratio > 1 and clip > 0 and lag_periods > 0):
             raise FilterOptionError(f"need variance_ratio > 1, clip > 0, lag_periods > 0; got "
                                     f"{variance_ratio}, {clip}, {lag_periods}")
@@ -227,6 +252,8 @@ class DynamicsMonitor:
                                 is not None else math.inf)
         n = int(n_robots)
         self._start = StartTracker(n, window_periods=self.window_periods)
+        self._change = ChangeTimeTracker(n, 3, window_s=self.window_periods * model.dt_s,
+                                         rule=change_time)
         self._s_prev = np.zeros((n, 2, 2))
         self._g = np.zeros((n, 3))                 # CUSUMs: lag, covariance, start
         self._left = np.zeros((n, 3))              # window start at which g last left zero
@@ -295,7 +322,9 @@ class DynamicsMonitor:
         z = self._start.window(e, cov, s, ok)
         score = (self.null.start.score(z) if self.null.start is not None
                  else np.full(len(z), math.nan))
-        g_new = np.maximum(0.0, self._g + self._llr(st, ok, score))         # Page 1954
+        llr = self._llr(st, ok, score)
+        self._change.push(self._t0, llr)
+        g_new = np.maximum(0.0, self._g + llr)                               # Page 1954
         span = (START_WINDOWS - 1) * self.window_periods * self.model.dt_s
         onset = np.array([self._t0, self._t0, self._t0 - span])          # start: its anchor
         self._left = np.where((self._g == 0) & (g_new > 0), onset, self._left)
@@ -309,9 +338,17 @@ class DynamicsMonitor:
         out = []
         for i in np.flatnonzero(np.any(g_new > thresholds, axis=1)):
             j = int(np.argmax(g_new[i] - thresholds))
-            lag = self._ab[i, 0] / self._ab[i, 1] if self._ab[i, 1] > 0 else math.nan
+            info = self._ab[i, 1]
+            lag, lag_std = ((self._ab[i, 0] / info, 1.0 / math.sqrt(info)) if info > 0
+                            else (math.nan, math.nan))
+            when = self._change.estimate(int(i), j)
+            # a start's score closes its third window: the start began two windows earlier
+            back = span if j == 2 else 0.0
             alarm = DynamicsAlarm(int(i), ("lag", "covariance", "start")[j], float(g_new[i, j]),
-                                  float(thresholds[j]), float(self._left[i, j]), float(lag))
+                                  float(thresholds[j]), when.onset_s - back, float(lag),
+                                  float(lag_std), when.lo_s - back, when.hi_s,
+                                  float(self._left[i, j]))
+            self._change.reset(int(i))
             self.alarms.append(alarm)
             out.append(alarm)
             self._g[i] = 0.0
@@ -323,6 +360,8 @@ class DynamicsMonitor:
         idx = slice(None) if robots is None else np.asarray(robots, int)
         self._g[idx] = 0.0
         self._ab[idx] = 0.0
+        for i in np.arange(self._g.shape[0])[idx]:
+            self._change.reset(int(i))
 
 
 def start_scores(null: DynamicsNull, windows: WindowResiduals, cmd_m_s: np.ndarray

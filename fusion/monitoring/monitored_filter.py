@@ -205,7 +205,9 @@ class MonitoredFilter:
         return FrameResult(ekf.t_s, ekf.pose, ekf.speeds, deltas, record, tuple(alarms))
 
     def step(self, ticks: np.ndarray | Sequence[int], cmd_m_s: np.ndarray | Sequence[float], *,
-             valid: bool = True, sightings: RangeBearing | None = None) -> FrameResult:
+             valid: bool = True, sightings: RangeBearing | None = None,
+             motor_current_a: np.ndarray | Sequence[float] | None = None,
+             wheel_overcurrent: np.ndarray | Sequence[bool] | None = None) -> FrameResult:
         """Take one frame: predict, test, fuse, in the module's order.
 
         Parameters
@@ -219,6 +221,12 @@ class MonitoredFilter:
         sightings : RangeBearing, optional
             Landmarks seen at this frame (used with a landmark map; rows without
             a covariance take ``landmark_noise``).
+        motor_current_a : array_like, shape (2,), optional
+            Wheel motor currents (left, right) [A] where the robot reports them.
+        wheel_overcurrent : array_like of bool, shape (2,), optional
+            Wheel overcurrent flags (left, right) where the robot reports them.
+            With either, a flat count is called a ``"stalled_wheel"`` or a
+            ``"stuck_encoder"`` (:mod:`fusion.monitoring.wheel_check`).
 
         Returns
         -------
@@ -237,7 +245,8 @@ class MonitoredFilter:
         t = ekf.t_s
         # the stuck check compares the counts with the model's prediction, before the update
         alarms = mon.update_counts(t, deltas, wheel_from_body(
-            ekf.speeds, wheel_base_m=self.model.wheel_base_m), cmd_m_s=cmd)
+            ekf.speeds, wheel_base_m=self.model.wheel_base_m), cmd_m_s=cmd,
+            motor_current_a=motor_current_a, wheel_overcurrent=wheel_overcurrent)
         resets = ekf.n_resets
         record = ekf.update_encoders(now)
         alarms += mon.update_record(record)

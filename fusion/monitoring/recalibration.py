@@ -47,8 +47,8 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   better. The encoder-speed fit [%] of a rescaled model is the old one's
   (both measured and predicted speeds scale), so the record holds the scale
   and wheel base before and after instead.
-- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``) and the filter's own
-  resets (``"filter_reset"``): no recalibration; recorded as ``"ignored"``.
+- sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``) and the
+  filter's own resets (``"filter_reset"``): no recalibration; recorded as ``"ignored"``.
 
 Every decision is a frozen :class:`RecalibrationRecord` in
 :attr:`Recalibrator.history`: what, when, the fits before and after.

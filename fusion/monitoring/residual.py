@@ -26,7 +26,9 @@ Tests on the residual stream, per stream ("encoders" or "landmark"):
    stays flat while the wheel travel that the command and the model's
    prediction agree on (the smaller speed when both point the same way; the
    prediction alone without commands) adds up to ``stuck_ticks`` ticks over
-   at least ``stuck_periods`` periods.
+   at least ``stuck_periods`` periods. With the motor currents, the alarm is
+   ``"stalled_wheel"`` when they say the wheel is blocked
+   (:mod:`fusion.monitoring.wheel_check`).
 
 Tests 4 and 5 raise ``"dynamics_changed"`` on the encoder stream and
 ``"scale_changed"`` on the landmark stream. Optional replacements:
@@ -100,6 +102,7 @@ from fusion.exceptions import (
 from fusion.monitoring.cusum import cusum_threshold
 from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
+from fusion.monitoring.wheel_check import WheelCheck, WheelCheckOptions, WheelVerdict
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
@@ -117,8 +120,8 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-AlarmKind = Literal["glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed",
-                    "filter_reset"]
+AlarmKind = Literal["glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed",
+                    "scale_changed", "filter_reset"]
 StreamKind = Literal["encoders", "landmark"]
 
 
@@ -134,10 +137,12 @@ class AlarmEvent:
     ----------
     t_s : float
         Time of the sample that raised it [s].
-    kind : {"glitch_burst", "stuck_encoder", "dynamics_changed", "scale_changed", \
-"filter_reset"}
-        What changed; ``"filter_reset"``: the EKF reset itself
-        (:mod:`fusion.ekf.resets`, raised by
+    kind : str
+        What changed: ``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``,
+        ``"dynamics_changed"``, ``"scale_changed"`` or ``"filter_reset"``
+        (``"stalled_wheel"``: a stuck check whose wheel's motor current says the
+        wheel is blocked, :mod:`fusion.monitoring.wheel_check`; ``"filter_reset"``:
+        the EKF reset itself, :mod:`fusion.ekf.resets`, raised by
         :class:`~fusion.monitoring.MonitoredFilter`).
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
@@ -157,6 +162,9 @@ class AlarmEvent:
     dynamics : DynamicsAlarm or None
         For ``"integrated"``: the dynamics test's alarm, with its sub-test
         (lag, covariance or start) and lag estimate.
+    wheel : WheelVerdict or None
+        For ``"stuck"``: what the motor current said (stalled wheel or stuck
+        encoder, and on what evidence).
     """
 
     t_s: float
@@ -168,6 +176,7 @@ class AlarmEvent:
     channel: int | None = None
     scale: ScaleAlarm | None = None
     dynamics: DynamicsAlarm | None = None
+    wheel: WheelVerdict | None = None
 
 
 @dataclass(frozen=True)
@@ -209,6 +218,15 @@ class MonitorOptions:
     refractory_s : float
         After an alarm, the same kind on the same stream is not raised again
         for this long (its statistics restart) [s].
+    startup_s : float
+        Start-up handling of the chi-square gate: encoder innovations within
+        this long after a start from rest (a period whose wheel commands leave
+        zero, :meth:`ResidualMonitor.update_counts`) are counted as
+        ``"startup"`` and tested by none of the innovation tests (gate, bursts,
+        windowed NIS, CUSUM) when the encoder gate is the chi-square one: a
+        linear model misses a start from rest by more than the chi-square tail
+        allows (``docs/monitor.md``). A Phase-I gate (``encoder_gate_nis``)
+        already holds nominal starts; then the option does nothing [s].
     """
 
     dt_s: float = 0.015
@@ -225,6 +243,7 @@ class MonitorOptions:
     stuck_ticks: float = 6.0
     stuck_periods: int = 3
     refractory_s: float = 5.0
+    startup_s: float = 1.0
 
     def __post_init__(self) -> None:
         checks = {"dt_s": self.dt_s > 0, "false_alarms_per_hour": self.false_alarms_per_hour > 0,
@@ -238,7 +257,7 @@ class MonitorOptions:
                   "nis_window": self.nis_window >= 1,
                   "landmark_rate_hz": self.landmark_rate_hz > 0,
                   "stuck_ticks": self.stuck_ticks > 0, "stuck_periods": self.stuck_periods >= 1,
-                  "refractory_s": self.refractory_s >= 0}
+                  "refractory_s": self.refractory_s >= 0, "startup_s": self.startup_s >= 0}
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
             raise FilterOptionError(f"MonitorOptions out of range: {', '.join(bad)} "
@@ -406,14 +425,19 @@ class ResidualMonitor:
         The landmark scale test (:mod:`fusion.monitoring.scale`, one robot), fed
         by :meth:`update_landmarks`. When given, it replaces the windowed NIS
         and CUSUM on the *landmark* innovations; their gate and bursts stay.
+    wheel_check : WheelCheckOptions, optional
+        Settings of the stalled-wheel / stuck-encoder call on motor currents
+        (:mod:`fusion.monitoring.wheel_check`; default settings).
 
     Attributes
     ----------
     events : list of AlarmEvent
         Every alarm so far, in time order.
     counts : dict of str to int
-        ``"samples"``, ``"glitches"``, ``"missing"`` (NaN innovations) and
-        ``"skipped"`` (records of readings never compared: anchors, gaps).
+        ``"samples"``, ``"glitches"``, ``"missing"`` (NaN innovations),
+        ``"skipped"`` (records of readings never compared: anchors, gaps) and
+        ``"startup"`` (encoder innovations left out after a start from rest,
+        :attr:`MonitorOptions.startup_s`).
 
     Examples
     --------
@@ -433,7 +457,8 @@ class ResidualMonitor:
     def __init__(self, options: MonitorOptions | None = None, *, m_per_tick: float | None = None,
                  on_alarm: Callable[[AlarmEvent], None] | None = None,
                  dynamics: DynamicsMonitor | None = None,
-                 scale: ScaleMonitor | None = None) -> None:
+                 scale: ScaleMonitor | None = None,
+                 wheel_check: WheelCheckOptions | None = None) -> None:
         self.options = options or MonitorOptions()
         self.dynamics = dynamics
         if scale is not None and scale.n_robots != 1:
@@ -452,13 +477,16 @@ class ResidualMonitor:
                                                   * opt.landmark_rate_hz), "scale_changed"),
         }
         self.events: list[AlarmEvent] = []
-        self.counts = {"samples": 0, "glitches": 0, "missing": 0, "skipped": 0}
+        self.counts = {"samples": 0, "glitches": 0, "missing": 0, "skipped": 0, "startup": 0}
         self._t_last = -math.inf
         self._flat = np.zeros(2)             # predicted ticks while the count stayed flat
         self._flat_n = np.zeros(2, dtype=int)
         self._flat_t0 = np.full(2, math.nan)
         self._last_ticks: np.ndarray | None = None
         self._stuck_alarm_t = -math.inf
+        self._wheel_check = WheelCheck(wheel_check)
+        self._at_rest = True                 # the last period's wheel commands were both zero
+        self._start_t = -math.inf            # time of the last start from rest [s]
 
     def thresholds(self, stream: StreamKind = "encoders") -> Thresholds:
         """The thresholds of ``stream``."""
@@ -514,6 +542,9 @@ class ResidualMonitor:
             return []
         w = whiten(nu, S)
         st = self._streams[stream]
+        if stream == "encoders" and self._in_startup(t):
+            self.counts["startup"] += 1
+            return []
         self.counts["samples"] += 1
         st.n_samples += 1
         if st.g_pos is None or st.g_pos.size != w.size:
@@ -530,6 +561,11 @@ class ResidualMonitor:
         raised += self._nis_window(st, t, value, w.size)
         raised += self._cusum(st, t, w)
         return self._emit(raised)
+
+    def _in_startup(self, t: float) -> bool:
+        """Within ``startup_s`` of a start from rest, with the chi-square encoder gate."""
+        return (self.options.encoder_gate_nis is None
+                and t - self._start_t < self.options.startup_s)
 
     def update_commands(self, t_s: float, cmd_m_s: np.ndarray, tick_deltas: np.ndarray
                         ) -> list[AlarmEvent]:
@@ -605,7 +641,9 @@ class ResidualMonitor:
 
     def update_counts(self, t_s: float, tick_deltas: np.ndarray,
                       predicted_wheel_m_s: np.ndarray, *,
-                      cmd_m_s: np.ndarray | None = None) -> list[AlarmEvent]:
+                      cmd_m_s: np.ndarray | None = None,
+                      motor_current_a: np.ndarray | None = None,
+                      wheel_overcurrent: np.ndarray | None = None) -> list[AlarmEvent]:
         """Stuck-encoder check on one period's count changes, predicted speeds and commands.
 
         Parameters
@@ -622,14 +660,23 @@ class ResidualMonitor:
             them a period's evidence is the travel that the command and the
             prediction agree on (Notes); without them, the predicted travel
             alone, which raises false alarms where a stop command meets a
-            model that lags the real stop (``docs/monitor.md``).
+            model that lags the real stop (``docs/monitor.md``). They also
+            mark starts from rest (:attr:`MonitorOptions.startup_s`).
+        motor_current_a : array_like, shape (2,), optional
+            (left, right) wheel motor currents of the period [A], where the
+            robot reports them: a flat count with a blocked wheel's current
+            is a ``"stalled_wheel"`` (:mod:`fusion.monitoring.wheel_check`).
+        wheel_overcurrent : array_like of bool, shape (2,), optional
+            (left, right) overcurrent flags of the period (Open Interface packet 14).
 
         Returns
         -------
         list of AlarmEvent
-            A ``"stuck_encoder"`` alarm when a wheel's count stayed flat while
-            the evidence reached ``stuck_ticks`` over at least
-            ``stuck_periods`` periods.
+            A ``"stuck_encoder"`` or ``"stalled_wheel"`` alarm (test
+            ``"stuck"``) when a wheel's count stayed flat while the evidence
+            reached ``stuck_ticks`` over at least ``stuck_periods`` periods and
+            the motor current decided which (:attr:`AlarmEvent.wheel`; a
+            blocked wheel's current is awaited up to ``decide_periods``).
 
         Raises
         ------
@@ -664,6 +711,11 @@ class ResidualMonitor:
         if not (np.all(np.isfinite(d)) and np.all(np.isfinite(v)) and np.all(np.isfinite(c))):
             self.counts["missing"] += 1
             return []
+        if cmd_m_s is not None:
+            moving = bool(np.any(c != 0.0))
+            if moving and self._at_rest:
+                self._start_t = t - self.options.dt_s     # the period began a frame ago
+            self._at_rest = not moving
         # the speed the command and the prediction agree on (Notes); v itself without commands
         v = np.where(np.sign(v) == np.sign(c), np.minimum(np.abs(v), np.abs(c)), 0.0)
         opt = self.options
@@ -675,13 +727,17 @@ class ResidualMonitor:
         self._flat_t0[start] = t - opt.dt_s            # the flat period began a frame ago
         self._flat = np.where(flat, self._flat + predicted_ticks, 0.0)
         self._flat_n = np.where(flat, self._flat_n + 1, 0)
+        self._wheel_check.update(flat, d, motor_current_a, wheel_overcurrent)
         raised = []
         if t - self._stuck_alarm_t >= opt.refractory_s:
             for wheel in np.flatnonzero((self._flat >= opt.stuck_ticks)
                                         & (self._flat_n >= opt.stuck_periods)):
-                raised.append(AlarmEvent(t, "stuck_encoder", "stuck", float(self._flat[wheel]),
+                verdict = self._wheel_check.verdict(int(wheel))
+                if verdict is None:                 # a high current: wait for a stall
+                    continue
+                raised.append(AlarmEvent(t, verdict.kind, "stuck", float(self._flat[wheel]),
                                          opt.stuck_ticks, float(self._flat_t0[wheel]),
-                                         int(wheel)))
+                                         int(wheel), wheel=verdict))
                 self._stuck_alarm_t = t
                 break
         return self._emit(raised)
@@ -699,8 +755,10 @@ class ResidualMonitor:
             st.glitch_t.popleft()
         if len(st.glitch_idx) < opt.burst_count or not self._allowed(st, "glitch_burst", t):
             return []
-        # a stuck encoder explains its own glitches: one alarm, not two
-        if t - self._stuck_alarm_t < opt.refractory_s and stream == "encoders":
+        # a stuck encoder or a stalled wheel explains its own glitches: one alarm, not two
+        # (also while the stuck check awaits the motor current's verdict)
+        stuck_now = np.any((self._flat >= opt.stuck_ticks) & (self._flat_n >= opt.stuck_periods))
+        if stream == "encoders" and (t - self._stuck_alarm_t < opt.refractory_s or stuck_now):
             return []
         st.last_alarm["glitch_burst"] = t
         onset = st.glitch_t[0]

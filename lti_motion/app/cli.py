@@ -311,9 +311,10 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
                     help="robot seconds to drive or listen (default 30)")
-    mo.add_argument("--fault", choices=["stuck-encoder", "spikes", "payload", "motor", "delay",
-                                        "carpet"],
-                    help="--robot only: inject this simulator fault")
+    mo.add_argument("--fault", choices=["stuck-encoder", "stall", "spikes", "payload", "motor",
+                                        "delay", "carpet"],
+                    help="--robot only: inject this simulator fault (stall: the left wheel "
+                         "blocked for 2 s)")
     mo.add_argument("--nominal-drives", type=int, default=20,
                     help="--robot: nominal drives of the same length first, for the dynamics "
                          "null and the encoder gate (default 20; 0: dynamics tests off)")

@@ -34,9 +34,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fusion.landmark_map import LandmarkMap
+from fusion.monitoring.dynamics import DynamicsAlarm
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
+from fusion.monitoring.wheel_check import WheelVerdict
+from fusion.noise import gate_threshold
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
@@ -47,18 +50,33 @@ from lti_motion.app.monitor_setup import (
 )
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import SensorFrame
+from lti_motion.kinematics import wrap_angle
 from lti_motion.model import MotionModel
 
 if TYPE_CHECKING:
     from drivers.sim.config import FloorMap, RobotParams
 
-__all__ = ["FAULTS", "MonitorRun", "fault_for", "format_alarm", "monitor_frames",
-           "monitor_route", "nominal_from_logs", "nominal_on_simulator", "run_on_port",
-           "run_on_simulator"]
+__all__ = [
+    "FAULTS",
+    "MEANINGFUL_LAG_STD_PERIODS",
+    "MonitorRun",
+    "dynamics_detail",
+    "fault_for",
+    "format_alarm",
+    "heading_deg",
+    "monitor_frames",
+    "monitor_route",
+    "nominal_from_logs",
+    "nominal_on_simulator",
+    "run_on_port",
+    "run_on_simulator",
+    "wheel_detail",
+]
 
 #: ``--fault`` choices -> (simulator fault kind, its parameters, the alarm expected).
 FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProxyType({
     "stuck-encoder": ("stuck_encoder", MappingProxyType({"wheel": "left"}), "stuck_encoder"),
+    "stall": ("stall", MappingProxyType({"wheel": "left", "duration_s": 2.0}), "stalled_wheel"),
     "spikes": ("encoder_spikes", MappingProxyType({"rate_hz": 20.0, "duration_s": 1.0}),
                "glitch_burst"),
     "payload": ("payload", MappingProxyType({"payload_kg": 1.8}), "dynamics_changed"),
@@ -68,6 +86,48 @@ FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProx
 })
 
 _WHEEL = MappingProxyType({0: "left wheel", 1: "right wheel"})
+
+#: A dynamics alarm's lag is printed when its standard deviation is at most this [periods]:
+#: ``a ~ N(theta b, b)`` per window (:mod:`fusion.monitoring.dynamics`), so a lag summed
+#: over windows without transients (``b ~ 0``) is noise, however large.
+MEANINGFUL_LAG_STD_PERIODS = 1.0
+
+
+def dynamics_detail(alarm: DynamicsAlarm) -> str:
+    """The sub-test of a dynamics alarm and, from the lag test, its lag when meaningful.
+
+    ``"(lag test, lag 2.4 +- 0.3 periods)"``, ``"(covariance test)"``; the lag only
+    for the lag test and when its standard deviation is at most
+    :data:`MEANINGFUL_LAG_STD_PERIODS` [periods].
+    """
+    lag, std = alarm.lag_periods, alarm.lag_std_periods
+    if (alarm.test == "lag" and math.isfinite(lag) and math.isfinite(std)
+            and std <= MEANINGFUL_LAG_STD_PERIODS):
+        return f"({alarm.test} test, lag {lag:.1f} +- {std:.1f} periods)"
+    return f"({alarm.test} test)"
+
+
+def wheel_detail(verdict: WheelVerdict) -> str:
+    """Why a flat count is a stalled wheel or a stuck encoder, in a person's words."""
+    if verdict.evidence == "no currents":
+        return "(no motor currents reported: a blocked wheel would look the same)"
+    if verdict.evidence == "overcurrent":
+        return "(the robot reports a wheel overcurrent: the wheel is blocked)"
+    low, ref = verdict.min_current_a * 1000.0, verdict.reference_current_a * 1000.0
+    running = f" against {ref:.0f} mA while driving" if math.isfinite(ref) else ""
+    if verdict.kind == "stalled_wheel":
+        return f"(motor current {low:.0f} mA{running}: the wheel is blocked)"
+    return f"(motor current {low:.0f} mA{running}: the wheel turns, its encoder does not count)"
+
+
+def _nis(value: float) -> str:
+    """A NIS gate as printed: one decimal below 1000 (55.3), none above (2667)."""
+    return f"{value:.1f}" if value < 1000 else f"{value:.0f}"
+
+
+def heading_deg(theta_rad: float) -> float:
+    """A heading [rad], unwrapped or not, in degrees in ``(-180, 180]``."""
+    return math.degrees(float(wrap_angle(theta_rad)))
 
 
 def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
@@ -82,6 +142,9 @@ def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
 def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
     """One line a person reads: time, kind, test, statistic / threshold, onset, channel.
 
+    A dynamics alarm's onset is its posterior change time with the interval it
+    states (:mod:`fusion.monitoring.change_time`).
+
     A scale alarm adds its new scale (ground travel and turn per encoder travel
     and turn, with standard deviations); ``detail`` is appended (the dynamics
     sub-test and lag).
@@ -89,15 +152,21 @@ def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
     where = ""
     if event.channel is not None:
         where = (_WHEEL.get(event.channel, f"channel {event.channel}")
-                 if event.kind == "stuck_encoder" else f"channel {event.channel}")
+                 if event.test == "stuck" else f"channel {event.channel}")
+    if event.wheel is not None:
+        where = " ".join(part for part in (where, wheel_detail(event.wheel)) if part)
     if event.scale is not None:
         a = event.scale
         where = (f"travel x{a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f}, turn "
                  f"x{a.yaw_ratio:.4f} +- {a.yaw_ratio_std:.4f}")
     tail = " ".join(part for part in (where, detail) if part)
+    onset = f"onset {event.onset_s:.3f} s"
+    d = event.dynamics
+    if d is not None and math.isfinite(d.onset_lo_s) and math.isfinite(d.onset_hi_s):
+        onset += f" (between {d.onset_lo_s:.2f} and {d.onset_hi_s:.2f} s)"
     return (f"ALARM t={event.t_s:8.3f} s  {event.kind:16s} test {event.test:10s} "
             f"statistic {event.statistic:9.3g} (threshold {event.threshold:.3g})  "
-            f"onset {event.onset_s:.3f} s  {tail}").rstrip()
+            f"{onset}  {tail}").rstrip()
 
 
 @dataclass
@@ -113,9 +182,15 @@ class MonitorRun:
     events : list of AlarmEvent
         The alarms, in time order.
     counts : dict
-        The monitor's counts (samples, glitches, missing, skipped).
+        The monitor's counts (samples, glitches, missing, skipped, startup).
+    glitch_gate_nis : float
+        The monitor's per-sample glitch gate on the encoder innovations (NIS):
+        a reading above it is a glitch, counted towards a burst.
     encoders_gated : int
-        Encoder readings the EKF's gate rejected.
+        Encoder readings the EKF's own fusion gate kept out of the estimate.
+    fusion_gate_nis : float
+        That gate (NIS; chi-square, ``gate_probability`` of the EKF): a reading
+        above it is not fused, and is no alarm on its own.
     final_pose : ndarray, shape (3,)
         The EKF's last pose (x [m], y [m], theta [rad]) from the origin.
     tests : list of str
@@ -126,7 +201,9 @@ class MonitorRun:
     duration_s: float = 0.0
     events: list[AlarmEvent] = field(default_factory=list)
     counts: dict = field(default_factory=dict)
+    glitch_gate_nis: float = math.nan
     encoders_gated: int = 0
+    fusion_gate_nis: float = math.nan
     final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tests: list[str] = field(default_factory=list)
 
@@ -135,15 +212,20 @@ class MonitorRun:
         by_kind = Counter(e.kind for e in self.events)
         kinds = ", ".join(f"{k} {n}" for k, n in sorted(by_kind.items())) or "none"
         x, y, th = self.final_pose
+        startup = self.counts.get("startup", 0)
         return [
             *self.tests,
             f"monitored {self.frames} frames ({self.duration_s:.1f} s): "
             f"{self.counts.get('samples', 0)} encoder innovations tested, "
-            f"{self.counts.get('glitches', 0)} glitches, {self.counts.get('missing', 0)} "
-            f"missing, {self.encoders_gated} readings gated by the EKF",
+            f"{self.counts.get('missing', 0)} missing"
+            + (f", {startup} left untested after starts from rest" if startup else ""),
+            f"two gates: {self.counts.get('glitches', 0)} glitches above the monitor's glitch "
+            f"gate (NIS {_nis(self.glitch_gate_nis)}; 3 within 20 readings make a burst); "
+            f"{self.encoders_gated} readings not fused by the EKF (its own fusion gate, "
+            f"NIS {self.fusion_gate_nis:.3g}; no alarm)",
             f"alarms: {len(self.events)} ({kinds})",
-            f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {math.degrees(th):.1f} deg "
-            "(from the start)",
+            f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {heading_deg(th):.1f} deg "
+            "(from the start, in (-180, 180])",
         ]
 
 
@@ -197,24 +279,28 @@ def monitor_frames(model: MotionModel,
 
     def relay(event: AlarmEvent) -> None:
         if on_alarm_line is not None:
-            a = event.dynamics
-            detail = "" if a is None else f"({a.test} test, lag {a.lag_periods:.1f} periods)"
+            detail = "" if event.dynamics is None else dynamics_detail(event.dynamics)
             on_alarm_line(format_alarm(event, detail=detail))
         if on_alarm is not None:
             on_alarm(event)
 
     mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
                          fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
-    run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks))
+    run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
+                     glitch_gate_nis=mf.monitor.thresholds().gate)
     for item in frames:
         frame, seen = item if isinstance(item, tuple) else (item, None)
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
-        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen)
+        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen,
+                motor_current_a=frame.motor_current_a,
+                wheel_overcurrent=frame.wheel_overcurrent)
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
+        if mf.ekf.gate_probability is not None:
+            run.fusion_gate_nis = gate_threshold(mf.ekf.gate_probability, 2)
         run.final_pose = mf.ekf.pose
     run.events = list(mf.events)
     run.counts = dict(mf.monitor.counts)
@@ -227,16 +313,17 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     gate = mon.thresholds().gate
     lines = []
     if nominal is None:
-        lines.append(f"tests: encoder gate NIS {gate:.1f} (chi-square) with glitch bursts, "
+        lines.append(f"tests: glitch gate NIS {_nis(gate)} (chi-square) with glitch bursts, "
                      "stuck encoder, windowed NIS and CUSUM on the encoder innovations "
                      "(no nominal drives: dynamics tests off)")
     else:
-        lines.append(f"tests: encoder gate NIS {gate:.0f} (nominal maximum "
+        dyn = mon.dynamics
+        ratio = gate / nominal.max_nominal_nis if nominal.max_nominal_nis > 0 else math.inf
+        lines.append(f"tests: glitch gate NIS {_nis(gate)} ({ratio:.3g} x the nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
-                     f"dynamics lag and covariance CUSUMs and start test (thresholds "
-                     f"{mon.dynamics.lag_threshold:.2f}, {mon.dynamics.covariance_threshold:.1f}"
-                     f", start {mon.dynamics.start_threshold:.2f};"
-                     f" null from {nominal.n_drives} nominal drives, "
+                     f"dynamics CUSUM thresholds: lag {dyn.lag_threshold:.2f} (from the "
+                     f"nominal drives), covariance {dyn.covariance_threshold:.1f}, start "
+                     f"{dyn.start_threshold:.2f} (null from {nominal.n_drives} nominal drives, "
                      f"{nominal.duration_s / 60.0:.1f} min)")
     if landmarks is not None:
         lines.append(f"       scale test on {len(landmarks.ids)} landmarks at 2 Hz (threshold "
@@ -338,7 +425,9 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                 full = SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
                                    light_bump=log.light_bump[k], bumps=log.bumps[k],
                                    cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
-                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k])
+                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k],
+                                   motor_current_a=log.motor_current_a[k],
+                                   wheel_overcurrent=log.wheel_overcurrent[k])
                 if record:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
@@ -347,7 +436,9 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                 n += 1
                 # the filter and the monitor get what a robot reports: no truth
                 yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,
-                                   full.cmd_m_s, valid=full.valid), seen)
+                                   full.cmd_m_s, valid=full.valid,
+                                   motor_current_a=full.motor_current_a,
+                                   wheel_overcurrent=full.wheel_overcurrent), seen)
 
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,

@@ -184,7 +184,7 @@ def test_one_percent_corrupted_bytes_are_counted_and_the_drive_goes_on(rng):
     stats = vr.stats
     assert len(log) == n and stats.bytes_corrupted > 0
     lost = stats.frames_sent - c.frames
-    assert lost > 0                                  # ~45 % of 59-byte frames hit at 1 %/byte
+    assert lost > 0                                  # ~45 % of 61-byte frames hit at 1 %/byte
     assert c.checksum_failures > 0 and c.bytes_dropped >= lost
     # an 8-bit checksum misses two flips that cancel: nearly all delivered frames are true
     ref = replay(vr, seed)
@@ -318,6 +318,19 @@ def test_simulator_faults_pass_through_and_lost_frames_show_as_gaps():
     steps = np.round(np.diff(np.r_[0.0, log.t_s]) / P)
     assert steps.min() >= 1 and steps.max() >= 2     # the stream clock saw gaps
     assert log.t_s[-1] >= 200 * P
+
+
+def test_motor_currents_and_overcurrents_reach_the_frames():
+    # a blocked left wheel: packets 54/55 carry the simulated currents [mA], 14 its flag
+    stall = [Fault("stall", t_s=1.0, duration_s=1.5, wheel="left")]
+    with VirtualRoomba(seed=14, speed=10.0, faults=stall) as vr, roomba(vr) as robot:
+        log = run_commands(robot, np.full((200, 2), 0.2))
+    ref = Simulator("create2", seed=14, faults=stall).run(vr.applied_commands_m_s)
+    periods = vr.frame_periods[1:201]
+    assert log.motor_current_a is not None and log.wheel_overcurrent is not None
+    assert np.allclose(log.motor_current_a, ref.motor_current_a[periods], atol=0.0005)
+    assert np.array_equal(log.wheel_overcurrent, ref.wheel_overcurrent[periods])
+    assert log.wheel_overcurrent[:, 0].any() and not log.wheel_overcurrent[:, 1].any()
 
 
 # ---------------------------------------------------------------------- encoders

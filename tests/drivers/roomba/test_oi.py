@@ -295,7 +295,7 @@ def test_default_stream_fits_at_115200_only() -> None:
     size = check_stream_bandwidth(DEFAULT_STREAM_IDS)
     assert size == stream_frame_size(DEFAULT_STREAM_IDS) <= 172.8
     assert check_stream_bandwidth(DEFAULT_STREAM_IDS, baud_bps=57600) == size
-    with pytest.raises(StreamBandwidthError, match=r"59 bytes exceeds the 28.8-byte budget"):
+    with pytest.raises(StreamBandwidthError, match=r"61 bytes exceeds the 28.8-byte budget"):
         check_stream_bandwidth(DEFAULT_STREAM_IDS, baud_bps=19200)
 
 

@@ -173,8 +173,8 @@ def test_monitor_sim_runs_the_dynamics_and_scale_tests_after_phase_one(model_fil
                  "--fault", "carpet", "--fault-at", "15", "--nominal-drives", "8"]) == 0
     out = capsys.readouterr().out
     assert "phase I: fitting the dynamics null and the encoder gate on 8 nominal drives" in out
-    assert "dynamics lag and covariance CUSUMs" in out and "scale test on 4 landmarks" in out
-    gate = float(out.split("encoder gate NIS ")[1].split()[0])
+    assert "dynamics CUSUM thresholds: lag" in out and "scale test on 4 landmarks" in out
+    gate = float(out.split("glitch gate NIS ")[1].split()[0])
     assert gate > 55.3                                  # set from the nominal drives
     scale = [line for line in out.splitlines()
              if line.startswith("ALARM") and "scale_changed" in line]
@@ -194,6 +194,8 @@ def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
     out = capsys.readouterr().out
     assert f"driving the robot on {vr.device_path}" in out and "monitored" in out
     assert driven > 200                      # 4 s at 15 ms, robot time
+    # a healthy drive: its start from rest (at 1 s) is no glitch burst, no dynamics change
+    assert "ALARM" not in out and "alarms: 0 (none)" in out, out
 
 
 def test_monitor_port_fits_phase_one_on_recorded_nominal_drives(model_file, tmp_path, capsys):
