@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from lti_motion.fir import estimate_fir
 from lti_motion.kinematics import integrate_poses, wheel_from_body, wrap_angle
 from lti_motion.metrics import fit_percent
 from lti_motion.model import MotionModel, fit_arx
+from lti_motion.output_error import OutputErrorOptions, refine_model
 
 __all__ = ["RobotResult", "evaluate_robot", "split_halves"]
 
@@ -88,8 +90,9 @@ def _free_run(model: MotionModel | None, seg: MrclamSegment) -> np.ndarray:
     return model.simulate(u)
 
 
-def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1,
-                   fir_length_s: float = 1.0) -> RobotResult:
+def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1, fir_length_s: float = 1.0,
+                   criterion: Literal["equation", "output_error"] = "equation",
+                   output_error: OutputErrorOptions | None = None) -> RobotResult:
     """Calibrate on the first half, evaluate on the second (module docstring).
 
     Parameters
@@ -99,12 +102,22 @@ def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1,
         Grid step of the resampled data [s].
     fir_length_s : float
         Length of the FIR model's impulse responses [s].
+    criterion : {"equation", "output_error"}
+        The ARX model's fit: least squares on the equation error (order and
+        delay by held-out free-run fit), or that model refined on the
+        output-error criterion (:func:`lti_motion.output_error.refine_model`).
+    output_error : OutputErrorOptions, optional
+        Settings of the output-error criterion.
     """
+    if criterion not in ("equation", "output_error"):
+        raise ValueError(f"criterion must be 'equation' or 'output_error', got {criterion!r}")
     warmup = round(WARMUP_S / dt_s)
     segments = resample_robot(robot, dt_s=dt_s)
     train, test = split_halves(segments, min_samples=2 * warmup)
     runs = _runs(train)
     arx = fit_arx(runs, dt_s=dt_s, wheel_base_m=CREATE1_WHEEL_BASE_M)
+    if criterion == "output_error":
+        arx = refine_model(arx, runs, options=output_error, warmup=warmup)
     fir = MotionModel.from_fir(estimate_fir(runs, n_taps=round(fir_length_s / dt_s)),
                                dt_s=dt_s, wheel_base_m=CREATE1_WHEEL_BASE_M)
     predictors = {"raw": None, "fir": fir, "arx": arx}
