@@ -27,7 +27,7 @@ from lti_motion.kinematics import integrate_poses
 from lti_motion.model import MotionModel
 from lti_motion.output_error import OutputErrorOptions, refine_output_error
 
-__all__ = ["Candidate", "StructureScore", "cv_blocks", "score_structures"]
+__all__ = ["Candidate", "StructureScore", "cv_blocks", "fit_candidate", "score_structures"]
 
 _log = logging.getLogger(__name__)
 
@@ -95,8 +95,16 @@ def cv_blocks(runs: Runs, n_folds: int) -> list[list[tuple[np.ndarray, np.ndarra
     return out
 
 
-def _fit(c: Candidate, runs: Runs, *, dt_s: float, wheel_base_m: float,
-         warmup: int) -> MotionModel:
+def fit_candidate(c: Candidate, runs: Runs, *, dt_s: float, wheel_base_m: float,
+                  warmup: int) -> MotionModel:
+    """Fit one candidate on ``runs``: least squares, then the output-error refinement if set.
+
+    Returns
+    -------
+    MotionModel
+        ``kind="arx"`` (``na = 0`` for an FIR), ``offset_speeds`` as fitted
+        (zeros without the offset term).
+    """
     fit = estimate_arx(runs, na=c.na, nb=c.nb, delay=c.delay)
     offset = np.zeros(2)
     if c.output_error is not None:
@@ -162,7 +170,7 @@ def score_structures(runs: Runs, candidates: Sequence[Candidate], *, dt_s: float
         for k, held in enumerate(blocks):
             train = [r for j, b in enumerate(blocks) if j != k for r in b]
             try:
-                model = _fit(c, train, dt_s=dt_s, wheel_base_m=wheel_base_m, warmup=warmup)
+                model = fit_candidate(c, train, dt_s=dt_s, wheel_base_m=wheel_base_m, warmup=warmup)
             except CalibrationError as exc:
                 _log.info("candidate %s fails on fold %d: %s", c.label, k, exc)
                 failed = True
