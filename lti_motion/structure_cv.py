@@ -14,6 +14,7 @@ position difference [m].
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ import numpy as np
 from lti_motion.arx import estimate_arx
 from lti_motion.exceptions import CalibrationError
 from lti_motion.excitation import check_runs
-from lti_motion.kinematics import integrate_poses
+from lti_motion.kinematics import body_from_wheel_matrix, integrate_poses
 from lti_motion.model import MotionModel
 from lti_motion.output_error import OutputErrorOptions, refine_output_error
 
@@ -45,18 +46,29 @@ class Candidate:
     output_error : OutputErrorOptions or None
         ``None``: least squares on the equation error; else the output-error
         refinement with these settings (its ``offset`` flag included).
+    commands : bool
+        Nothing fitted: the body speeds are the commands at face value,
+        ``y[n] = M u[n - delay]`` (``M`` the wheel-to-body matrix); ``na`` must
+        be 0 and ``nb`` 1. The reference every fitted structure must beat.
     """
 
     na: int
     nb: int
     delay: int
     output_error: OutputErrorOptions | None = None
+    commands: bool = False
+
+    def __post_init__(self) -> None:
+        if self.commands and (self.na, self.nb, self.output_error) != (0, 1, None):
+            raise ValueError("a commands-at-face-value candidate has na=0, nb=1 and no fit")
 
     @property
     def label(self) -> str:
         """Short name, e.g. ``"arx(2,2,1)+oe+c"``."""
         oe = self.output_error
         tail = "" if oe is None else "+oe" + ("+c" if oe.offset else "")
+        if self.commands:
+            return f"commands(delay {self.delay})"
         kind = "fir" if self.na == 0 else "arx"
         return f"{kind}({self.na},{self.nb},{self.delay}){tail}"
 
@@ -107,7 +119,11 @@ def fit_candidate(c: Candidate, runs: Runs, *, dt_s: float, wheel_base_m: float,
     """
     fit = estimate_arx(runs, na=c.na, nb=c.nb, delay=c.delay)
     offset = np.zeros(2)
-    if c.output_error is not None:
+    if c.commands:
+        m = body_from_wheel_matrix(wheel_base_m)
+        e = np.concatenate([y[c.delay:] - u[:len(u) - c.delay] @ m.T for u, y in runs])
+        fit = dataclasses.replace(fit, b=m[None], residual_cov=np.cov(e.T, bias=True))
+    elif c.output_error is not None:
         oe = refine_output_error(fit, runs, dt_s=dt_s, warmup=warmup, options=c.output_error)
         fit, offset = oe.fit, oe.offset_speeds
     model = MotionModel.from_arx(fit, dt_s=dt_s, wheel_base_m=wheel_base_m,

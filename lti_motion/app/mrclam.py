@@ -40,7 +40,8 @@ WINDOW_S = 30.0
 
 def _candidates() -> tuple[Candidate, ...]:
     oe = (OutputErrorOptions(offset=False), OutputErrorOptions(offset=True))
-    out = [Candidate(1, 1, 1), Candidate(2, 2, 1)]                  # least squares
+    out = [Candidate(0, 1, 0, commands=True)]                        # nothing fitted
+    out += [Candidate(1, 1, 1), Candidate(2, 2, 1)]                 # least squares
     for opts in oe:
         out += [Candidate(0, 1, d, opts) for d in (0, 1, 2)]        # static gain, delay d
         out += [Candidate(0, 5, 0, opts), Candidate(1, 1, 1, opts)]

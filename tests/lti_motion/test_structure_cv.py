@@ -49,3 +49,16 @@ def test_too_short_runs_are_refused(runs):
     with pytest.raises(ValueError, match="n_folds must be at least 2"):
         score_structures(runs, [Candidate(1, 1, 0)], dt_s=DT, wheel_base_m=BASE, warmup=10,
                          n_folds=1)
+
+
+def test_the_commands_candidate_fits_nothing(runs):
+    from lti_motion.kinematics import body_from_wheel
+    from lti_motion.structure_cv import fit_candidate
+    c = Candidate(0, 1, 0, commands=True)
+    model = fit_candidate(c, runs, dt_s=DT, wheel_base_m=BASE, warmup=10)
+    u = runs[0][0]
+    np.testing.assert_allclose(model.simulate(u), body_from_wheel(u, wheel_base_m=BASE),
+                               atol=1e-12)
+    assert c.label == "commands(delay 0)"
+    with pytest.raises(ValueError, match="na=0, nb=1 and no fit"):
+        Candidate(1, 1, 0, commands=True)
