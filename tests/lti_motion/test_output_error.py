@@ -83,3 +83,11 @@ def test_bad_input_is_refused(data):
     unstable = ls.__class__(**{**ls.__dict__, "a": np.array([1.5 * np.eye(2)] * 2)})
     with pytest.raises(CalibrationError, match="unstable"):
         refine_output_error(unstable, [(u, y)], dt_s=DT, warmup=WARMUP)
+
+
+def test_the_calibration_plan_takes_the_criterion_by_name():
+    from lti_motion.calibration import CalibrationPlan
+    assert CalibrationPlan().arx_criterion == "equation"
+    assert CalibrationPlan(arx_criterion="output_error").arx_criterion == "output_error"
+    with pytest.raises(ValueError, match="arx_criterion must be 'equation' or 'output_error'"):
+        CalibrationPlan(arx_criterion="simulation")
