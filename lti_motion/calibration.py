@@ -36,6 +36,7 @@ from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.odometry import unwrap_ticks
+from lti_motion.output_error import OutputErrorOptions, refine_model
 from lti_motion.recording import Recording
 from lti_motion.resample import on_grid
 
@@ -97,6 +98,12 @@ class CalibrationPlan:
         ``"settled"`` the mean of the settled part of each response;
         ``"wheel_servo"`` (default) the wheel-servo gain ``c M`` nearest it
         (docs/route.md has the measurements).
+    arx_criterion : {"equation", "output_error"}
+        The ARX fit: least squares on the equation error (default), or that
+        fit refined on the output-error criterion without offset
+        (:func:`lti_motion.output_error.refine_model`). The default is the
+        measured choice: on the simulator's route the refinement, which frees
+        the wheel-servo gain, closes worse (docs/calibration.md).
     seed : int
         Seed of the random excitation.
     """
@@ -114,7 +121,13 @@ class CalibrationPlan:
     validation_fraction: float = 0.3
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo"
     fir_dc_gain: Literal["wheel_servo", "settled", "free"] = "wheel_servo"
+    arx_criterion: Literal["equation", "output_error"] = "equation"
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.arx_criterion not in ("equation", "output_error"):
+            raise ValueError("arx_criterion must be 'equation' or 'output_error', got "
+                             f"{self.arx_criterion!r}")
 
 
 @dataclass(frozen=True)
@@ -402,6 +415,8 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
     arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
                   **common)
+    if plan.arx_criterion == "output_error":
+        arx = refine_model(arx, [(u_x, y_x)], options=OutputErrorOptions(offset=False))
     fir = fit_fir_from_steps(u_s, y_s, phases=step_phases, noise_runs=[(u_x, y_x)],
                              dc_gain=plan.fir_dc_gain, **common)
     return Calibration(m_per_tick=scale, rotation=rotation, fir=fir, arx=arx,

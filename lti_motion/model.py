@@ -80,7 +80,8 @@ _log = logging.getLogger(__name__)
 #: a standard deviation of 1e-6 (m/s or rad/s), far below encoder resolution.
 COVARIANCE_JITTER = 1e-12
 #: Format name and version of saved models. Version 2 adds ``"intrinsics"`` (each
-#: wheel's scale and the wheel base, or null); version 1 files are still read.
+#: wheel's scale and the wheel base, or null) and ``"offset_speeds"`` (the affine term of
+#: the speeds); version 1 files are still read (no intrinsics, a zero offset).
 FORMAT = "lti-motion/motion-model"
 VERSION = 2
 READ_VERSIONS = (1, 2)
@@ -225,6 +226,10 @@ class MotionModel:
         Fit figures (validation fit [%], condition numbers, rank ...).
     selection : ArxSelection or None
         The order/delay selection curve (not saved to files).
+    offset_speeds : ndarray, shape (2,)
+        Affine output offset ``c`` = (v [m/s], w [rad/s]): the model predicts
+        ``y = C z + D u + c`` (:mod:`lti_motion.output_error`); zeros for a
+        linear model and for files of version 1.
 
     Notes
     -----
@@ -283,6 +288,7 @@ class MotionModel:
     intrinsics: OdometryIntrinsics | None = None
     diagnostics: Mapping[str, float] = field(default_factory=dict)
     selection: ArxSelection | None = field(default=None, repr=False)
+    offset_speeds: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
@@ -315,6 +321,10 @@ class MotionModel:
         if self.intrinsics is not None and not isinstance(self.intrinsics, OdometryIntrinsics):
             raise ValueError(f"intrinsics must be an OdometryIntrinsics or None, got "
                              f"{type(self.intrinsics).__name__}")
+        setf(self, "offset_speeds", _frozen(self.offset_speeds))
+        if self.offset_speeds.shape != (2,) or not np.all(np.isfinite(self.offset_speeds)):
+            raise ValueError(f"offset_speeds must be 2 finite numbers (v [m/s], w [rad/s]), "
+                             f"got {self.offset_speeds.tolist()}")
         datetime.fromisoformat(self.calibrated_at)  # ValueError if not ISO 8601
         mags = np.abs(np.linalg.eigvals(self.A)) if nz else np.zeros(0)
         if mags.size and mags.max() >= 1:
@@ -367,7 +377,8 @@ class MotionModel:
     def propagate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
         """Free run from ``z0``: outputs ``(..., n, 2)`` and the state after the last command."""
-        return simulate_state_space(self.A, self.B, self.C, self.D, _commands(cmd_m_s), z0=z0)
+        y, z = simulate_state_space(self.A, self.B, self.C, self.D, _commands(cmd_m_s), z0=z0)
+        return y + self.offset_speeds, z
 
     def simulate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None) -> np.ndarray:
         """Sensor-less prediction: body speeds from commands only.
@@ -419,7 +430,10 @@ class MotionModel:
                              "must match")
         _finite(y, "speeds")
         pa, pb, pc, pd = one_step_predictor(self.state_space)
-        return simulate_state_space(pa, pb, pc, pd, np.concatenate([u, y], axis=-1), z0=z0)
+        c = self.offset_speeds          # the linear part runs on y - c
+        yhat, z = simulate_state_space(pa, pb, pc, pd, np.concatenate([u, y - c], axis=-1),
+                                       z0=z0)
+        return yhat + c, z
 
     def predict_one_step(self, cmd_m_s: np.ndarray, speeds: np.ndarray, *,
                          z0: np.ndarray | None = None) -> np.ndarray:
@@ -482,7 +496,8 @@ class MotionModel:
         runs = check_runs(runs)
         warm = self.n_states // 2 if warmup is None else int(warmup)
         if mode == "free_run":
-            err = np.concatenate(free_run_errors(self.state_space, runs, warmup=warm))
+            lin = [(u, y - self.offset_speeds) for u, y in runs]
+            err = np.concatenate(free_run_errors(self.state_space, lin, warmup=warm))
         elif mode == "one_step":
             err = np.concatenate([y[warm:] - self.predict_one_step(u, y)[warm:] for u, y in runs])
         else:
@@ -556,6 +571,7 @@ class MotionModel:
             "coefficients": {k: encode_array(v) for k, v in self.coefficients.items()},
             "matrices": {n: encode_array(getattr(self, n)) for n in "ABCDKQR"},
             "intrinsics": None if self.intrinsics is None else self.intrinsics.as_dict(),
+            "offset_speeds": encode_array(self.offset_speeds),
         }
         return write_document(path, payload, fmt=FORMAT, version=VERSION)
 
@@ -577,8 +593,8 @@ class MotionModel:
         matrices = doc.get("matrices") if isinstance(doc.get("matrices"), dict) else {}
         missing = [k for k in keys if k not in doc]
         missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in matrices]
-        if doc["version"] >= 2 and "intrinsics" not in doc:
-            missing.append("intrinsics")
+        if doc["version"] >= 2:
+            missing += [k for k in ("intrinsics", "offset_speeds") if k not in doc]
         if missing:
             raise ModelFileError(f"{path} lacks the keys {missing}; it is not a model file "
                                  "that lti-motion wrote")
@@ -594,6 +610,8 @@ class MotionModel:
                 orders=doc["orders"], diagnostics=doc["diagnostics"],
                 coefficients={k: decode_array(v, k) for k, v in doc["coefficients"].items()},
                 **{n: decode_array(doc["matrices"][n], n) for n in "ABCDKQR"},
+                offset_speeds=(decode_array(doc["offset_speeds"], "offset_speeds")
+                               if "offset_speeds" in doc else np.zeros(2)),
             )
         except (ValueError, TypeError, AttributeError) as exc:
             if isinstance(exc, ModelFileError):

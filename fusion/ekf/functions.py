@@ -399,6 +399,7 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     x_new = np.empty(n)
     tail = fm.ACD @ x[_Z0:_Z0 + nz]
     tail += fm.BD @ cmd_m_s                       # (A z + B u, C z + D u)
+    tail[nz:] += fm.model.offset_speeds           # + c, the model's affine offset
     x_new[_Z0:] = tail
     v, w = tail[nz:].tolist()
     if accumulate:
@@ -703,7 +704,7 @@ def initial_state(fm: FilterModel, pose: np.ndarray, *, z: np.ndarray | None = N
                                     f"and {zz.shape}")
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(zz))):
         raise NonFiniteInputError("the start pose and model state must be finite")
-    return np.concatenate([pose, np.zeros(2), zz, fm.model.C @ zz])
+    return np.concatenate([pose, np.zeros(2), zz, fm.model.C @ zz + fm.model.offset_speeds])
 
 
 def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] = (0.01, 0.01,

@@ -255,8 +255,9 @@ class WindowIntegrator:
         if self._h == 0:
             self._zf = self._z.copy()
             self._s_start = self._y_last.copy()
-        y_free = self._zf @ m.C.T + u @ m.D.T
-        y_one = self._z @ m.C.T + u @ m.D.T
+        c = m.offset_speeds                      # affine offset: the linear part runs on y - c
+        y_free = self._zf @ m.C.T + u @ m.D.T + c
+        y_one = self._z @ m.C.T + u @ m.D.T + c
         p_ticks = y_free @ self._to_ticks.T
         self._y_last = p_ticks
         good = np.all(np.isfinite(d), axis=1)
@@ -269,7 +270,7 @@ class WindowIntegrator:
         self._acc[1] += p_ticks
         y_meas = d_use @ self._from_ticks.T
         self._zf = self._zf @ m.A.T + u @ m.B.T
-        self._z = self._z @ self._pa.T + u @ self._pb.T + y_meas @ m.K.T
+        self._z = self._z @ self._pa.T + u @ self._pb.T + (y_meas - c) @ m.K.T
         self._h += 1
         if self._h < self.window_periods:
             return None

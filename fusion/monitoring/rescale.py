@@ -146,4 +146,5 @@ def rescaled_model(model: MotionModel, *, m_per_tick: float, wheel_base_m: float
     diag["rescaled_w"] = diag.get("rescaled_w", 1.0) * float(s[1])
     return model.updated(C=S @ model.C, D=S @ model.D, K=model.K @ S_inv,           # eq. 2
                          R=0.5 * (r + r.T), coefficients=coef, m_per_tick=float(m_per_tick),
+                         offset_speeds=S @ model.offset_speeds,
                          wheel_base_m=float(wheel_base_m), diagnostics=diag)

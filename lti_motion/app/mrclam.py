@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -26,13 +27,29 @@ from lti_motion.fir import estimate_fir
 from lti_motion.kinematics import integrate_poses, wheel_from_body, wrap_angle
 from lti_motion.metrics import fit_percent
 from lti_motion.model import MotionModel, fit_arx
+from lti_motion.output_error import OutputErrorOptions, refine_model
+from lti_motion.structure_cv import Candidate, fit_candidate, score_structures
 
-__all__ = ["RobotResult", "evaluate_robot", "split_halves"]
+__all__ = ["CANDIDATES", "RobotResult", "evaluate_robot", "split_halves"]
 
 _log = logging.getLogger(__name__)
 
 WARMUP_S = 2.0          # the start of each validation stretch only sets a model's state
 WINDOW_S = 30.0
+
+
+def _candidates() -> tuple[Candidate, ...]:
+    oe = (OutputErrorOptions(offset=False), OutputErrorOptions(offset=True))
+    out = [Candidate(0, 1, 0, commands=True)]                        # nothing fitted
+    out += [Candidate(1, 1, 1), Candidate(2, 2, 1)]                 # least squares
+    for opts in oe:
+        out += [Candidate(0, 1, d, opts) for d in (0, 1, 2)]        # static gain, delay d
+        out += [Candidate(0, 5, 0, opts), Candidate(1, 1, 1, opts)]
+    return tuple(out)
+
+
+#: ``criterion="selected"``: the structures scored on the first half (docs/mrclam.md rules).
+CANDIDATES = _candidates()
 
 
 @dataclass(frozen=True)
@@ -88,8 +105,9 @@ def _free_run(model: MotionModel | None, seg: MrclamSegment) -> np.ndarray:
     return model.simulate(u)
 
 
-def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1,
-                   fir_length_s: float = 1.0) -> RobotResult:
+def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1, fir_length_s: float = 1.0,
+                   criterion: Literal["equation", "output_error", "selected"] = "equation",
+                   output_error: OutputErrorOptions | None = None) -> RobotResult:
     """Calibrate on the first half, evaluate on the second (module docstring).
 
     Parameters
@@ -99,12 +117,33 @@ def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1,
         Grid step of the resampled data [s].
     fir_length_s : float
         Length of the FIR model's impulse responses [s].
+    criterion : {"equation", "output_error", "selected"}
+        The ARX model's fit: least squares on the equation error (order and
+        delay by held-out free-run fit); that model refined on the
+        output-error criterion (:func:`lti_motion.output_error.refine_model`);
+        or the one of :data:`CANDIDATES` with the least 3-fold cross-validated
+        30 s path error on the first half
+        (:func:`lti_motion.structure_cv.score_structures`), refitted on it.
+    output_error : OutputErrorOptions, optional
+        Settings of the output-error criterion.
     """
+    if criterion not in ("equation", "output_error", "selected"):
+        raise ValueError(f"criterion must be 'equation', 'output_error' or 'selected', got "
+                         f"{criterion!r}")
     warmup = round(WARMUP_S / dt_s)
     segments = resample_robot(robot, dt_s=dt_s)
     train, test = split_halves(segments, min_samples=2 * warmup)
     runs = _runs(train)
     arx = fit_arx(runs, dt_s=dt_s, wheel_base_m=CREATE1_WHEEL_BASE_M)
+    if criterion == "output_error":
+        arx = refine_model(arx, runs, options=output_error, warmup=warmup)
+    elif criterion == "selected":
+        common = {"dt_s": dt_s, "wheel_base_m": CREATE1_WHEEL_BASE_M, "warmup": warmup}
+        scores = score_structures(runs, CANDIDATES, horizon_s=WINDOW_S, **common)
+        best = min(scores, key=lambda s: s.median_end_error_m)
+        _log.info("robot %d: structure %s (first-half CV %.3f m)", robot.robot,
+                  best.candidate.label, best.median_end_error_m)
+        arx = fit_candidate(best.candidate, runs, **common)
     fir = MotionModel.from_fir(estimate_fir(runs, n_taps=round(fir_length_s / dt_s)),
                                dt_s=dt_s, wheel_base_m=CREATE1_WHEEL_BASE_M)
     predictors = {"raw": None, "fir": fir, "arx": arx}

@@ -25,7 +25,7 @@ from lti_motion.excitation import random_held_normal, step_sequence
 from lti_motion.fir import simulate_state_space, simulate_state_space_loop
 from lti_motion.kinematics import integrate_poses
 from lti_motion.metrics import fit_percent
-from lti_motion.model import FORMAT, MotionModel, fit_arx, fit_fir_from_steps
+from lti_motion.model import FORMAT, VERSION, MotionModel, fit_arx, fit_fir_from_steps
 from lti_motion.persistence import write_document
 
 WHEN = "2026-11-23T12:00:00+00:00"
@@ -203,7 +203,7 @@ def test_save_load_round_trip_is_exact_and_atomic(kind, arx_model, fir_model, tm
     _same(m, loaded)
     assert loaded.selection is None
     doc = json.loads(path.read_text())
-    assert doc["format"] == FORMAT and doc["version"] == 2
+    assert doc["format"] == FORMAT and doc["version"] == VERSION == 2
 
 
 def test_failed_write_keeps_the_old_file(arx_model, fir_model, tmp_path, monkeypatch):
@@ -226,7 +226,7 @@ def test_damaged_files_raise_model_file_error(arx_model, tmp_path):
         "truncated": (text[: len(text) // 2], "damaged or truncated"),
         "garbage": ("\x00\xff binary", "damaged or truncated"),
         "edited": (text.replace('"tiles"', '"carpet"'), "checksum"),
-        "version": (text.replace('"version": 2', '"version": 99'), "version 99"),
+        "version": (text.replace(f'"version": {VERSION}', '"version": 99'), "version 99"),
         "format": (text.replace(FORMAT, "something-else"), "not a"),
         "list": ("[1, 2, 3]", "not a"),
     }
@@ -237,12 +237,12 @@ def test_damaged_files_raise_model_file_error(arx_model, tmp_path):
             MotionModel.load(bad)
     doc = json.loads(text)
     payload = {k: v for k, v in doc.items() if k not in ("format", "version", "sha256", "floor")}
-    write_document(tmp_path / "missing.json", payload, fmt=FORMAT, version=1)
+    write_document(tmp_path / "missing.json", payload, fmt=FORMAT, version=VERSION)
     with pytest.raises(ModelFileError, match=r"lacks the keys \['floor'\]"):
         MotionModel.load(tmp_path / "missing.json")
     payload["floor"] = None
     payload["matrices"]["Q"]["data"][0] = -1.0  # checksum fine, model invalid
-    write_document(tmp_path / "invalid.json", payload, fmt=FORMAT, version=1)
+    write_document(tmp_path / "invalid.json", payload, fmt=FORMAT, version=VERSION)
     with pytest.raises(ModelFileError, match=r"invalid model.*Q must be symmetric positive"):
         MotionModel.load(tmp_path / "invalid.json")
     with pytest.raises(FileNotFoundError):
@@ -315,3 +315,28 @@ def test_model_file_carries_the_intrinsics_and_reads_version_1(arx_model, tmp_pa
     write_document(tmp_path / "v2neg.json", payload, fmt=FORMAT, version=2)
     with pytest.raises(ModelFileError, match="m_per_tick_left must be a positive"):
         MotionModel.load(tmp_path / "v2neg.json")
+
+
+def test_version_1_files_read_with_a_zero_offset(arx_model, tmp_path):
+    doc = json.loads(arx_model.save(tmp_path / "v2.json").read_text())
+    payload = {k: v for k, v in doc.items()
+               if k not in ("format", "version", "sha256", "offset_speeds")}
+    write_document(tmp_path / "v1.json", payload, fmt=FORMAT, version=1)
+    old = MotionModel.load(tmp_path / "v1.json")
+    assert old.offset_speeds.tolist() == [0.0, 0.0]
+    np.testing.assert_array_equal(old.A, arx_model.A)
+
+
+def test_the_offset_is_added_to_every_prediction_and_saved(arx_model, fresh, tmp_path):
+    u, y = fresh
+    c = np.array([0.01, -0.05])
+    shifted = arx_model.updated(offset_speeds=c)
+    np.testing.assert_allclose(shifted.simulate(u), arx_model.simulate(u) + c, atol=1e-12)
+    # one-step: the linear part runs on y - c, so data shifted by c predicts shifted by c
+    np.testing.assert_allclose(shifted.predict_one_step(u, y + c),
+                               arx_model.predict_one_step(u, y) + c, atol=1e-12)
+    np.testing.assert_allclose(shifted.fit_percent([(u, y + c)]), arx_model.fit_percent([(u, y)]),
+                               atol=1e-9)
+    assert MotionModel.load(shifted.save(tmp_path / "m.json")).offset_speeds.tolist() == c.tolist()
+    with pytest.raises(ValueError, match="offset_speeds must be 2 finite"):
+        arx_model.updated(offset_speeds=[np.nan, 0.0])

@@ -592,3 +592,18 @@ def test_example_runs_with_a_short_horizon(tmp_path, capsys, load_example):
     png = tmp_path / "ekf_plugin.png"
     assert png.exists() and png.stat().st_size > 10_000
     assert "position RMS error EKF" in capsys.readouterr().out
+
+
+def test_a_models_offset_reaches_the_speed_state_and_the_pose(model, rng):
+    """Sensor-less, the filter's speeds are the model's free run, affine offset included."""
+    shifted = model.updated(offset_speeds=[0.01, -0.02])
+    u = _held_commands(rng, 200)
+    ekf = ModelEKF(shifted, initial_pose=(0.0, 0.0, 0.0))
+    speeds = []
+    for k in range(len(u)):
+        speeds.append(ekf.speeds)
+        ekf.predict(u[k])
+    want = shifted.simulate(u[:-1])
+    np.testing.assert_allclose(np.array(speeds)[1:], want, atol=1e-12)
+    np.testing.assert_allclose(speeds[0], [0.01, -0.02], atol=1e-15)
+    np.testing.assert_allclose(ekf.pose, shifted.predict_poses(u)[-1], atol=1e-9)
