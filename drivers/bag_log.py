@@ -8,7 +8,8 @@ The rule (``docs/guide_ros_bags.md``):
   or a whole rate in Hz within 0.1 %): frame
   ``k`` is the message ``rint((t - t_first) / dt_s) = k``, stamped
   ``t_first + k dt_s``, as :func:`lti_motion.odometry.stream_clock` times a
-  jittered host stream. A period without a message is a lost frame
+  jittered host stream; where jitter puts two messages on one period, the one
+  further from it moves to the free period beside it. A period without a message is a lost frame
   (``valid`` false) whose angles are interpolated linearly between its
   neighbours, so the next counts span the gap;
 - the counts are the angles times ``ticks_per_rad``, rounded, on the 16-bit ring
@@ -58,32 +59,56 @@ def _grid(rec: BagRecording, dt_s: float | None) -> tuple[np.ndarray, float, np.
         dt_s = _period(t, wheels.topic)
     if not (math.isfinite(dt_s) and dt_s > 0):
         raise BagError(f"the sensor period must be positive, got {dt_s!r} s")
-    k = np.rint((t - t[0]) / dt_s).astype(np.int64)
-    same = np.flatnonzero(np.diff(k) < 1)
-    if same.size:
-        i = int(same[0])
-        raise BagError(f"topic {wheels.topic}: messages {i} and {i + 1} fall in the same "
-                       f"{dt_s * 1e3:g} ms period (stamps {t[i]:.4f} s and {t[i + 1]:.4f} s): "
-                       "stamps jitter by half a period or more, or the period is wrong "
-                       "(--dt)")
+    k = _periods(t, dt_s, wheels.topic)
     return k, dt_s, t
 
 
+def _periods(t: np.ndarray, dt_s: float, topic: str) -> np.ndarray:
+    """Period number of each message: the nearest whole number of periods since the first,
+    except where jitter puts two messages on one period; then the one whose stamp is
+    further from it moves to the free neighbouring period on its side."""
+    x = (t - t[0]) / dt_s
+    k = np.rint(x).astype(np.int64)
+    for i in np.flatnonzero(np.diff(k) < 1):
+        a, b = int(i), int(i) + 1
+        if k[b] != k[a]:                      # a stamp more than half a period backwards
+            break
+        lower_free = a == 0 or k[a - 1] < k[a] - 1
+        upper_free = b == len(k) - 1 or k[b + 1] > k[b] + 1
+        late_a, early_b = x[a] - (k[a] - 1), (k[b] + 1) - x[b]     # the cost of each move
+        if lower_free and (not upper_free or late_a <= early_b) and a > 0:
+            k[a] -= 1
+        elif upper_free:
+            k[b] += 1
+    same = np.flatnonzero(np.diff(k) < 1)
+    if same.size:
+        i = int(same[0])
+        raise BagError(f"topic {topic}: messages {i} and {i + 1} fall in the same "
+                       f"{dt_s * 1e3:g} ms period (stamps {t[i]:.4f} s and {t[i + 1]:.4f} s): "
+                       "stamps jitter by a period or more, or the period is wrong (--dt)")
+    return k
+
+
 def _period(t: np.ndarray, topic: str) -> float:
-    """The sensor period of jittered stamps [s]: the median of the intervals shorter than
-    1.5 times the median interval (one period each, lost frames aside), then the
-    least-squares slope of the stamps against their period numbers, each interval
-    counted as a whole number of periods; snapped to a whole 0.1 ms or a whole rate in Hz
-    within 0.1 %, else rounded to 0.1 us."""
+    """The sensor period of jittered stamps [s]: the median of the intervals between half
+    and 1.5 times the median interval (one period each, lost frames aside), then refined
+    as the least-squares slope of the stamps against their period numbers over the first
+    64, 128, 256, ... messages (each fit good enough to number the next stretch); snapped
+    to a whole 0.1 ms or a whole rate in Hz within 0.1 %, else rounded to 0.1 us."""
     steps = np.diff(t)
     if not np.any(steps > 0):
         raise BagError(f"topic {topic}: no sensor period in its stamps (all equal); give the "
                        "period with --dt")
     rough = float(np.median(steps[steps > 0]))
-    dt_s = float(np.median(steps[(steps > 0) & (steps < 1.5 * rough)]))
-    k = np.concatenate([[0.0], np.cumsum(np.maximum(np.rint(steps / dt_s), 1.0))])
-    if k[-1] >= 2:
-        dt_s = float(np.polyfit(k, t, 1)[0])
+    dt_s = float(np.median(steps[(steps > 0.5 * rough) & (steps < 1.5 * rough)]))
+    m = min(64, len(t))
+    while True:
+        k = np.rint((t[:m] - t[0]) / dt_s)
+        if k[-1] >= 2:
+            dt_s = float(np.polyfit(k, t[:m], 1)[0])
+        if m == len(t):
+            break
+        m = min(2 * m, len(t))
     for nominal in (round(dt_s, 4), 1.0 / round(1.0 / dt_s)):     # 15 ms, 50 Hz, 30 Hz
         if abs(nominal - dt_s) <= 1e-3 * dt_s:
             return nominal
@@ -102,7 +127,7 @@ def _check_speed(what: str, topic: str, speed_m_s: np.ndarray, limit_m_s: float)
 def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
                ticks_per_rad: float = CREATE2_TICKS_PER_RAD,
                wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M, dt_s: float | None = None,
-               max_wheel_m_s: float = 2.0, max_gap_s: float = 0.25) -> FrameLog:
+               max_wheel_m_s: float = 20.0, max_gap_s: float = 0.25) -> FrameLog:
     """The drive in a bag as a :class:`FrameLog`, by the rule of the module docstring.
 
     Parameters
@@ -118,7 +143,9 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
     dt_s : float, optional
         Sensor period [s]; default from the wheel messages' stamps (module docstring).
     max_wheel_m_s : float
-        A wheel or wheel command faster than this [m/s] is refused as impossible.
+        A wheel or wheel command faster than this [m/s] is refused as impossible
+        (default 20 m/s: far beyond any robot this library models, while encoder
+        glitches of several hundred ticks still pass, for the monitor to find).
     max_gap_s : float
         Reference poses are blank across gaps longer than this [s].
 
@@ -146,7 +173,8 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
                        f"{listing or 'no topics'}")
     k, dt_s, t = _grid(rec, dt_s)
     angles = rec.wheels.values
-    speed = np.diff(angles, axis=0) / np.diff(t)[:, None] * wheel_radius_m
+    # over the periods between messages, not the jittered stamps
+    speed = np.diff(angles, axis=0) / (np.diff(k) * dt_s)[:, None] * wheel_radius_m
     for side in (0, 1):
         _check_speed(f"{rec.joints[side]} wheel", rec.wheels.topic, speed[:, side],
                      max_wheel_m_s)

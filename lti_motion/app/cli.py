@@ -42,7 +42,46 @@ PRESET_NAMES = tuple(PRESETS)
 FLOOR_NAMES = tuple(FLOORS)
 
 
+def _bag_options(args: argparse.Namespace):
+    from lti_motion.app.bag_commands import BagOptions
+
+    topics = {kind: getattr(args, f"{kind}_topic") for kind in
+              ("cmd", "wheels", "odom", "imu", "truth") if getattr(args, f"{kind}_topic")}
+    for name in ("ticks_per_rad", "wheel_radius", "dt", "max_wheel_speed"):
+        value = getattr(args, name)
+        if value is not None and not value > 0:
+            raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value:g}")
+    extra = {k: v for k, v in (("ticks_per_rad", args.ticks_per_rad),
+                               ("wheel_radius_m", args.wheel_radius), ("dt_s", args.dt),
+                               ("max_wheel_m_s", args.max_wheel_speed))
+             if v is not None}
+    return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
+                      encoders=args.encoders, **extra)
+
+
+def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
+    from lti_motion.app.plots import plot_order_selection
+
+    out = Path(args.out)
+    model, log = calibrate_from_bag(args.bag, wheel_base_m=args.wheel_base,
+                                    options=_bag_options(args), floor=args.floor)
+    out.mkdir(parents=True, exist_ok=True)
+    path = model.save(out / "model_arx.json")
+    print(f"calibrated from {args.bag}: {len(log)} frames of {log.dt_s * 1e3:g} ms "
+          f"({log.meta['lost_frames']} lost), topics {log.meta['topics']}")
+    print(f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
+          f"{model.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    plot_order_selection(model, out / "order_selection.png")
+    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders)
+    print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
+    print(f"wrote {path}, {out / 'order_selection.png'} and {out / 'bag_fit.png'}")
+    return 0
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_calibrate_bag(args)
     from drivers.sim.calibration import (
         calibrate_simulator,
         print_progress,
@@ -95,7 +134,26 @@ def _load_model(path: str):
     return MotionModel.load(path)
 
 
+def _cmd_replay_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import replay_bag
+
+    if args.source is not None:
+        raise ValueError("give either a log / data set or --bag, not both")
+    if args.model is None:
+        raise ValueError("replay --bag needs --model FILE (from 'lti-motion calibrate --bag')")
+    replay_bag(args.bag, _load_model(args.model), args.out, options=_bag_options(args),
+               out_bag=args.out_bag, estimators=args.estimators, start_s=args.start_s,
+               duration_s=args.duration_s, initial_pose=args.initial_pose, rpe_s=args.rpe_s)
+    return 0
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_replay_bag(args)
+    if args.out_bag:
+        raise ValueError("--out-bag writes the estimates of a --bag replay; give --bag")
+    if args.source is None:
+        raise ValueError("give a log (.npz) or an MRCLAM data set folder, or --bag BAG")
     from lti_motion.app.replay import fit_mrclam_model, run_replay
 
     start_s = args.start_s
@@ -122,7 +180,27 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_monitor_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import monitor_bag
+    from lti_motion.app.monitor_setup import nominal_from_logs
+
+    if args.fault or args.listen or args.record:
+        raise ValueError("--fault, --listen and --record drive a robot; --bag reads a "
+                         "recorded drive")
+    if args.model is None:
+        raise ValueError("monitor --bag needs --model FILE (from 'lti-motion calibrate --bag')")
+    model = _load_model(args.model)
+    nominal = nominal_from_logs(model, args.nominal) if args.nominal else None
+    monitor_bag(args.bag, model, options=_bag_options(args), out_bag=args.out_bag,
+                nominal=nominal)
+    return 0
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_monitor_bag(args)
+    if args.out_bag:
+        raise ValueError("--out-bag writes what monitor --bag found; give --bag")
     from lti_motion.app import monitor as live_monitor
 
     if args.fault and not args.sim:
@@ -184,6 +262,32 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_bag_options(parser: argparse.ArgumentParser) -> None:
+    """The options of --bag: topics where a bag holds several of a kind, joints, encoder."""
+    group = parser.add_argument_group(
+        "ROS bag (--bag)", "topics are found by message type when the bag has one of each")
+    for kind, what in (("cmd", "Twist or TwistStamped commands"),
+                       ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
+                       ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
+        group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
+    group.add_argument("--left-joint", default="left", metavar="PATTERN",
+                       help="left wheel joint: its name or a pattern (default 'left')")
+    group.add_argument("--right-joint", default="right", metavar="PATTERN",
+                       help="right wheel joint: its name or a pattern (default 'right')")
+    group.add_argument("--ticks-per-rad", type=float, default=None,
+                       help="encoder counts per wheel radian (default the Create 2's, 80.98)")
+    group.add_argument("--wheel-radius", type=float, default=None,
+                       help="nominal wheel radius [m] (default the Create 2's, 0.036)")
+    group.add_argument("--encoders", choices=["commanded", "quadrature"], default="commanded",
+                       help="commanded: the angles count in the commanded direction (Roomba, "
+                            "Create 2; default); quadrature: they know the way the wheel turns")
+    group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
+                       help="refuse wheel speeds above this as impossible [m/s] (default 20)")
+    group.add_argument("--dt", type=float, default=None,
+                       help="sensor period [s] (default: calibrate from the wheel stamps, "
+                            "replay and monitor the model's)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lti-motion``."""
     parser = argparse.ArgumentParser(
@@ -215,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
     where = cal.add_mutually_exclusive_group(required=True)
     where.add_argument("--sim", choices=PRESET_NAMES, help="calibrate the simulator")
     where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
+    where.add_argument("--bag", help="a recorded ROS bag (ROS 1 .bag, or a ROS 2 folder with a "
+                                     ".db3 or .mcap file): fit the ARX model on its drive "
+                                     "(docs/guide_ros_bags.md)")
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "
@@ -229,6 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--out", default="out/calibration", help="output folder")
     cal.add_argument("--yes", action="store_true",
                      help="do not wait for Enter between manoeuvres (robot already placed)")
+    _add_bag_options(cal)
     cal.set_defaults(func=_cmd_calibrate)
 
     rp = sub.add_parser(
@@ -239,8 +347,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "data set folder; prints ATE / RPE where there is ground truth; writes one "
                     "TUM trajectory per estimator (and groundtruth.tum) for evo, "
                     "metrics.json and plots. See docs/replay.md.")
-    rp.add_argument("source", metavar="LOG_OR_DATASET",
-                    help="an .npz log, or an MRCLAM_Dataset folder")
+    rp.add_argument("source", metavar="LOG_OR_DATASET", nargs="?",
+                    help="an .npz log, or an MRCLAM_Dataset folder (or give --bag)")
+    rp.add_argument("--bag", help="a recorded ROS bag instead (docs/guide_ros_bags.md)")
+    rp.add_argument("--out-bag", metavar="NEW_BAG",
+                    help="--bag: also write the EKF's estimates (nav_msgs/Odometry with "
+                         "covariance) into this new bag (.bag: ROS 1; else a ROS 2 folder)")
     rp.add_argument("--model", help="model file from 'lti-motion calibrate' (model_arx.json)")
     rp.add_argument("--fit-first-half", action="store_true",
                     help="MRCLAM only, instead of --model: fit an ARX model on the first half "
@@ -260,6 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"),
                     help="start pose [m m rad] (default: the first ground-truth pose, else 0 0 0)")
     rp.add_argument("--rpe-s", type=float, default=1.0, help="RPE step [s] (default 1)")
+    _add_bag_options(rp)
     rp.set_defaults(func=_cmd_replay)
 
     mo = sub.add_parser(
@@ -275,6 +388,11 @@ def build_parser() -> argparse.ArgumentParser:
     mwhere = mo.add_mutually_exclusive_group(required=True)
     mwhere.add_argument("--sim", choices=PRESET_NAMES, help="monitor the simulator")
     mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
+    mwhere.add_argument("--bag", help="a recorded ROS bag: monitor its drive, alarms with bag "
+                                      "time (needs --model)")
+    mo.add_argument("--out-bag", metavar="NEW_BAG",
+                    help="--bag: write the estimates (nav_msgs/Odometry with covariance) and "
+                         "the alarms (diagnostic_msgs/DiagnosticArray) into this new bag")
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
                     help="robot seconds to drive or listen (default 30)")
@@ -301,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="--port only: send no wheel command, only read the stream")
     mo.add_argument("--record", metavar="FILE.npz",
                     help="also write the frames as a log that 'lti-motion replay' reads")
+    _add_bag_options(mo)
     mo.set_defaults(func=_cmd_monitor)
 
     vr = sub.add_parser(
