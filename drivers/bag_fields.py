@@ -110,7 +110,7 @@ def _parent(msg: object, attrs: list[str]) -> object:
 def _vectorised(raws: Sequence[bytes], paths: Sequence[str], first: object,
                 serialize: Callable[[object], bytes]) -> np.ndarray | None:
     length = len(raws[0])
-    if any(len(r) != length for r in raws):
+    if len(set(map(len, raws))) != 1:
         return None
     try:
         where = _offsets(first, paths, length, serialize)
@@ -119,11 +119,11 @@ def _vectorised(raws: Sequence[bytes], paths: Sequence[str], first: object,
     if where is None:
         return None
     block = np.frombuffer(b"".join(raws), dtype=np.uint8).reshape(len(raws), length)
-    constant = np.ones(length, bool)
+    numeric = np.zeros(length, bool)
     for at, dtype in where:
-        constant[at:at + dtype.itemsize] = False
-    if not np.array_equal(block[:, constant], np.broadcast_to(block[0, constant],
-                                                              (len(raws), int(constant.sum())))):
+        numeric[at:at + dtype.itemsize] = True
+    varies = np.bitwise_or.reduce(block ^ block[0], axis=0) != 0     # bytes that change
+    if np.any(varies & ~numeric):
         return None
     out = np.empty((len(raws), len(paths)))
     for j, (at, dtype) in enumerate(where):

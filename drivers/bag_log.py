@@ -6,10 +6,11 @@ The rule (``docs/guide_ros_bags.md``):
   period ``dt_s`` (default: the median interval between them, refined as the
   slope of their stamps against their period numbers, snapped to a whole 0.1 ms
   or a whole rate in Hz within 0.1 %): frame
-  ``k`` is the message ``rint((t - t_first) / dt_s) = k``, stamped
-  ``t_first + k dt_s``, as :func:`lti_motion.odometry.stream_clock` times a
-  jittered host stream; where jitter puts two messages on one period, the one
-  further from it moves to the free period beside it. A period without a message is a lost frame
+  ``k`` is the message ``rint((t - t_0) / dt_s) = k``, stamped ``t_0 + k dt_s``, with
+  ``t_0`` the grid's phase from all the stamps (their circular mean), as
+  :func:`lti_motion.odometry.stream_clock` times a jittered host stream; where
+  jitter puts two messages on one period, a run of them beside it moves by one period
+  into the period a misrounded stamp left free. A period without a message is a lost frame
   (``valid`` false) whose angles are interpolated linearly between its
   neighbours, so the next counts span the gap;
 - the counts are the angles times ``ticks_per_rad``, rounded, on the 16-bit ring
@@ -39,6 +40,9 @@ from lti_motion.odometry import TICK_MODULUS
 
 __all__ = ["CREATE2_TICKS_PER_RAD", "CREATE2_WHEEL_RADIUS_M", "bag_to_log"]
 
+#: Longest run of messages moved by one period to separate two on one period.
+_MAX_SHIFT = 50
+
 #: The Create 2's encoder: 508.8 counts per wheel turn (OI spec, packet 43).
 CREATE2_TICKS_PER_RAD = 508.8 / (2.0 * math.pi)
 #: The Create 2's nominal wheel radius [m] (72 mm diameter, OI spec).
@@ -49,8 +53,10 @@ def _seconds(series: StampedSeries, start_ns: int) -> np.ndarray:
     return (series.t_ns - start_ns) * 1e-9
 
 
-def _grid(rec: BagRecording, dt_s: float | None) -> tuple[np.ndarray, float, np.ndarray]:
-    """Frame index of each wheel message, the period, and the message times [s]."""
+def _grid(rec: BagRecording, dt_s: float | None
+          ) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """Frame index of each wheel message, the period, the message times and the time of
+    frame 0 [s]."""
     wheels = rec.wheels
     t = _seconds(wheels, rec.start_ns)
     if len(t) < 2:
@@ -59,34 +65,54 @@ def _grid(rec: BagRecording, dt_s: float | None) -> tuple[np.ndarray, float, np.
         dt_s = _period(t, wheels.topic)
     if not (math.isfinite(dt_s) and dt_s > 0):
         raise BagError(f"the sensor period must be positive, got {dt_s!r} s")
-    k = _periods(t, dt_s, wheels.topic)
-    return k, dt_s, t
+    k, origin = _periods(t, dt_s, wheels.topic)
+    return k, dt_s, t, origin
 
 
-def _periods(t: np.ndarray, dt_s: float, topic: str) -> np.ndarray:
-    """Period number of each message: the nearest whole number of periods since the first,
-    except where jitter puts two messages on one period; then the one whose stamp is
-    further from it moves to the free neighbouring period on its side."""
+def _numbers(t: np.ndarray, dt_s: float) -> tuple[np.ndarray, float]:
+    """The nearest period numbers of stamps on a grid of ``dt_s`` whose phase is the stamps'
+    circular mean (not the first stamp's, which has its own jitter), and the grid's time 0."""
     x = (t - t[0]) / dt_s
-    k = np.rint(x).astype(np.int64)
+    phase = float(np.angle(np.mean(np.exp(2j * np.pi * x))) / (2.0 * np.pi))
+    k = np.rint(x - phase).astype(np.int64)
+    return k - k[0], float(t[0] + (phase + k[0]) * dt_s)
+
+
+def _periods(t: np.ndarray, dt_s: float, topic: str) -> tuple[np.ndarray, float]:
+    """Period number of each message (:func:`_numbers`), and the time of period 0 [s].
+
+    Where jitter rounds two messages onto one period, a run of messages beside them
+    moves by one period into the free period nearest (at most :data:`_MAX_SHIFT`
+    messages away), on the side where the moved stamps end up closest to their periods
+    (least squares): the slot a misrounded stamp left empty."""
+    k, origin = _numbers(t, dt_s)
+    x = (t - origin) / dt_s
+    n = len(k)
     for i in np.flatnonzero(np.diff(k) < 1):
-        a, b = int(i), int(i) + 1
-        if k[b] != k[a]:                      # a stamp more than half a period backwards
-            break
-        lower_free = a == 0 or k[a - 1] < k[a] - 1
-        upper_free = b == len(k) - 1 or k[b + 1] > k[b] + 1
-        late_a, early_b = x[a] - (k[a] - 1), (k[b] + 1) - x[b]     # the cost of each move
-        if lower_free and (not upper_free or late_a <= early_b) and a > 0:
-            k[a] -= 1
-        elif upper_free:
-            k[b] += 1
+        if k[i + 1] > k[i]:                        # an earlier repair separated them
+            continue
+        lo = i
+        while lo > 0 and k[lo - 1] == k[lo] - 1 and i - lo < _MAX_SHIFT:
+            lo -= 1
+        hi = i + 1
+        while hi < n - 1 and k[hi + 1] == k[hi] + 1 and hi - i < _MAX_SHIFT:
+            hi += 1
+        down_ok = lo == 0 or k[lo - 1] < k[lo] - 1
+        up_ok = hi == n - 1 or k[hi + 1] > k[hi] + 1
+        left, right = slice(lo, i + 1), slice(i + 1, hi + 1)
+        cost_down = np.sum((x[left] - k[left] + 1) ** 2 - (x[left] - k[left]) ** 2)
+        cost_up = np.sum((x[right] - k[right] - 1) ** 2 - (x[right] - k[right]) ** 2)
+        if down_ok and (not up_ok or cost_down <= cost_up):
+            k[left] -= 1
+        elif up_ok:
+            k[right] += 1
     same = np.flatnonzero(np.diff(k) < 1)
     if same.size:
         i = int(same[0])
         raise BagError(f"topic {topic}: messages {i} and {i + 1} fall in the same "
                        f"{dt_s * 1e3:g} ms period (stamps {t[i]:.4f} s and {t[i + 1]:.4f} s): "
                        "stamps jitter by a period or more, or the period is wrong (--dt)")
-    return k
+    return k - k[0], origin + k[0] * dt_s
 
 
 def _period(t: np.ndarray, topic: str) -> float:
@@ -103,7 +129,7 @@ def _period(t: np.ndarray, topic: str) -> float:
     dt_s = float(np.median(steps[(steps > 0.5 * rough) & (steps < 1.5 * rough)]))
     m = min(64, len(t))
     while True:
-        k = np.rint((t[:m] - t[0]) / dt_s)
+        k, _ = _numbers(t[:m], dt_s)
         if k[-1] >= 2:
             dt_s = float(np.polyfit(k, t[:m], 1)[0])
         if m == len(t):
@@ -171,7 +197,7 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(rec.topics.items()))
         raise BagError(f"{rec.path.name} has no sensor_msgs/JointState wheel angles; it has "
                        f"{listing or 'no topics'}")
-    k, dt_s, t = _grid(rec, dt_s)
+    k, dt_s, t, origin = _grid(rec, dt_s)
     angles = rec.wheels.values
     # over the periods between messages, not the jittered stamps
     speed = np.diff(angles, axis=0) / (np.diff(k) * dt_s)[:, None] * wheel_radius_m
@@ -184,7 +210,7 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
     ticks = np.mod(np.rint(full * ticks_per_rad).astype(np.int64), TICK_MODULUS)
     valid = np.zeros(n, bool)
     valid[k] = True
-    t_s = t[0] + grid * dt_s
+    t_s = origin + grid * dt_s
     cmd = np.zeros((n, 2))
     if rec.cmd is not None:
         tc = _seconds(rec.cmd, rec.start_ns)

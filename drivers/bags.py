@@ -39,7 +39,7 @@ import contextlib
 import logging
 import os
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -234,7 +234,7 @@ def _yaw(q: np.ndarray) -> np.ndarray:
     return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
-def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: list[bytes],
+def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequence[bytes],
             reader: AnyReader, joints: tuple[str, str]) -> tuple[StampedSeries, tuple[str, ...]]:
     store = reader.typestore
     if reader.is2:
@@ -335,16 +335,15 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
             if topic is not None and not counts.get(topic):
                 raise BagError(f"topic {topic} is empty: no messages to read as {kind}")
         wanted = {t: k for k, t in picked.items() if t is not None}
-        raws: dict[str, list[bytes]] = {t: [] for t in wanted}
-        recv: dict[str, list[int]] = {t: [] for t in wanted}
-        conns = [c for c in reader.connections if c.topic in wanted]
-        for conn, t_ns, raw in reader.messages(connections=conns):
-            raws[conn.topic].append(raw)
-            recv[conn.topic].append(t_ns)
         found, names = {}, ()
+        conns = [c for c in reader.connections if c.topic in wanted]
+        which, recv, raws = zip(*reader.messages(connections=conns), strict=True)
+        which = np.fromiter((c.id for c in which), np.int64, len(which))
+        recv = np.array(recv, np.int64)
         for topic, kind in wanted.items():
-            series, got = _series(kind, topic, topics[topic], np.array(recv[topic], np.int64),
-                                  raws[topic], reader, (left_joint, right_joint))
+            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic == topic]))
+            series, got = _series(kind, topic, topics[topic], recv[rows],
+                                  [raws[i] for i in rows], reader, (left_joint, right_joint))
             _check(series)
             found[kind] = series
             names = got or names

@@ -61,8 +61,9 @@ def test_the_drive_comes_back_frame_for_frame(bag, drive):
     np.testing.assert_allclose(log.true_pose[ok], drive.true_pose[ok], atol=1e-9)
     # lost frames: counts interpolated between their neighbours, within a tick per period
     assert np.all(np.abs(log.ticks[~ok] - drive.ticks[~ok]) <= 3)
-    first_ns = log.meta["bag_start_ns"] + log.t_s[0] * 1e9      # frame 0 on the bag's clock
-    assert abs(first_ns - (START_NS + drive.t_s[0] * 1e9)) < 2
+    # frame 0 on the bag's clock: the grid's phase from all stamps, within their 1 ms jitter
+    first_ns = log.meta["bag_start_ns"] + log.t_s[0] * 1e9
+    assert abs(first_ns - (START_NS + drive.t_s[0] * 1e9)) < 3e6
 
 
 def test_vectorised_and_per_message_decoding_agree(bag):
