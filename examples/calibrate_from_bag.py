@@ -32,7 +32,7 @@ from matplotlib.figure import Figure
 from drivers.bag_log import bag_to_log
 from drivers.bag_writer import BagAlarm, write_drive_bag, write_estimates_bag
 from drivers.bags import read_bag
-from drivers.sim.config import Fault
+from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
 from fusion.ekf import ModelEKF
 from fusion.monitoring import MonitoredFilter
@@ -49,7 +49,8 @@ WHEEL_BASE_M = 0.235                   # the Create 2's; give your robot's
 
 def record_stand_ins(folder: Path, *, seed: int = 0, excitation_s: float = 180.0,
                      drive_s: float = 60.0) -> tuple[Path, Path]:
-    """Two simulator drives written as a robot running ROS records them (ROS 2, MCAP).
+    """Two simulator drives on open floor (no walls to hit), written as a robot running ROS
+    records them (ROS 2, MCAP).
 
     The second has encoder spikes from 70 % of its length on, for the monitor to find.
     """
@@ -62,10 +63,11 @@ def record_stand_ins(folder: Path, *, seed: int = 0, excitation_s: float = 180.0
                                mean_m_s=0.15, hold_s=(1.0, 3.0), correlation=0.8)
     lost = Fault("lost_frames", t_s=0.0, probability=0.02)
     spikes = Fault("encoder_spikes", t_s=0.7 * drive_s, duration_s=1.0, rate_hz=20.0)
-    cal = write_drive_bag(folder / "calibration_drive",
-                          Simulator("create2", seed=seed, faults=[lost]).run(excitation))
-    ref = write_drive_bag(folder / "reference_drive",
-                          Simulator("create2", seed=seed + 1, faults=[lost, spikes]).run(drive))
+    room = Room.empty()
+    cal = write_drive_bag(folder / "calibration_drive", Simulator(
+        "create2", seed=seed, room=room, faults=[lost]).run(excitation))
+    ref = write_drive_bag(folder / "reference_drive", Simulator(
+        "create2", seed=seed + 1, room=room, faults=[lost, spikes]).run(drive))
     return cal, ref
 
 
