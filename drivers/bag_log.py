@@ -115,6 +115,32 @@ def _periods(t: np.ndarray, dt_s: float, topic: str) -> tuple[np.ndarray, float]
     return k - k[0], origin + k[0] * dt_s
 
 
+def _beside_gaps(k: np.ndarray, x: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    """Messages beside a one-period gap, moved into it where the wheels say so.
+
+    Jitter can round a message onto the period of a lost neighbour, leaving its own
+    free: no collision shows it. For a message with a free period on one side and a
+    stamp within a period of it, the period is the one that makes the wheels' travel
+    per period most even over the message before and the one after (the sum over both
+    wheels of the change of travel per period, which a robot's inertia keeps small:
+    a misplaced message shows as one period of double travel then one of none)."""
+    k = k.copy()
+    gaps = np.diff(k) >= 2
+    for i in np.flatnonzero(gaps[:-1] | gaps[1:]) + 1:        # beside a free period
+        for step in (-1, 1):
+            new = k[i] + step
+            if not (k[i - 1] < new < k[i + 1]) or abs(x[i] - new) >= 0.75:
+                continue
+            cost = []
+            for ki in (k[i], new):
+                before = (angles[i] - angles[i - 1]) / (ki - k[i - 1])
+                after = (angles[i + 1] - angles[i]) / (k[i + 1] - ki)
+                cost.append(float(np.abs(after - before).sum()))
+            if cost[1] < 0.5 * cost[0]:
+                k[i] = new
+    return k
+
+
 def _period(t: np.ndarray, topic: str) -> float:
     """The sensor period of jittered stamps [s]: the median of the intervals between half
     and 1.5 times the median interval (one period each, lost frames aside), then refined
@@ -199,6 +225,7 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
                        f"{listing or 'no topics'}")
     k, dt_s, t, origin = _grid(rec, dt_s)
     angles = rec.wheels.values
+    k = _beside_gaps(k, (t - origin) / dt_s, angles)
     # over the periods between messages, not the jittered stamps
     speed = np.diff(angles, axis=0) / (np.diff(k) * dt_s)[:, None] * wheel_radius_m
     for side in (0, 1):

@@ -39,7 +39,7 @@ import contextlib
 import logging
 import os
 import re
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -294,7 +294,8 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
 def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
              wheels_topic: str | None = None, odom_topic: str | None = None,
              imu_topic: str | None = None, truth_topic: str | None = None,
-             left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT) -> BagRecording:
+             left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
+             kinds: Collection[str] = tuple(TOPIC_TYPES)) -> BagRecording:
     """Find a drive's topics in a bag and decode them.
 
     Parameters
@@ -307,6 +308,9 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     left_joint, right_joint : str
         Regular expressions (case-insensitive, searched) that pick exactly one
         joint each from the first ``JointState`` message, or the joints' names.
+    kinds : collection of str
+        The kinds to read (default all); the others stay ``None`` and unread
+        (calibration needs only ``cmd`` and ``wheels``).
 
     Returns
     -------
@@ -330,7 +334,11 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         counts: dict[str, int] = {}
         for c in reader.connections:
             counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
-        picked = {kind: _choose(kind, topics, counts, chosen[kind]) for kind in TOPIC_TYPES}
+        unknown = set(kinds) - set(TOPIC_TYPES)
+        if unknown:
+            raise ValueError(f"unknown kinds {sorted(unknown)}; known: {', '.join(TOPIC_TYPES)}")
+        picked = {kind: _choose(kind, topics, counts, chosen[kind]) for kind in TOPIC_TYPES
+                  if kind in kinds}
         for kind, topic in picked.items():
             if topic is not None and not counts.get(topic):
                 raise BagError(f"topic {topic} is empty: no messages to read as {kind}")

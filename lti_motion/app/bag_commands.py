@@ -82,8 +82,10 @@ class BagOptions:
 
 
 def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
-                 options: BagOptions | None = None) -> FrameLog:
-    """The drive in a bag as a log (:func:`drivers.bags.read_bag`, then ``bag_to_log``).
+                 options: BagOptions | None = None,
+                 kinds: Sequence[str] = ("cmd", "wheels", "odom", "imu", "truth")) -> FrameLog:
+    """The drive in a bag as a log (:func:`drivers.bags.read_bag`, then ``bag_to_log``);
+    only the topics of ``kinds`` are read.
 
     Raises
     ------
@@ -91,7 +93,7 @@ def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
         From the reader and the conversion.
     """
     opt = options or BagOptions()
-    rec = read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint,
+    rec = read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint, kinds=kinds,
                    **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
     return bag_to_log(rec, wheel_base_m=wheel_base_m, ticks_per_rad=opt.ticks_per_rad,
                       wheel_radius_m=opt.wheel_radius_m, dt_s=opt.dt_s,
@@ -132,7 +134,7 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
         If the drive does not excite the model enough.
     """
     opt = options or BagOptions()
-    log = load_bag_log(path, wheel_base_m=wheel_base_m, options=opt)
+    log = load_bag_log(path, wheel_base_m=wheel_base_m, options=opt, kinds=("cmd", "wheels"))
     if not log.meta["has_commands"]:
         raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
                        "commands; calibration needs what was commanded (record /cmd_vel)")

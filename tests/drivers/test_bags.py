@@ -297,3 +297,17 @@ def test_4_ms_of_host_jitter_at_50_hz(tmp_path):
     assert log.dt_s == 0.02 and len(log) == len(drive)
     np.testing.assert_array_equal(log.valid, drive.valid)
     np.testing.assert_array_equal(log.ticks[drive.valid], drive.ticks[drive.valid])
+
+
+def test_a_message_jittered_onto_a_lost_neighbours_period_goes_back(tmp_path):
+    """Message 6 of a steady drive is 12 ms early and message 5 never came: the stamp alone
+    puts message 6 on period 5; the even wheel travel puts it back on period 6."""
+    periods = np.delete(np.arange(200), 5)
+    stamps = 10**9 + periods * 20_000_000
+    stamps[5] -= 12_000_000                                    # period 6, stamped early
+    angles = np.column_stack([periods * 0.05, periods * 0.06])   # steady: 2.5, 3 rad/s
+    log = bag_to_log(read_bag(_joints_bag(tmp_path, stamps, angles)), wheel_base_m=0.235)
+    assert len(log) == 200 and log.dt_s == 0.02
+    np.testing.assert_array_equal(np.flatnonzero(~log.valid), [5])
+    np.testing.assert_array_equal(log.ticks[periods],
+                                  np.rint(angles * CREATE2_TICKS_PER_RAD).astype(np.int64))
