@@ -4,12 +4,15 @@
   embedded default), its configuration and compiled kernel;
 - :mod:`drivers.roomba`: the Roomba / Create 2 Open Interface, the pyserial robot,
   the virtual Roomba on a pseudo-terminal, the stream clock;
-- :mod:`drivers.logs`, :mod:`drivers.datasets`: recorded logs and public data sets.
+- :mod:`drivers.logs`, :mod:`drivers.datasets`: recorded logs and public data sets;
+- :mod:`drivers.bags`, :mod:`drivers.bag_log`, :mod:`drivers.bag_writer`: ROS bags in
+  and out (``rosbags``).
 
 Importing this package loads only its exceptions; each wing loads what it needs.
 """
 
 from drivers.exceptions import (
+    BagError,
     DatasetError,
     PortError,
     ProtocolError,
@@ -17,4 +20,5 @@ from drivers.exceptions import (
     StreamStalledError,
 )
 
-__all__ = ["DatasetError", "PortError", "ProtocolError", "SimulatorError", "StreamStalledError"]
+__all__ = ["BagError", "DatasetError", "PortError", "ProtocolError", "SimulatorError",
+           "StreamStalledError"]

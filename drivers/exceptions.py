@@ -12,6 +12,7 @@ the wrong length raises :class:`ProtocolError`.
 from __future__ import annotations
 
 __all__ = [
+    "BagError",
     "DatasetError",
     "PassiveModeError",
     "PortError",
@@ -60,3 +61,8 @@ class StreamBandwidthError(ProtocolError):
 
 class DatasetError(ValueError):
     """A dataset folder that is missing files or holds malformed ones."""
+
+
+class BagError(ValueError):
+    """A ROS bag that cannot give what was asked: no usable topic, a wrong message type, an
+    empty topic, stamps going backwards, impossible values; the message names the topic."""

@@ -37,3 +37,18 @@ def test_recalibration_alarm_raises_the_right_alarms_and_plots(tmp_path, capsys,
         assert (tmp_path / name).stat().st_size > 10_000, name
     out = capsys.readouterr().out
     assert "| t [s] | kind |" in out and "recalibration records" in out
+
+
+def test_calibrate_from_bag_goes_through_the_guide(tmp_path, capsys, load_example):
+    example = load_example("calibrate_from_bag")
+    assert example.main(["--out", str(tmp_path), "--excitation-s", "40", "--drive-s",
+                         "20"]) == 0
+    out = capsys.readouterr().out
+    assert "free-run fit" in out and "EKF, model and encoders: ATE rmse" in out
+    bursts = [float(line.split("bag time ")[1].split(":")[0]) - 1_700_000_000
+              for line in out.splitlines() if line.startswith("lti_motion/glitch_burst")]
+    # the spikes start 14 s in (the monitor without a nominal fit may also cry wolf before)
+    assert any(14.0 <= t <= 15.0 for t in bursts), out
+    for name in ("fit.png", "trajectories.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+    assert (tmp_path / "estimates.bag").stat().st_size > 10_000

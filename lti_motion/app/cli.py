@@ -80,7 +80,49 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bag_options(args: argparse.Namespace):
+    from lti_motion.app.bag_commands import BagOptions
+
+    topics = {kind: getattr(args, f"{kind}_topic") for kind in
+              ("cmd", "wheels", "odom", "imu", "truth") if getattr(args, f"{kind}_topic")}
+    for name in ("ticks_per_rad", "wheel_radius", "dt", "max_wheel_speed"):
+        value = getattr(args, name)
+        if value is not None and not value > 0:
+            raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value:g}")
+    extra = {k: v for k, v in (("ticks_per_rad", args.ticks_per_rad),
+                               ("wheel_radius_m", args.wheel_radius), ("dt_s", args.dt),
+                               ("max_wheel_m_s", args.max_wheel_speed))
+             if v is not None}
+    return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
+                      encoders=args.encoders, **extra)
+
+
+def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
+    from lti_motion.app.plots import plot_order_selection
+
+    out = Path(args.out)
+    from lti_motion.app.calibrate_run import nominal_wheel_base_m
+
+    described = load_robot(args.sim) if args.sim else None
+    model, log = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
+                                    options=_bag_options(args), floor=args.floor)
+    out.mkdir(parents=True, exist_ok=True)
+    path = model.save(out / "model_arx.json")
+    print(f"calibrated from {args.bag}: {len(log)} frames of {log.dt_s * 1e3:g} ms "
+          f"({log.meta['lost_frames']} lost), topics {log.meta['topics']}")
+    print(f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
+          f"{model.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    plot_order_selection(model, out / "order_selection.png")
+    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders)
+    print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
+    print(f"wrote {path}, {out / 'order_selection.png'} and {out / 'bag_fit.png'}")
+    return 0
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_calibrate_bag(args)
     if args.log and args.reference:                 # odometry intrinsics of a recorded drive
         from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
 
@@ -100,7 +142,26 @@ def _load_model(path: str):
     return MotionModel.load(path)
 
 
+def _cmd_replay_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import replay_bag
+
+    if args.source is not None:
+        raise ValueError("give either a log / data set or --bag, not both")
+    if args.model is None:
+        raise ValueError("replay --bag needs --model FILE (from 'lti-motion calibrate --bag')")
+    replay_bag(args.bag, _load_model(args.model), args.out, options=_bag_options(args),
+               out_bag=args.out_bag, estimators=args.estimators, start_s=args.start_s,
+               duration_s=args.duration_s, initial_pose=args.initial_pose, rpe_s=args.rpe_s)
+    return 0
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_replay_bag(args)
+    if args.out_bag:
+        raise ValueError("--out-bag writes the estimates of a --bag replay; give --bag")
+    if args.source is None:
+        raise ValueError("give a log (.npz) or an MRCLAM data set folder, or --bag BAG")
     from lti_motion.app.replay import fit_mrclam_model, run_replay
 
     start_s = args.start_s
@@ -127,7 +188,27 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_monitor_bag(args: argparse.Namespace) -> int:
+    from lti_motion.app.bag_commands import monitor_bag
+    from lti_motion.app.monitor_setup import nominal_from_logs
+
+    if args.fault or args.listen or args.record:
+        raise ValueError("--fault, --listen and --record drive a robot; --bag reads a "
+                         "recorded drive")
+    if args.model is None:
+        raise ValueError("monitor --bag needs --model FILE (from 'lti-motion calibrate --bag')")
+    model = _load_model(args.model)
+    nominal = nominal_from_logs(model, args.nominal) if args.nominal else None
+    monitor_bag(args.bag, model, options=_bag_options(args), out_bag=args.out_bag,
+                nominal=nominal)
+    return 0
+
+
 def _cmd_monitor(args: argparse.Namespace) -> int:
+    if args.bag:
+        return _cmd_monitor_bag(args)
+    if args.out_bag:
+        raise ValueError("--out-bag writes what monitor --bag found; give --bag")
     from lti_motion.app import monitor as live_monitor
 
     if args.fault and not args.sim:
@@ -192,6 +273,38 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = False) -> None:
+    """The options of --bag: topics where a bag holds several of a kind, joints, encoder.
+
+    ``shared_with_log``: ``calibrate`` already has ``--wheel-radius`` and ``--encoders`` (for
+    ``--log``); they mean the same for a bag and are not added twice."""
+    group = parser.add_argument_group(
+        "ROS bag (--bag)", "topics are found by message type when the bag has one of each")
+    for kind, what in (("cmd", "Twist or TwistStamped commands"),
+                       ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
+                       ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
+        group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
+    group.add_argument("--left-joint", default="left", metavar="PATTERN",
+                       help="left wheel joint: its name or a pattern (default 'left')")
+    group.add_argument("--right-joint", default="right", metavar="PATTERN",
+                       help="right wheel joint: its name or a pattern (default 'right')")
+    group.add_argument("--ticks-per-rad", type=float, default=None,
+                       help="encoder counts per wheel radian (default the Create 2's, 80.98)")
+    if not shared_with_log:
+        group.add_argument("--wheel-radius", type=float, default=None,
+                           help="nominal wheel radius [m] (default the Create 2's, 0.036)")
+        group.add_argument("--encoders", choices=["commanded", "quadrature"],
+                           default="commanded",
+                           help="commanded: the angles count in the commanded direction "
+                                "(Roomba, Create 2; default); quadrature: they know the way "
+                                "the wheel turns")
+    group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
+                       help="refuse wheel speeds above this as impossible [m/s] (default 20)")
+    group.add_argument("--dt", type=float, default=None,
+                       help="sensor period [s] (default: calibrate from the wheel stamps, "
+                            "replay and monitor the model's)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lti-motion``."""
     parser = argparse.ArgumentParser(
@@ -238,6 +351,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with --log: encoder scale [m/tick] from the robot description")
     cal.add_argument("--wheel-radius", type=float, default=None,
                      help="with --log: wheel radius [m] for wheel angles or speeds in rad/s")
+    where.add_argument("--bag", help="a recorded ROS bag (ROS 1 .bag, or a ROS 2 folder with a "
+                                     ".db3 or .mcap file): fit the ARX model on its drive "
+                                     "(docs/guide_ros_bags.md)")
     add_intrinsics_arguments(cal)
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
@@ -260,6 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--accept-unhealthy", action="store_true",
                      help="save the model even if its held-out fit is below the healthy 85%% "
                           "(docs/guide_calibrate_real_robot.md)")
+    _add_bag_options(cal, shared_with_log=True)
     cal.set_defaults(func=_cmd_calibrate)
 
     rp = sub.add_parser(
@@ -270,8 +387,12 @@ def build_parser() -> argparse.ArgumentParser:
                     "data set folder; prints ATE / RPE where there is ground truth; writes one "
                     "TUM trajectory per estimator (and groundtruth.tum) for evo, "
                     "metrics.json and plots. See docs/replay.md.")
-    rp.add_argument("source", metavar="LOG_OR_DATASET",
-                    help="an .npz log, or an MRCLAM_Dataset folder")
+    rp.add_argument("source", metavar="LOG_OR_DATASET", nargs="?",
+                    help="an .npz log, or an MRCLAM_Dataset folder (or give --bag)")
+    rp.add_argument("--bag", help="a recorded ROS bag instead (docs/guide_ros_bags.md)")
+    rp.add_argument("--out-bag", metavar="NEW_BAG",
+                    help="--bag: also write the EKF's estimates (nav_msgs/Odometry with "
+                         "covariance) into this new bag (.bag: ROS 1; else a ROS 2 folder)")
     rp.add_argument("--model", help="model file from 'lti-motion calibrate' (model_arx.json)")
     rp.add_argument("--fit-first-half", action="store_true",
                     help="MRCLAM only, instead of --model: fit an ARX model on the first half "
@@ -291,6 +412,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"),
                     help="start pose [m m rad] (default: the first ground-truth pose, else 0 0 0)")
     rp.add_argument("--rpe-s", type=float, default=1.0, help="RPE step [s] (default 1)")
+    _add_bag_options(rp)
     rp.set_defaults(func=_cmd_replay)
 
     mo = sub.add_parser(
@@ -308,6 +430,11 @@ def build_parser() -> argparse.ArgumentParser:
     mwhere.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
                         help=f"monitor {ROBOT_HELP}")
     mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
+    mwhere.add_argument("--bag", help="a recorded ROS bag: monitor its drive, alarms with bag "
+                                      "time (needs --model)")
+    mo.add_argument("--out-bag", metavar="NEW_BAG",
+                    help="--bag: write the estimates (nav_msgs/Odometry with covariance) and "
+                         "the alarms (diagnostic_msgs/DiagnosticArray) into this new bag")
     mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
     mo.add_argument("--duration", type=float, default=30.0,
                     help="robot seconds to drive or listen (default 30)")
@@ -334,6 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="--port only: send no wheel command, only read the stream")
     mo.add_argument("--record", metavar="FILE.npz",
                     help="also write the frames as a log that 'lti-motion replay' reads")
+    _add_bag_options(mo)
     mo.set_defaults(func=_cmd_monitor)
 
     vr = sub.add_parser(
@@ -405,15 +533,16 @@ def _check_args(args: argparse.Namespace) -> None:
 def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     """``calibrate``: one place to drive; --wheel-base only for a robot or a recording (the
     simulator has its description's)."""
-    if not (args.sim or args.port or args.log):
-        raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot) "
-                         "or --log FILE (a recorded drive)")
+    if not (args.sim or args.port or args.log or args.bag):
+        raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot), "
+                         "--log FILE or --bag PATH (a recorded drive)")
     if args.reference and not args.log:
         raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
     described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
-    if described and not (args.port or args.log) and args.wheel_base is not None:
-        raise ValueError(f"--wheel-base is for --port and --log; the simulated {args.sim} has "
-                         f"its own ({described.wheel_base_m:g} m)")
+    recorded = args.log or args.bag
+    if described and not (args.port or recorded) and args.wheel_base is not None:
+        raise ValueError(f"--wheel-base is for --port, --log and --bag; the simulated "
+                         f"{args.sim} has its own ({described.wheel_base_m:g} m)")
     positive("--wheel-base", args.wheel_base)
     positive("--clock-rate", args.clock_rate)
 

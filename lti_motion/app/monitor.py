@@ -35,7 +35,7 @@ import numpy as np
 
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.dynamics import DynamicsAlarm
-from fusion.monitoring.monitored_filter import MonitoredFilter
+from fusion.monitoring.monitored_filter import FrameResult, MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.wheel_check import WheelVerdict
@@ -235,7 +235,9 @@ def monitor_frames(model: MotionModel,
                    landmarks: LandmarkMap | None = None,
                    on_alarm: Callable[[AlarmEvent], None] | None = None,
                    on_alarm_line: Callable[[str], object] | None = None,
-                   on_frame: Callable[[SensorFrame], None] | None = None) -> MonitorRun:
+                   on_frame: Callable[[SensorFrame], None] | None = None,
+                   on_step: Callable[[FrameResult, np.ndarray], None] | None = None
+                   ) -> MonitorRun:
     """Run a :class:`~fusion.monitoring.MonitoredFilter` over frames.
 
     Parameters
@@ -266,6 +268,10 @@ def monitor_frames(model: MotionModel,
         dynamics sub-test and lag).
     on_frame : callable, optional
         Called with each frame (to record it, to show progress).
+    on_step : callable, optional
+        Called after each frame with what it gave (a
+        :class:`~fusion.monitoring.monitored_filter.FrameResult`) and the EKF's
+        pose covariance, shape (3, 3) [m^2, m rad, rad^2] (to write the estimates).
 
     Returns
     -------
@@ -293,9 +299,11 @@ def monitor_frames(model: MotionModel,
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
-        mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)), sightings=seen,
-                motor_current_a=frame.motor_current_a,
-                wheel_overcurrent=frame.wheel_overcurrent)
+        result = mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)),
+                         sightings=seen, motor_current_a=frame.motor_current_a,
+                         wheel_overcurrent=frame.wheel_overcurrent)
+        if on_step is not None and mf.ekf is not None:
+            on_step(result, mf.ekf.P[:3, :3].copy())
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")

@@ -26,7 +26,7 @@ import json
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -96,7 +96,7 @@ def _sensorless(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.
 
 
 def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
-         landmarks: bool) -> tuple[np.ndarray, dict]:
+         landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray]:
     encoders = src.ticks is not None
     first = int(np.argmax(src.valid)) if encoders else 0
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
@@ -104,7 +104,8 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
                    landmarks=src.landmarks if landmarks else None,
                    landmark_noise=src.landmark_noise, history=0)
     poses = np.empty((len(src), 3))
-    poses[0] = ekf.pose
+    covs = np.empty((len(src), 3, 3))
+    poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]
     sightings = src.sightings.by_index() if landmarks else {}
     none = RangeBearing.empty()
     for k in range(1, len(src)):
@@ -113,7 +114,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
         if encoders and src.valid[k] and k > first:
             ekf.update_encoders(src.ticks[k])
         ekf.update_landmarks(sightings.get(k, none))
-        poses[k] = ekf.x[:3]
+        poses[k], covs[k] = ekf.x[:3], ekf.P[:3, :3]
     stats = ekf.stats
     causes = [r.cause for r in ekf.resets]
     return poses, {"encoders_gated": stats.count("encoders", "gated"),
@@ -121,7 +122,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
                    "landmarks_gated": stats.count("landmark", "gated"),
                    "filter_resets": ekf.n_resets,
                    "resets_scale_implausible": causes.count("scale_implausible"),
-                   "resets_diverged": causes.count("diverged")}
+                   "resets_diverged": causes.count("diverged")}, covs
 
 
 def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
@@ -154,6 +155,14 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
     ValueError
         For an unknown estimator or one the source cannot feed.
     """
+    poses, extra, _ = _estimate(src, model, names, initial_pose=initial_pose)
+    return poses, extra
+
+
+def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
+              initial_pose: Sequence[float] | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict[str, np.ndarray]]:
+    """:func:`estimate`, and each EKF estimator's pose covariances (n, 3, 3)."""
     if not math.isclose(model.dt_s, src.dt_s, rel_tol=1e-6):
         raise ValueError(f"the model was calibrated at {model.dt_s:g} s but {src.name} has a "
                          f"{src.dt_s:g} s sensor period; use a model of this robot")
@@ -173,6 +182,7 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
         pose0 = np.zeros(3)
     out: dict[str, np.ndarray] = {}
     extra: dict[str, dict] = {}
+    covs: dict[str, np.ndarray] = {}
     for name in names:
         if name == "odometry":
             out[name] = _odometry(src, model, pose0)
@@ -181,8 +191,9 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
         elif name == "sensorless":
             out[name] = _sensorless(src, model, pose0)
         else:
-            out[name], extra[name] = _ekf(src, model, pose0, landmarks=name == "ekf_landmarks")
-    return out, extra
+            out[name], extra[name], covs[name] = _ekf(src, model, pose0,
+                                                      landmarks=name == "ekf_landmarks")
+    return out, extra, covs
 
 
 # -- metrics --------------------------------------------------------------------------------
@@ -251,12 +262,15 @@ class ReplayResult:
         :func:`evaluate` per estimator, plus the filter counts.
     files : list of Path
         TUM trajectories, ``metrics.json`` and plots, in the order written.
+    pose_covs : dict of str to ndarray, shape (n, 3, 3)
+        Each EKF estimator's pose covariance at every frame [m^2, m rad, rad^2].
     """
 
     source: ReplaySource
     poses: dict[str, np.ndarray]
     metrics: dict[str, dict]
     files: list[Path]
+    pose_covs: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _table(src: ReplaySource, metrics: dict[str, dict]) -> list[str]:
@@ -274,7 +288,8 @@ def _table(src: ReplaySource, metrics: dict[str, dict]) -> list[str]:
         fmt.format(*r) for r in rows]
 
 
-def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str | os.PathLike,
+def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel,
+               out_dir: str | os.PathLike,
                *, estimators: Sequence[str] | None = None, robot: int | None = None,
                start_s: float = 0.0, duration_s: float | None = None,
                initial_pose: Sequence[float] | None = None, rpe_s: float = 1.0,
@@ -287,8 +302,9 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
 
     Parameters
     ----------
-    source_path : str or path-like
-        An ``.npz`` log or an MRCLAM folder (:func:`load_source`).
+    source_path : str, path-like or ReplaySource
+        An ``.npz`` log or an MRCLAM folder (:func:`load_source`), or a source
+        already read (a ROS bag's, :mod:`lti_motion.app.bag_commands`).
     model : MotionModel
         The calibrated model.
     out_dir : str or path-like
@@ -304,7 +320,8 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
     """
     from lti_motion.app.replay_plots import plot_errors, plot_trajectories
 
-    src = load_source(source_path, model, robot=robot, start_s=start_s, duration_s=duration_s)
+    src = (source_path if isinstance(source_path, ReplaySource) else
+           load_source(source_path, model, robot=robot, start_s=start_s, duration_s=duration_s))
     names = list(estimators) if estimators else src.available()
     n_sight = len(src.sightings)
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
@@ -315,7 +332,7 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
                and np.all(np.isfinite(src.truth[0])) else "the given pose" if initial_pose
                is not None else "the origin")
     print_fn(f"estimators start at {started}; they never read the truth after that")
-    poses, extra = estimate(src, model, names, initial_pose=initial_pose)
+    poses, extra, covs = _estimate(src, model, names, initial_pose=initial_pose)
     metrics = {name: {**evaluate(src, p, rpe_s=rpe_s), **extra.get(name, {})}
                for name, p in poses.items()}
     for line in _table(src, metrics):
@@ -352,7 +369,7 @@ def run_replay(source_path: str | os.PathLike, model: MotionModel, out_dir: str 
     if files and src.has_truth:
         print_fn(f"compare with evo: evo_ape tum {out / 'groundtruth.tum'} "
                  f"{out / names[-1]}.tum --plot")
-    return ReplayResult(source=src, poses=poses, metrics=metrics, files=files)
+    return ReplayResult(source=src, poses=poses, metrics=metrics, files=files, pose_covs=covs)
 
 
 def _plain(value: object) -> object:

@@ -20,6 +20,7 @@ from drivers.exceptions import DatasetError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
+from lti_motion.frames import FrameLog
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.logfile import load_log
 from lti_motion.model import MotionModel
@@ -31,6 +32,7 @@ __all__ = [
     "ReplaySource",
     "fit_mrclam_model",
     "load_source",
+    "source_from_frame_log",
     "source_from_log",
     "source_from_mrclam",
 ]
@@ -172,6 +174,27 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
         if not 0 <= i < log.n_robots:
             raise ValueError(f"{name} holds robots 0-{log.n_robots - 1}; there is no robot {i}")
         log, name = log.robot(i), f"{name} robot {i}"
+    return source_from_frame_log(log, name, start_s=start_s, duration_s=duration_s)
+
+
+def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
+                          duration_s: float | None = None) -> ReplaySource:
+    """One robot's :class:`FrameLog` (a loaded log, a ROS bag's drive) as a :class:`ReplaySource`.
+
+    Parameters
+    ----------
+    log : FrameLog
+        One robot's frames.
+    name : str
+        What it is, for people.
+    start_s, duration_s : float
+        The stretch to replay, from the first frame [s].
+
+    Raises
+    ------
+    ValueError
+        For an empty stretch, or two frames with the same time.
+    """
     keep = _window(log.t_s, start_s, duration_s)
     repeat = np.flatnonzero(np.diff(log.t_s[keep]) <= 0)      # load_log refused earlier times
     if repeat.size:

@@ -28,7 +28,7 @@ def files(tmp_path_factory):
 
 CASES = [
     (["calibrate", "--sim", "create2", "--wheel-base", "-0.2"],
-     "--wheel-base is for --port and --log; the simulated create2 has its own (0.235 m)"),
+     "--wheel-base is for --port, --log and --bag; the simulated create2 has its own (0.235 m)"),
     (["calibrate", "--sim", "create2", "--wheel-base", "0.235"], "--wheel-base is for --port"),
     (["calibrate", "--port", "/dev/nonexistent-roomba", "--wheel-base", "-0.2"],
      "--wheel-base must be a positive number, got -0.2"),

@@ -1,0 +1,385 @@
+"""ROS bags in: the topics of a recorded drive found by type, decoded into stamped arrays.
+
+Reads ROS 1 ``.bag`` files and ROS 2 bags (a folder with ``metadata.yaml`` and a
+``.db3`` or ``.mcap`` file; the ``.db3`` / ``.mcap`` file itself is accepted too)
+with ``rosbags``, without a ROS install.
+
+What is read (:data:`TOPIC_TYPES`), each topic found by its message type when the
+bag holds one topic of that kind, or named by the caller when it holds several:
+
+- ``cmd``: ``geometry_msgs/Twist`` or ``TwistStamped`` body-speed commands
+  (``linear.x`` [m/s], ``angular.z`` [rad/s]);
+- ``wheels``: ``sensor_msgs/JointState`` wheel angles [rad], the left and the right
+  joint found by name (:data:`LEFT_JOINT`, :data:`RIGHT_JOINT`: a name holding
+  ``left`` / ``right``, as ``wheel_left_joint`` of the TurtleBot and Create
+  descriptions or ``left_wheel_joint`` of diff_drive_controller's examples);
+- ``odom``: ``nav_msgs/Odometry`` (pose x, y, yaw; twist v, w);
+- ``imu``: ``sensor_msgs/Imu`` (yaw rate);
+- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture).
+
+Each message is stamped with its header stamp when it has one, else with the time
+the bag received it. :func:`bag_to_log` turns a recording into today's
+:class:`~lti_motion.frames.FrameLog`.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from drivers.bag_writer import write_drive_bag
+>>> from drivers.sim.simulator import Simulator
+>>> log = Simulator("create2", seed=0).run(np.full((50, 2), 0.2))
+>>> path = write_drive_bag(pathlib.Path(tempfile.mkdtemp()) / "drive.bag", log)
+>>> rec = read_bag(path)
+>>> rec.wheels.topic, rec.cmd.topic, len(rec.wheels)
+('/joint_states', '/cmd_vel', 50)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import re
+from collections.abc import Collection, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.typesys import Stores, get_typestore
+
+from drivers.bag_fields import decode_fields
+from drivers.exceptions import BagError
+
+__all__ = [
+    "LEFT_JOINT",
+    "RIGHT_JOINT",
+    "TOPIC_OPTIONS",
+    "TOPIC_TYPES",
+    "BagRecording",
+    "StampedSeries",
+    "bag_topics",
+    "read_bag",
+]
+
+_log = logging.getLogger(__name__)
+
+#: Message types accepted for each kind of topic.
+TOPIC_TYPES: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    "cmd": ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"),
+    "wheels": ("sensor_msgs/msg/JointState",),
+    "odom": ("nav_msgs/msg/Odometry",),
+    "imu": ("sensor_msgs/msg/Imu",),
+    "truth": ("geometry_msgs/msg/PoseStamped",),
+})
+#: The command-line option that names each kind's topic (for the messages).
+TOPIC_OPTIONS: Mapping[str, str] = MappingProxyType({
+    "cmd": "--cmd-topic", "wheels": "--wheels-topic", "odom": "--odom-topic",
+    "imu": "--imu-topic", "truth": "--truth-topic"})
+#: Default joint-name patterns (regular expressions, case-insensitive, searched).
+LEFT_JOINT = r"left"
+RIGHT_JOINT = r"right"
+
+_STAMP = ("header.stamp.sec", "header.stamp.nanosec")
+_POSE = ("position.x", "position.y", "orientation.x", "orientation.y", "orientation.z",
+         "orientation.w")
+#: Field paths per message type (after the header stamp, when there is one).
+_FIELDS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    "geometry_msgs/msg/Twist": ("linear.x", "angular.z"),
+    "geometry_msgs/msg/TwistStamped": ("twist.linear.x", "twist.angular.z"),
+    "nav_msgs/msg/Odometry": (*(f"pose.pose.{p}" for p in _POSE), "twist.twist.linear.x",
+                              "twist.twist.angular.z"),
+    "sensor_msgs/msg/Imu": ("angular_velocity.z",),
+    "geometry_msgs/msg/PoseStamped": tuple(f"pose.{p}" for p in _POSE),
+})
+#: What each kind's ``values`` columns hold, for people.
+COLUMNS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    "cmd": ("v [m/s]", "w [rad/s]"),
+    "wheels": ("left [rad]", "right [rad]"),
+    "odom": ("x [m]", "y [m]", "theta [rad]", "v [m/s]", "w [rad/s]"),
+    "imu": ("w [rad/s]",),
+    "truth": ("x [m]", "y [m]", "theta [rad]"),
+})
+
+
+@dataclass(frozen=True)
+class StampedSeries:
+    """The messages of one topic as numbers.
+
+    Attributes
+    ----------
+    topic, msgtype : str
+        Where they came from.
+    t_ns : ndarray of int64, shape (n,)
+        Stamps [ns] (header stamp, else receive time), non-decreasing.
+    values : ndarray, shape (n, k)
+        The kind's columns (:data:`COLUMNS`), SI units; headings unwrapped.
+    """
+
+    topic: str
+    msgtype: str
+    t_ns: np.ndarray
+    values: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+
+@dataclass(frozen=True)
+class BagRecording:
+    """The topics of a recorded drive found in a bag.
+
+    Attributes
+    ----------
+    path : Path
+        The bag.
+    topics : Mapping of str to str
+        Every topic of the bag and its message type.
+    start_ns : int
+        The bag's first stamp [ns] (times elsewhere count from it).
+    cmd, wheels, odom, imu, truth : StampedSeries or None
+        The kinds of :data:`TOPIC_TYPES` found (``None``: the bag has none).
+    joints : tuple of str
+        The (left, right) joint names used, ``()`` without wheels.
+    """
+
+    path: Path
+    topics: Mapping[str, str]
+    start_ns: int
+    cmd: StampedSeries | None = None
+    wheels: StampedSeries | None = None
+    odom: StampedSeries | None = None
+    imu: StampedSeries | None = None
+    truth: StampedSeries | None = None
+    joints: tuple[str, ...] = ()
+
+
+def _bag_paths(path: str | os.PathLike) -> list[Path]:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such bag: {path}")
+    if path.suffix in (".db3", ".mcap") and path.is_file():
+        path = path.parent                      # the ROS 2 bag is the folder
+    if path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise BagError(f"{path} is a folder without metadata.yaml: not a ROS 2 bag")
+    if path.is_file() and path.suffix != ".bag":
+        raise BagError(f"{path} is not a bag: give a ROS 1 .bag file or a ROS 2 bag folder "
+                       "(with metadata.yaml and a .db3 or .mcap file)")
+    return [path]
+
+
+@contextlib.contextmanager
+def _open(path: str | os.PathLike) -> Iterator[AnyReader]:
+    paths = _bag_paths(path)
+    reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    try:
+        reader.open()
+    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
+        raise BagError(f"cannot read {paths[0]} as a ROS bag: {exc}") from exc
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def _listing(topics: Mapping[str, str]) -> str:
+    return ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "no topics"
+
+
+def bag_topics(path: str | os.PathLike) -> dict[str, str]:
+    """Every topic of a bag and its message type (``pkg/msg/Type``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file or folder.
+    BagError
+        If it is not a readable bag.
+    """
+    with _open(path) as reader:
+        return {c.topic: c.msgtype for c in reader.connections}
+
+
+def _choose(kind: str, topics: Mapping[str, str], counts: Mapping[str, int],
+            chosen: str | None) -> str | None:
+    """The topic of one kind: the one named, else the only one of its types."""
+    types = TOPIC_TYPES[kind]
+    what = " or ".join(t.replace("/msg/", "/") for t in types)
+    if chosen is not None:
+        if chosen not in topics:
+            raise BagError(f"the bag has no topic {chosen}; it has {_listing(topics)}")
+        if topics[chosen] not in types:
+            raise BagError(f"topic {chosen} holds {topics[chosen]}, but {TOPIC_OPTIONS[kind]} "
+                           f"needs {what}")
+        return chosen
+    found = sorted(t for t, m in topics.items() if m in types and counts.get(t, 0))
+    if len(found) > 1:
+        raise BagError(f"the bag has {len(found)} {what} topics ({', '.join(found)}); choose "
+                       f"one with {TOPIC_OPTIONS[kind]}")
+    return found[0] if found else None
+
+
+def _joint_index(names: list[str], pattern: str, side: str, topic: str) -> int:
+    hits = [i for i, n in enumerate(names) if re.search(pattern, n, re.IGNORECASE)]
+    if len(hits) != 1:
+        raise BagError(f"topic {topic}: {len(hits)} joints match the {side} wheel pattern "
+                       f"{pattern!r} among {names}; name the {side} joint with "
+                       f"--{side}-joint")
+    return hits[0]
+
+
+def _yaw(q: np.ndarray) -> np.ndarray:
+    """Yaw of quaternions (x, y, z, w) [rad], unwrapped along time."""
+    x, y, z, w = q.T
+    return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequence[bytes],
+            reader: AnyReader, joints: tuple[str, str]) -> tuple[StampedSeries, tuple[str, ...]]:
+    store = reader.typestore
+    if reader.is2:
+        def deserialize(raw: bytes) -> object:
+            return store.deserialize_cdr(raw, msgtype)
+
+        def serialize(msg: object) -> bytes:
+            return store.serialize_cdr(msg, msgtype)
+    else:
+        def deserialize(raw: bytes) -> object:
+            return store.deserialize_ros1(raw, msgtype)
+
+        def serialize(msg: object) -> bytes:
+            return store.serialize_ros1(msg, msgtype)
+    stamped = msgtype != "geometry_msgs/msg/Twist"
+    names: tuple[str, ...] = ()
+    if kind == "wheels":
+        first = list(deserialize(raws[0]).name)
+        names = (first[_joint_index(first, joints[0], "left", topic)],
+                 first[_joint_index(first, joints[1], "right", topic)])
+
+        def paths_of(msg: object) -> tuple[str, ...]:
+            now = list(msg.name)
+            if not set(names) <= set(now):
+                raise BagError(f"topic {topic}: a message lacks joint {names[0]} or "
+                               f"{names[1]} (it has {now})")
+            return (*_STAMP, f"position[{now.index(names[0])}]",
+                    f"position[{now.index(names[1])}]")
+        paths = paths_of(deserialize(raws[0]))
+    else:
+        paths_of = None
+        paths = (*_STAMP, *_FIELDS[msgtype]) if stamped else _FIELDS[msgtype]
+    if stamped and not reader.is2:            # ROS 1 headers count: read the count too
+        seq = ("header.seq",)
+        inner = paths_of
+        paths_of = None if inner is None else (lambda msg: (*seq, *inner(msg)))
+        paths = (*seq, *paths)
+    try:
+        data = decode_fields(raws, paths, deserialize=deserialize, serialize=serialize,
+                             paths_of=paths_of)
+    except IndexError as exc:
+        raise BagError(f"topic {topic}: a message is missing a field ({exc})") from exc
+    if stamped and not reader.is2:
+        data = data[:, 1:]
+    if stamped:
+        t_ns = data[:, 0].astype(np.int64) * 1_000_000_000 + data[:, 1].astype(np.int64)
+        data = data[:, 2:]
+        if not np.any(t_ns):                  # header never filled in: the bag's times
+            t_ns = recv_ns
+    else:
+        t_ns = recv_ns
+    if kind in ("odom", "truth"):
+        data = np.column_stack([data[:, :2], _yaw(data[:, 2:6]), data[:, 6:]])
+    return StampedSeries(topic, msgtype, t_ns, data), names
+
+
+def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
+             wheels_topic: str | None = None, odom_topic: str | None = None,
+             imu_topic: str | None = None, truth_topic: str | None = None,
+             left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
+             kinds: Collection[str] = tuple(TOPIC_TYPES)) -> BagRecording:
+    """Find a drive's topics in a bag and decode them.
+
+    Parameters
+    ----------
+    path : str or path-like
+        ROS 1 ``.bag`` file, or ROS 2 bag folder (or its ``.db3`` / ``.mcap`` file).
+    cmd_topic, wheels_topic, odom_topic, imu_topic, truth_topic : str, optional
+        The topic of each kind (:data:`TOPIC_TYPES`); needed only where the bag
+        holds several of that kind. Without one, a kind the bag lacks is ``None``.
+    left_joint, right_joint : str
+        Regular expressions (case-insensitive, searched) that pick exactly one
+        joint each from the first ``JointState`` message, or the joints' names.
+    kinds : collection of str
+        The kinds to read (default all); the others stay ``None`` and unread
+        (calibration needs only ``cmd`` and ``wheels``).
+
+    Returns
+    -------
+    BagRecording
+        Stamps and values checked: finite, stamps never going backwards.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such bag.
+    BagError
+        A ``ValueError``: not a bag; a named topic missing or of the wrong type;
+        several topics of a kind and none named; a named topic empty; joints not
+        found; stamps going backwards; a value not finite. The message names the
+        topic (and lists the bag's topics where that helps).
+    """
+    chosen = {"cmd": cmd_topic, "wheels": wheels_topic, "odom": odom_topic,
+              "imu": imu_topic, "truth": truth_topic}
+    with _open(path) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        counts: dict[str, int] = {}
+        for c in reader.connections:
+            counts[c.topic] = counts.get(c.topic, 0) + c.msgcount
+        unknown = set(kinds) - set(TOPIC_TYPES)
+        if unknown:
+            raise ValueError(f"unknown kinds {sorted(unknown)}; known: {', '.join(TOPIC_TYPES)}")
+        picked = {kind: _choose(kind, topics, counts, chosen[kind]) for kind in TOPIC_TYPES
+                  if kind in kinds}
+        for kind, topic in picked.items():
+            if topic is not None and not counts.get(topic):
+                raise BagError(f"topic {topic} is empty: no messages to read as {kind}")
+        wanted = {t: k for k, t in picked.items() if t is not None}
+        found, names = {}, ()
+        conns = [c for c in reader.connections if c.topic in wanted]
+        which, recv, raws = zip(*reader.messages(connections=conns), strict=True)
+        which = np.fromiter((c.id for c in which), np.int64, len(which))
+        recv = np.array(recv, np.int64)
+        for topic, kind in wanted.items():
+            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic == topic]))
+            series, got = _series(kind, topic, topics[topic], recv[rows],
+                                  [raws[i] for i in rows], reader, (left_joint, right_joint))
+            _check(series)
+            found[kind] = series
+            names = got or names
+    firsts = [int(s.t_ns[0]) for s in found.values()]
+    start_ns = min(firsts) if firsts else 0
+    _log.info("read %s: %s", path, ", ".join(f"{k} {s.topic} ({len(s)})"
+                                             for k, s in found.items()))
+    return BagRecording(path=Path(path), topics=MappingProxyType(topics), start_ns=start_ns,
+                        joints=names, **found)
+
+
+def _check(series: StampedSeries) -> None:
+    """Finite values and stamps that never go backwards, or a one-line :class:`BagError`."""
+    back = np.flatnonzero(np.diff(series.t_ns) < 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise BagError(f"topic {series.topic}: stamps go backwards at message {i} "
+                       f"({(series.t_ns[i - 1] - series.t_ns[i]) / 1e9:.6f} s before the one "
+                       "ahead of it); record with header stamps from one clock")
+    bad = np.argwhere(~np.isfinite(series.values))
+    if bad.size:
+        i, j = (int(v) for v in bad[0])
+        raise BagError(f"topic {series.topic}: message {i} has a {series.values[i, j]} in its "
+                       f"{_column(series, j)}")
+
+
+def _column(series: StampedSeries, j: int) -> str:
+    for kind, types in TOPIC_TYPES.items():
+        if series.msgtype in types:
+            return COLUMNS[kind][j]
+    return f"column {j}"
