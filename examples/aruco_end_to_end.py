@@ -213,6 +213,7 @@ class EkfRun:
     poses: np.ndarray           # (n, 3), every frame
     fused: int
     gated: int
+    diverged: int = 0           # resets of the filter's divergence watch (docs/ekf.md)
 
 
 def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_map: MarkerMap,
@@ -239,7 +240,8 @@ def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_ma
         ekf.update_landmarks(at.get(k, none))
         poses[k] = ekf.x[:3]
     return EkfRun(poses, ekf.stats.count("landmark", "fused"),
-                  ekf.stats.count("landmark", "gated"))
+                  ekf.stats.count("landmark", "gated"),
+                  sum(r.cause == "diverged" for r in ekf.resets))
 
 
 @dataclass(frozen=True)

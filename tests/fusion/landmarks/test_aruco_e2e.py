@@ -64,7 +64,9 @@ def test_smoother_position_rms_within_5_cm(runs):
 
 def test_the_cameras_mount_is_what_keeps_the_ekf_on_track(example, model, runs):
     """The camera sits 0.1 m ahead of the axle; its detections taken as from the axle centre
-    (the mount dropped: issue 16's failure) are mostly gated and the error grows tenfold."""
+    (the mount dropped: issue 16's failure) grow the error tenfold, and the filter finds
+    itself diverged (runs of gated sightings reset it, docs/ekf.md) where with the mount it
+    never does."""
     run = runs[0]
     assert run.detections.sightings.sensor_pose == example.make_camera().mount.sensor_pose()
     det = replace(run.detections, sightings=replace(run.detections.sightings,
@@ -72,7 +74,8 @@ def test_the_cameras_mount_is_what_keeps_the_ekf_on_track(example, model, runs):
     wrong = example.run_ekf(model, run.log, det, example.wall_markers())
     rms = np.sqrt(np.mean(np.sum((wrong.poses[:, :2] - run.log.true_pose[:, :2]) ** 2, axis=1)))
     assert rms > 10 * run.ekf_rms_m, (rms, run.ekf_rms_m)
-    assert wrong.gated > 0.5 * (wrong.fused + wrong.gated)
+    assert wrong.diverged > 0 and run.ekf.diverged == 0, (wrong.diverged, run.ekf.diverged)
+    assert wrong.gated > 10 * run.ekf.gated, (wrong.gated, run.ekf.gated)
 
 
 def test_smoother_at_most_the_ekf(runs):
