@@ -89,8 +89,15 @@ def _bag_options(args: argparse.Namespace):
         value = getattr(args, name)
         if value is not None and not value > 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value:g}")
-    extra = {k: v for k, v in (("ticks_per_rad", args.ticks_per_rad),
-                               ("wheel_radius_m", args.wheel_radius), ("dt_s", args.dt),
+    ticks_per_rad, wheel_radius_m = args.ticks_per_rad, args.wheel_radius
+    if getattr(args, "sim", None):                  # calibrate --robot: its description
+        described = load_robot(args.sim)
+        if ticks_per_rad is None:
+            ticks_per_rad = described.ticks_per_rev / (2 * math.pi)
+        if wheel_radius_m is None:
+            wheel_radius_m = described.wheel_diameter_m / 2
+    extra = {k: v for k, v in (("ticks_per_rad", ticks_per_rad),
+                               ("wheel_radius_m", wheel_radius_m), ("dt_s", args.dt),
                                ("max_wheel_m_s", args.max_wheel_speed))
              if v is not None}
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
@@ -289,7 +296,8 @@ def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool =
     group.add_argument("--right-joint", default="right", metavar="PATTERN",
                        help="right wheel joint: its name or a pattern (default 'right')")
     group.add_argument("--ticks-per-rad", type=float, default=None,
-                       help="encoder counts per wheel radian (default the Create 2's, 80.98)")
+                       help="encoder counts per wheel radian (default: calibrate --robot's "
+                            "description, else the Create 2's, 80.98)")
     if not shared_with_log:
         group.add_argument("--wheel-radius", type=float, default=None,
                            help="nominal wheel radius [m] (default the Create 2's, 0.036)")
@@ -350,7 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--m-per-tick", type=float, default=None,
                      help="with --log: encoder scale [m/tick] from the robot description")
     cal.add_argument("--wheel-radius", type=float, default=None,
-                     help="with --log: wheel radius [m] for wheel angles or speeds in rad/s")
+                     help="with --log or --bag: wheel radius [m] for wheel angles or speeds "
+                          "in rad/s (default: the --robot description's; --bag without "
+                          "--robot: the Create 2's, 0.036)")
     where.add_argument("--bag", help="a recorded ROS bag (ROS 1 .bag, or a ROS 2 folder with a "
                                      ".db3 or .mcap file): fit the ARX model on its drive "
                                      "(docs/guide_ros_bags.md)")

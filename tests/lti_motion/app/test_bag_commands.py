@@ -145,3 +145,20 @@ def _drop_topic_and_calibrate(path, tmp_path):
             if c.topic in conns:
                 writer.write(conns[c.topic], t, raw)
     return calibrate_from_bag(out, wheel_base_m=0.235)
+
+
+def test_calibrate_bag_takes_the_robot_descriptions_encoders_and_wheels():
+    import math
+
+    from drivers.sim.config import load_robot
+    from lti_motion.app.cli import _bag_options, build_parser
+
+    paper = load_robot("paper")
+    args = build_parser().parse_args(["calibrate", "--bag", "drive.bag", "--robot", "paper"])
+    options = _bag_options(args)
+    assert options.ticks_per_rad == pytest.approx(paper.ticks_per_rev / (2 * math.pi))
+    assert options.wheel_radius_m == pytest.approx(paper.wheel_diameter_m / 2)
+    # an explicit option wins over the description
+    args = build_parser().parse_args(["calibrate", "--bag", "drive.bag", "--robot", "paper",
+                                      "--wheel-radius", "0.05"])
+    assert _bag_options(args).wheel_radius_m == 0.05
