@@ -275,16 +275,24 @@ def _section(doc: Mapping, section: str, label: str) -> dict:
     return dict(_value(fields[k], table[k], f"{where}{k}") for k in fields if k in table)
 
 
-def _regions(doc: Mapping, label: str) -> tuple[tuple[float, float, float, float, str], ...]:
-    regions = doc.get("floor", {}).get("regions", [])
-    if not isinstance(regions, list):
-        raise RobotFileError(f"{label}: [floor] regions must be a list of tables "
-                             f"([[floor.regions]]), got {regions!r}")
+def _tables(value: object, label: str, *, name: str, array: str) -> list[tuple[str, Mapping]]:
+    """The tables of an array of tables (``[[array]]``), each with its place for messages."""
+    if not isinstance(value, list):
+        raise RobotFileError(f"{label}: {name} must be a list of tables ([[{array}]]), "
+                             f"got {value!r}")
     out = []
-    for i, reg in enumerate(regions, start=1):
-        where = f"{label}: [[floor.regions]] #{i} "
-        if not isinstance(reg, Mapping):
-            raise RobotFileError(f"{where}must be a table, got {reg!r}")
+    for i, entry in enumerate(value, start=1):
+        where = f"{label}: [[{array}]] #{i} "
+        if not isinstance(entry, Mapping):
+            raise RobotFileError(f"{where}must be a table, got {entry!r}")
+        out.append((where, entry))
+    return out
+
+
+def _regions(doc: Mapping, label: str) -> tuple[tuple[float, float, float, float, str], ...]:
+    out = []
+    for where, reg in _tables(doc.get("floor", {}).get("regions", []), label,
+                              name="[floor] regions", array="floor.regions"):
         for key in reg:
             if key not in _REGION_KEYS:
                 raise RobotFileError(f"{where}unknown field {key!r}; known: "
@@ -299,15 +307,8 @@ def _regions(doc: Mapping, label: str) -> tuple[tuple[float, float, float, float
 
 
 def _faults(doc: Mapping, label: str) -> tuple[dict, ...]:
-    faults = doc.get("faults", [])
-    if not isinstance(faults, list):
-        raise RobotFileError(f"{label}: faults must be a list of tables ([[faults]]), "
-                             f"got {faults!r}")
     out = []
-    for i, entry in enumerate(faults, start=1):
-        where = f"{label}: [[faults]] #{i} "
-        if not isinstance(entry, Mapping):
-            raise RobotFileError(f"{where}must be a table, got {entry!r}")
+    for where, entry in _tables(doc.get("faults", []), label, name="faults", array="faults"):
         for key in ("kind", "t_s"):
             if key not in entry:
                 raise RobotFileError(f"{where}{key} is missing")

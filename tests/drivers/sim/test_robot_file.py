@@ -187,6 +187,10 @@ BAD = [
     (lambda t: t + '[[faults]]\nkind = "stall"\nt_s = 1\nwheel = "middle"\n',
      "[[faults]] #1 wheel must be"),
     (lambda t: t + "[[floor.regions]]\nxmin_m = 0\n", "[[floor.regions]] #1 xmax_m is missing"),
+    (lambda t: "faults = 3\n" + t, "faults must be a list of tables ([[faults]]), got 3"),
+    (lambda t: t + "[floor]\nregions = [1]\n", "[[floor.regions]] #1 must be a table, got 1"),
+    (lambda t: t + '[floor]\nregions = "all"\n',
+     "[floor] regions must be a list of tables ([[floor.regions]]), got 'all'"),
     (lambda t: _replace(t, 'name = "mybot"', 'name = "mybot"\nname = "again"'),
      "robot file {path}: not valid TOML:"),
 ]
