@@ -21,6 +21,8 @@ import os
 import struct
 import zipfile
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
@@ -108,27 +110,34 @@ def load_log(path: str | os.PathLike) -> FrameLog:
         it never suggests loading pickled data.
     """
     path = Path(path)
-    _check_npz(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            header = _header(path, npz)
-            if header["version"] == RECORDING_VERSION:
-                return _frame_log_of_recording(path, _read_recording(path, npz, header))
-            missing = [name for name in _ARRAYS if name not in npz.files]
-            if missing:
-                raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
-                                   f"{LOG_FORMAT} file")
-            arrays = {name: _array(path, npz, name)
-                      for name in (*_ARRAYS, *(n for n in _TRUTH if n in npz.files))}
-    except (FileNotFoundError, LogFileError):
-        raise
-    except _READ_ERRORS as exc:                     # the zip directory itself is damaged
-        raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
+    with _archive(path) as (npz, header):
+        if header["version"] == RECORDING_VERSION:
+            return _frame_log_of_recording(path, _read_recording(path, npz, header))
+        missing = [name for name in _ARRAYS if name not in npz.files]
+        if missing:
+            raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
+                               f"{LOG_FORMAT} file")
+        arrays = {name: _array(path, npz, name)
+                  for name in (*_ARRAYS, *(n for n in _TRUTH if n in npz.files))}
     _check_arrays(path, arrays)
     _check_times(path, arrays["t_s"])
     meta = header.get("meta", {})
     _check_sightings(path, meta)
     return FrameLog(dt_s=float(header["dt_s"]), meta=meta, **arrays)
+
+
+@contextmanager
+def _archive(path: Path) -> Iterator[tuple[np.lib.npyio.NpzFile, dict]]:
+    """The open archive and its checked header; what reading a damaged archive raises
+    (inside the ``with`` block too) becomes one :class:`LogFileError` naming the file."""
+    _check_npz(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            yield npz, _header(path, npz)
+    except (FileNotFoundError, LogFileError):
+        raise
+    except _READ_ERRORS as exc:                     # the zip directory itself is damaged
+        raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
 
 
 #: What reading a damaged archive raises (zipfile, zlib and numpy's .npy reader).
@@ -347,16 +356,9 @@ def load_recording(path: str | os.PathLike) -> Recording:
         naming the file and the field.
     """
     path = Path(path)
-    _check_npz(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            header = _header(path, npz)
-            if header["version"] == RECORDING_VERSION:
-                return _read_recording(path, npz, header)
-    except (FileNotFoundError, LogFileError):
-        raise
-    except _READ_ERRORS as exc:
-        raise LogFileError(f"{path} is damaged or not a log file: {_reason(exc)}") from exc
+    with _archive(path) as (npz, header):
+        if header["version"] == RECORDING_VERSION:
+            return _read_recording(path, npz, header)
     log = load_log(path)
     if log.n_robots is not None:
         raise LogFileError(f"{path} holds a batch of {log.n_robots} robots; save one robot's "
