@@ -49,6 +49,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing
+from lti_motion.frames import FrameLog
 from lti_motion.kinematics import body_from_wheel, integrate_poses
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -95,6 +96,24 @@ def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None
     return poses, d2, ekf.n_resets
 
 
+def biased_drive(example, model: MotionModel, *, seed: int, rest_s: float, bias_m_s: float,
+                 duration_s: float = DRIVE_S) -> tuple[FrameLog, np.ndarray, RangeBearing]:
+    """The issue's scenario on the simulator: rest, then ``examples/ekf_plugin.py``'s
+    rounded-square route; the odometry's body speeds [m/s, rad/s] biased by ``bias_m_s`` on
+    both wheels while at rest; sightings of the four corner landmarks at 10 Hz."""
+    sim = Simulator("create2", n_robots=1, seed=seed, room=Room.box(5.0, 5.0),
+                    initial_pose=START)
+    log = example.drive_route(sim, duration_s=duration_s, rng=np.random.default_rng(seed),
+                              rest_s=rest_s).robot(0)
+    dt = log.dt_s
+    wheel = tick_deltas(log.ticks, axis=0) * model.m_per_tick / dt
+    wheel[:round(rest_s / dt) - 1] += bias_m_s
+    speeds = body_from_wheel(wheel, wheel_base_m=model.wheel_base_m)
+    sightings = synthetic_observations(log.true_pose, LANDMARKS, dt_s=dt, rate_hz=10.0,
+                                       rng=np.random.default_rng(500 + seed))
+    return log, speeds, sightings
+
+
 def _ate(truth: np.ndarray, poses: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((poses[:, :2] - truth[:, :2]) ** 2, axis=1))))
 
@@ -104,16 +123,8 @@ def _accuracy(example, model: MotionModel) -> dict[str, list[float]]:
         "bounded", "unbounded", "odometry", "landmarks_only", "d2_bounded", "d2_unbounded",
         "resets")}
     for seed in range(100, 100 + N_RUNS):
-        sim = Simulator("create2", n_robots=1, seed=seed, room=Room.box(5.0, 5.0),
-                        initial_pose=START)
-        log = example.drive_route(sim, duration_s=DRIVE_S, rng=np.random.default_rng(seed),
-                                  rest_s=REST_S).robot(0)
-        dt = log.dt_s
-        wheel = tick_deltas(log.ticks, axis=0) * model.m_per_tick / dt
-        wheel[:round(REST_S / dt) - 1] += BIAS_M_S
-        speeds = body_from_wheel(wheel, wheel_base_m=model.wheel_base_m)
-        sightings = synthetic_observations(log.true_pose, LANDMARKS, dt_s=dt, rate_hz=10.0,
-                                           rng=np.random.default_rng(500 + seed))
+        log, speeds, sightings = biased_drive(example, model, seed=seed, rest_s=REST_S,
+                                              bias_m_s=BIAS_M_S)
         poses, d2, resets = _run(ModelEKF, model, log, speeds, sightings)
         out["bounded"].append(_ate(log.true_pose, poses))
         out["d2_bounded"].append(d2)
@@ -124,7 +135,7 @@ def _accuracy(example, model: MotionModel) -> dict[str, list[float]]:
         out["landmarks_only"].append(_ate(log.true_pose,
                                           _run(ModelEKF, model, log, None, sightings)[0]))
         out["odometry"].append(_ate(log.true_pose,
-                                    integrate_poses(speeds, dt, initial_pose=START)))
+                                    integrate_poses(speeds, log.dt_s, initial_pose=START)))
     return out
 
 

@@ -12,8 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.sim.config import Room
-from drivers.sim.simulator import Simulator
+from benchmarks.bench_bounds import BIAS_M_S, LANDMARKS, START, biased_drive
 from fusion.ekf.functions import SCALES
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import (
@@ -26,18 +25,14 @@ from fusion.ekf.resets import (
     widen_pose,
 )
 from fusion.exceptions import FilterOptionError
-from fusion.landmark_map import LandmarkMap
-from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.fir import FirFit
-from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.kinematics import integrate_poses
 from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
 
-LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
-START = (2.5, 1.3, 0.0)
-BIAS_M_S = -0.022          # what the odometry reads while the robot stands still
+# the issue's scenario, shared with `python -m benchmarks bounds`: START, the four corner
+# LANDMARKS, BIAS_M_S = -0.022 m/s (what the odometry reads while the robot stands still)
 
 
 @pytest.fixture(scope="module")
@@ -145,21 +140,6 @@ def test_a_wide_prior_is_clipped_to_the_physical_bound(small_model):
 
 
 # -- the reproduction on the simulator ----------------------------------------------------------
-def _drive(example, model, *, seed, rest_s, bias_m_s):
-    """Rest, then the example's rounded-square route; odometry speeds biased while at rest."""
-    sim = Simulator("create2", n_robots=1, seed=seed, room=Room.box(5.0, 5.0),
-                    initial_pose=START)
-    log = example.drive_route(sim, duration_s=25.0, rng=np.random.default_rng(seed),
-                      rest_s=rest_s).robot(0)
-    dt = log.dt_s
-    wheel = tick_deltas(log.ticks, axis=0) * model.m_per_tick / dt
-    wheel[:round(rest_s / dt) - 1] += bias_m_s
-    speeds = body_from_wheel(wheel, wheel_base_m=model.wheel_base_m)
-    sightings = synthetic_observations(log.true_pose, LANDMARKS, dt_s=dt, rate_hz=10.0,
-                                       rng=np.random.default_rng(500 + seed))
-    return log, speeds, sightings
-
-
 def _filter(model, log, speeds, sightings):
     ekf = ModelEKF(model, initial_pose=START, pose_std=(0.005,) * 3, landmarks=LANDMARKS,
                    history=0)
@@ -190,7 +170,8 @@ def example(load_example):
 @pytest.mark.parametrize("seed", [100, 101])
 def test_an_encoder_bias_at_rest_with_dense_landmarks_does_not_run_the_filter_away(
         example, route_model, seed):
-    log, speeds, sightings = _drive(example, route_model, seed=seed, rest_s=30.0, bias_m_s=BIAS_M_S)
+    log, speeds, sightings = biased_drive(example, route_model, seed=seed, rest_s=30.0,
+                                           bias_m_s=BIAS_M_S)
     ekf, poses, d2 = _filter(route_model, log, speeds, sightings)
     odometry = integrate_poses(speeds, log.dt_s, initial_pose=START)
     # the scale states stay within their plausibility bound at every frame
@@ -202,7 +183,8 @@ def test_an_encoder_bias_at_rest_with_dense_landmarks_does_not_run_the_filter_aw
 
 
 def test_without_the_bias_the_filter_never_resets(example, route_model):
-    log, speeds, sightings = _drive(example, route_model, seed=100, rest_s=30.0, bias_m_s=0.0)
+    log, speeds, sightings = biased_drive(example, route_model, seed=100, rest_s=30.0,
+                                           bias_m_s=0.0)
     ekf, poses, _ = _filter(route_model, log, speeds, sightings)
     assert ekf.n_resets == 0 and _ate(log, poses) < 0.02
 
