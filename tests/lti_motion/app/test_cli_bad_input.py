@@ -11,19 +11,14 @@ import pytest
 
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.fir import FirFit
 from lti_motion.logfile import save_log
-from lti_motion.model import MotionModel
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
+def files(tmp_path_factory, tiny_model):
     """A model file and a short simulated log (the model need not be good here)."""
     folder = tmp_path_factory.mktemp("cli")
-    fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
-                 residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps")
-    model = MotionModel.from_fir(fit, dt_s=0.015, wheel_base_m=0.235, m_per_tick=4.4e-4,
-                                 calibrated_at="2026-01-01T00:00:00+00:00")
+    model = tiny_model
     log = Simulator("create2", seed=0).run(np.full((50, 2), 0.1))
     return {"model": model.save(folder / "model.json"), "log": log,
             "good": save_log(folder / "good.npz", log)}

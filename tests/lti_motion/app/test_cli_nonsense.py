@@ -9,18 +9,13 @@ import pytest
 
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.fir import FirFit
 from lti_motion.logfile import save_log
-from lti_motion.model import MotionModel
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
+def files(tmp_path_factory, tiny_model):
     folder = tmp_path_factory.mktemp("nonsense")
-    fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
-                 residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps")
-    model = MotionModel.from_fir(fit, dt_s=0.015, wheel_base_m=0.235, m_per_tick=4.4e-4,
-                                 calibrated_at="2026-01-01T00:00:00+00:00")
+    model = tiny_model
     log = Simulator("create2", seed=0).run(np.full((200, 2), 0.1))
     return {"model": str(model.save(folder / "model.json")),
             "log": str(save_log(folder / "one_robot.npz", log))}
