@@ -15,7 +15,10 @@ bag holds one topic of that kind, or named by the caller when it holds several:
   descriptions or ``left_wheel_joint`` of diff_drive_controller's examples);
 - ``odom``: ``nav_msgs/Odometry`` (pose x, y, yaw; twist v, w);
 - ``imu``: ``sensor_msgs/Imu`` (yaw rate);
-- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture).
+- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture), or,
+  when the bag has no such topic or a tf frame pair is named, the transform of the
+  robot's frame in ``tf2_msgs/TFMessage`` topics (``/tf``, ``/tf_static``;
+  :mod:`drivers.bag_tf`).
 
 Each message is stamped with its header stamp when it has one, else with the time
 the bag received it. :func:`bag_to_log` turns a recording into today's
@@ -49,6 +52,7 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from drivers.bag_fields import decode_fields
+from drivers.bag_tf import TF_TYPE, tf_truth
 from drivers.exceptions import BagError
 
 __all__ = [
@@ -141,6 +145,8 @@ class BagRecording:
         The kinds of :data:`TOPIC_TYPES` found (``None``: the bag has none).
     joints : tuple of str
         The (left, right) joint names used, ``()`` without wheels.
+    truth_frames : tuple of str
+        The tf (parent, child) frames of ``truth`` when it came from tf, else ``()``.
     """
 
     path: Path
@@ -152,6 +158,7 @@ class BagRecording:
     imu: StampedSeries | None = None
     truth: StampedSeries | None = None
     joints: tuple[str, ...] = ()
+    truth_frames: tuple[str, ...] = ()
 
 
 def _bag_paths(path: str | os.PathLike) -> list[Path]:
@@ -234,6 +241,11 @@ def _yaw(q: np.ndarray) -> np.ndarray:
     return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
+def _planar(data: np.ndarray) -> np.ndarray:
+    """Columns (x, y, qx, qy, qz, qw, ...) as (x, y, yaw, ...)."""
+    return np.column_stack([data[:, :2], _yaw(data[:, 2:6]), data[:, 6:]])
+
+
 def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequence[bytes],
             reader: AnyReader, joints: tuple[str, str]) -> tuple[StampedSeries, tuple[str, ...]]:
     store = reader.typestore
@@ -287,7 +299,7 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
     else:
         t_ns = recv_ns
     if kind in ("odom", "truth"):
-        data = np.column_stack([data[:, :2], _yaw(data[:, 2:6]), data[:, 6:]])
+        data = _planar(data)
     return StampedSeries(topic, msgtype, t_ns, data), names
 
 
@@ -295,6 +307,7 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
              wheels_topic: str | None = None, odom_topic: str | None = None,
              imu_topic: str | None = None, truth_topic: str | None = None,
              left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
+             truth_parent: str | None = None, truth_child: str | None = None,
              kinds: Collection[str] = tuple(TOPIC_TYPES)) -> BagRecording:
     """Find a drive's topics in a bag and decode them.
 
@@ -308,6 +321,11 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     left_joint, right_joint : str
         Regular expressions (case-insensitive, searched) that pick exactly one
         joint each from the first ``JointState`` message, or the joints' names.
+    truth_parent, truth_child : str, optional
+        Take the reference poses from tf: the transform of frame ``truth_child``
+        in frame ``truth_parent`` (:mod:`drivers.bag_tf`; either left out is
+        tried from its defaults). Without either, tf is read only when the bag
+        has no ``PoseStamped`` topic, and its default pair used when present.
     kinds : collection of str
         The kinds to read (default all); the others stay ``None`` and unread
         (calibration needs only ``cmd`` and ``wheels``).
@@ -324,8 +342,10 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     BagError
         A ``ValueError``: not a bag; a named topic missing or of the wrong type;
         several topics of a kind and none named; a named topic empty; joints not
-        found; stamps going backwards; a value not finite. The message names the
-        topic (and lists the bag's topics where that helps).
+        found; a tf frame pair named and absent (the pairs found listed), or named
+        in a bag without tf, or named with ``truth_topic``; stamps going backwards;
+        a value not finite. The message names the topic (and lists the bag's
+        topics where that helps).
     """
     chosen = {"cmd": cmd_topic, "wheels": wheels_topic, "odom": odom_topic,
               "imu": imu_topic, "truth": truth_topic}
@@ -342,10 +362,12 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         for kind, topic in picked.items():
             if topic is not None and not counts.get(topic):
                 raise BagError(f"topic {topic} is empty: no messages to read as {kind}")
+        tf = _tf_topics(topics, counts, kinds, picked, truth_topic, truth_parent, truth_child)
         wanted = {t: k for k, t in picked.items() if t is not None}
         found, names = {}, ()
-        conns = [c for c in reader.connections if c.topic in wanted]
+        conns = [c for c in reader.connections if c.topic in wanted or c.topic in tf]
         which, recv, raws = zip(*reader.messages(connections=conns), strict=True)
+        conns_by_id = {c.id: c.topic for c in conns}
         which = np.fromiter((c.id for c in which), np.int64, len(which))
         recv = np.array(recv, np.int64)
         for topic, kind in wanted.items():
@@ -355,12 +377,56 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
             _check(series)
             found[kind] = series
             names = got or names
+        frames: tuple[str, ...] = ()
+        if tf:
+            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic in tf]))
+            series = _tf_series(reader, [conns_by_id[i] for i in which[rows]], recv[rows],
+                                [raws[i] for i in rows], truth_parent, truth_child)
+            if series is not None:
+                (series, frames) = series
+                _check(series)
+                found["truth"] = series
     firsts = [int(s.t_ns[0]) for s in found.values()]
     start_ns = min(firsts) if firsts else 0
     _log.info("read %s: %s", path, ", ".join(f"{k} {s.topic} ({len(s)})"
                                              for k, s in found.items()))
     return BagRecording(path=Path(path), topics=MappingProxyType(topics), start_ns=start_ns,
-                        joints=names, **found)
+                        joints=names, truth_frames=frames, **found)
+
+
+def _tf_topics(topics: Mapping[str, str], counts: Mapping[str, int], kinds: Collection[str],
+               picked: dict[str, str | None], truth_topic: str | None,
+               truth_parent: str | None, truth_child: str | None) -> list[str]:
+    """The tf topics to read for the reference poses (``[]``: none); a named frame pair
+    replaces a ``PoseStamped`` topic found by type (``picked`` updated)."""
+    named = truth_parent is not None or truth_child is not None
+    if named and truth_topic is not None:
+        raise BagError("give --truth-topic (PoseStamped) or --truth-parent / --truth-child "
+                       "(tf), not both")
+    if "truth" not in kinds or truth_topic is not None or (picked.get("truth") and not named):
+        return []
+    tf = sorted(t for t, m in topics.items() if m == TF_TYPE and counts.get(t))
+    if named and not tf:
+        raise BagError("--truth-parent / --truth-child read tf, but the bag has no "
+                       f"tf2_msgs/TFMessage topic; it has {_listing(topics)}")
+    if tf:
+        picked["truth"] = None
+    return tf
+
+
+def _tf_series(reader: AnyReader, topics: Sequence[str], recv_ns: np.ndarray,
+               raws: Sequence[bytes], parent: str | None, child: str | None
+               ) -> tuple[StampedSeries, tuple[str, str]] | None:
+    """The reference poses in tf messages (:func:`drivers.bag_tf.tf_truth`), or None."""
+    store = reader.typestore
+    decode = store.deserialize_cdr if reader.is2 else store.deserialize_ros1
+    msgs = [decode(raw, TF_TYPE) for raw in raws]
+    got = tf_truth(msgs, recv_ns, topics, parent=parent, child=child)
+    if got is None:
+        _log.info("tf holds none of the default reference frame pairs; no reference poses")
+        return None
+    t_ns, rows, pair, where = got
+    return StampedSeries(", ".join(where), TF_TYPE, t_ns, _planar(rows)), pair
 
 
 def _check(series: StampedSeries) -> None:
@@ -380,6 +446,6 @@ def _check(series: StampedSeries) -> None:
 
 def _column(series: StampedSeries, j: int) -> str:
     for kind, types in TOPIC_TYPES.items():
-        if series.msgtype in types:
+        if series.msgtype in (*types, *((TF_TYPE,) if kind == "truth" else ())):
             return COLUMNS[kind][j]
     return f"column {j}"
