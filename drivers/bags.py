@@ -38,20 +38,19 @@ Examples
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import re
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
-from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.highlevel import AnyReader
 
 from drivers.bag_fields import decode_fields
+from drivers.bag_io import is_mcap, open_bag, raw_messages
 from drivers.bag_tf import TF_TYPE, tf_truth
 from drivers.exceptions import BagError
 
@@ -161,34 +160,6 @@ class BagRecording:
     truth_frames: tuple[str, ...] = ()
 
 
-def _bag_paths(path: str | os.PathLike) -> list[Path]:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no such bag: {path}")
-    if path.suffix in (".db3", ".mcap") and path.is_file():
-        path = path.parent                      # the ROS 2 bag is the folder
-    if path.is_dir() and not (path / "metadata.yaml").is_file():
-        raise BagError(f"{path} is a folder without metadata.yaml: not a ROS 2 bag")
-    if path.is_file() and path.suffix != ".bag":
-        raise BagError(f"{path} is not a bag: give a ROS 1 .bag file or a ROS 2 bag folder "
-                       "(with metadata.yaml and a .db3 or .mcap file)")
-    return [path]
-
-
-@contextlib.contextmanager
-def _open(path: str | os.PathLike) -> Iterator[AnyReader]:
-    paths = _bag_paths(path)
-    reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    try:
-        reader.open()
-    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
-        raise BagError(f"cannot read {paths[0]} as a ROS bag: {exc}") from exc
-    try:
-        yield reader
-    finally:
-        reader.close()
-
-
 def _listing(topics: Mapping[str, str]) -> str:
     return ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "no topics"
 
@@ -203,7 +174,7 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
     BagError
         If it is not a readable bag.
     """
-    with _open(path) as reader:
+    with open_bag(path) as reader:
         return {c.topic: c.msgtype for c in reader.connections}
 
 
@@ -349,7 +320,7 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     """
     chosen = {"cmd": cmd_topic, "wheels": wheels_topic, "odom": odom_topic,
               "imu": imu_topic, "truth": truth_topic}
-    with _open(path) as reader:
+    with open_bag(path) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
         counts: dict[str, int] = {}
         for c in reader.connections:
@@ -366,22 +337,21 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         wanted = {t: k for k, t in picked.items() if t is not None}
         found, names = {}, ()
         conns = [c for c in reader.connections if c.topic in wanted or c.topic in tf]
-        which, recv, raws = zip(*reader.messages(connections=conns), strict=True)
-        conns_by_id = {c.id: c.topic for c in conns}
-        which = np.fromiter((c.id for c in which), np.int64, len(which))
-        recv = np.array(recv, np.int64)
+        got_raw = raw_messages(reader, conns, mcap=is_mcap(path))
         for topic, kind in wanted.items():
-            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic == topic]))
-            series, got = _series(kind, topic, topics[topic], recv[rows],
-                                  [raws[i] for i in rows], reader, (left_joint, right_joint))
+            recv, raws = got_raw[topic]
+            series, got = _series(kind, topic, topics[topic], recv, raws, reader,
+                                  (left_joint, right_joint))
             _check(series)
             found[kind] = series
             names = got or names
         frames: tuple[str, ...] = ()
         if tf:
-            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic in tf]))
-            series = _tf_series(reader, [conns_by_id[i] for i in which[rows]], recv[rows],
-                                [raws[i] for i in rows], truth_parent, truth_child)
+            parts = [(t, *got_raw[t]) for t in tf]
+            series = _tf_series(reader, [t for t, r, _ in parts for _ in r],
+                                np.concatenate([r for _, r, _ in parts]),
+                                [raw for _, _, raws in parts for raw in raws],
+                                truth_parent, truth_child)
             if series is not None:
                 (series, frames) = series
                 _check(series)
