@@ -73,9 +73,10 @@ def raw_messages(reader: AnyReader, conns: Sequence[object], *, mcap: bool
     Parameters
     ----------
     reader : AnyReader
-        Open (:func:`open_bag`).
+        Open (:func:`open_bag`) on one bag.
     conns : sequence of rosbags Connection
-        The connections to read.
+        The connections to read, of that bag (each read by its ``owner``, the
+        bag's own ``rosbags`` reader).
     mcap : bool
         The bag is MCAP (:func:`is_mcap`).
 
@@ -84,15 +85,21 @@ def raw_messages(reader: AnyReader, conns: Sequence[object], *, mcap: bool
     dict of str to (ndarray of int64, list of bytes)
         Per topic: receive times [ns] and the serialized messages.
     """
+    if not conns:
+        return {}
     by_topic: dict[str, list] = {}
     for c in conns:
         by_topic.setdefault(c.topic, []).append(c)
+    def read(cs: Sequence[object]) -> Iterator[tuple[object, int, bytes]]:
+        # the bag's own reader (one bag: nothing for AnyReader to merge across bags)
+        return cs[0].owner.messages(connections=cs)
+
     if mcap:
         groups: dict[str, list] = {t: [] for t in by_topic}
-        for item in reader.messages(connections=conns):
+        for item in read(conns):
             groups[item[0].topic].append(item)
     else:
-        groups = {t: list(reader.messages(connections=cs)) for t, cs in by_topic.items()}
+        groups = {t: list(read(cs)) for t, cs in by_topic.items()}
     return {t: (np.fromiter((m[1] for m in items), np.int64, len(items)),
                 [m[2] for m in items]) for t, items in groups.items()}
 
