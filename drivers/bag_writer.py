@@ -13,7 +13,9 @@ renamed into place when complete; an existing path is refused.
 - :func:`write_drive_bag`: a :class:`~lti_motion.frames.FrameLog` (a simulator
   drive) as a robot running ROS would record it: ``/cmd_vel`` (``Twist``),
   ``/joint_states`` (wheel angles from the counts), ``/odom`` (encoder odometry)
-  and, with simulator truth, ``/ground_truth`` (``PoseStamped``).
+  and, with simulator truth, ``/ground_truth`` (``PoseStamped``) or, with
+  ``truth="tf"``, ``/tf`` (``tf2_msgs/TFMessage``: ``world -> base_link``) and a
+  static ``base_link -> base_laser`` mount on ``/tf_static``.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
 from drivers.exceptions import BagError
@@ -237,7 +239,7 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     * 1_000_000_000, ticks_per_rad: float = CREATE2_TICKS_PER_RAD,
                     wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M, wheel_base_m: float = 0.235,
                     joints: tuple[str, str] = ("wheel_left_joint", "wheel_right_joint"),
-                    storage: Storage = "mcap") -> Path:
+                    storage: Storage = "mcap", truth: Literal["pose", "tf"] = "pose") -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
@@ -259,12 +261,17 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         The (left, right) joint names.
     storage : {"mcap", "sqlite3"}
         ROS 2 storage.
+    truth : {"pose", "tf"}
+        How the simulator's poses go in: a ``PoseStamped`` topic, or tf (module
+        docstring).
 
     Returns
     -------
     Path
         The bag written.
     """
+    if truth not in ("pose", "tf"):
+        raise ValueError(f"truth must be 'pose' or 'tf', got {truth!r}")
     if log.n_robots is not None:
         raise ValueError("write_drive_bag writes one robot; pass log.robot(i)")
     rows = np.flatnonzero(log.valid)
@@ -275,15 +282,17 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     travel = tick_deltas(log.ticks[rows], axis=0) * (wheel_radius_m / ticks_per_rad)
     odom = integrate_poses(body_from_wheel(travel, wheel_base_m=wheel_base_m), 1.0)
     with _open_bag(path, storage) as bag:
-        t = bag.types
+        t, out = bag.types, []
         for topic, msgtype in (("/cmd_vel", "geometry_msgs/msg/Twist"),
                                ("/joint_states", "sensor_msgs/msg/JointState"),
                                ("/odom", "nav_msgs/msg/Odometry")):
             bag.topic(topic, msgtype)
-        if log.true_pose is not None:
+        if log.true_pose is not None and truth == "pose":
             bag.topic("/ground_truth", "geometry_msgs/msg/PoseStamped")
-        out = [(cmd_ns[k], "/cmd_vel", bag.twist(*cmd_vw[k]))     # sent, lost frame or not
-               for k in range(1, len(log))]
+        elif log.true_pose is not None:
+            out.extend(_tf_truth(bag, t_ns[rows], log.true_pose[rows]))
+        out += [(cmd_ns[k], "/cmd_vel", bag.twist(*cmd_vw[k]))    # sent, lost frame or not
+                for k in range(1, len(log))]
         empty = np.zeros(0)
         for j, k in enumerate(rows):
             out.append((t_ns[k], "/joint_states", t["sensor_msgs/msg/JointState"](
@@ -295,10 +304,36 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     pose=bag.pose(*odom[j]), covariance=np.zeros(36)),
                 twist=t["geometry_msgs/msg/TwistWithCovariance"](
                     twist=bag.twist(0.0, 0.0), covariance=np.zeros(36)))))
-            if log.true_pose is not None:
+            if log.true_pose is not None and truth == "pose":
                 out.append((t_ns[k], "/ground_truth", t["geometry_msgs/msg/PoseStamped"](
                     header=bag.header(t_ns[k], "world"), pose=bag.pose(*log.true_pose[k]))))
         out.sort(key=lambda item: item[0])        # in time order, as a recorder writes
         for stamp, topic, msg in out:
             bag.write(topic, stamp, msg)
     return Path(path)
+
+
+def _tf_truth(bag: _Bag, t_ns: np.ndarray, poses: np.ndarray) -> list[tuple[int, str, object]]:
+    """``world -> base_link`` on ``/tf`` per pose, a static laser mount on ``/tf_static``."""
+    if "tf2_msgs/msg/TFMessage" not in bag.types:          # ROS 1 Noetic's store lacks it
+        bag.store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",
+                                              "tf2_msgs/msg/TFMessage"))
+        bag.types = bag.store.types
+    t = bag.types
+    for topic in ("/tf", "/tf_static"):
+        bag.topic(topic, "tf2_msgs/msg/TFMessage")
+
+    def transform(stamp: int, parent: str, child: str, x: float, y: float, theta: float
+                  ) -> object:
+        pose = bag.pose(x, y, theta)
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=bag.header(stamp, parent), child_frame_id=child,
+            transform=t["geometry_msgs/msg/Transform"](
+                translation=bag.vector3(pose.position.x, pose.position.y),
+                rotation=pose.orientation))
+    mount = transform(int(t_ns[0]), "base_link", "base_laser", 0.1, 0.0, 0.0)
+    out = [(int(t_ns[0]), "/tf_static", t["tf2_msgs/msg/TFMessage"](transforms=[mount]))]
+    for stamp, pose in zip(t_ns, poses, strict=True):
+        out.append((int(stamp), "/tf", t["tf2_msgs/msg/TFMessage"](
+            transforms=[transform(int(stamp), "world", "base_link", *pose)])))
+    return out

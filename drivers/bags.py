@@ -15,7 +15,10 @@ bag holds one topic of that kind, or named by the caller when it holds several:
   descriptions or ``left_wheel_joint`` of diff_drive_controller's examples);
 - ``odom``: ``nav_msgs/Odometry`` (pose x, y, yaw; twist v, w);
 - ``imu``: ``sensor_msgs/Imu`` (yaw rate);
-- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture).
+- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture), or,
+  when the bag has no such topic or a tf frame pair is named, the transform of the
+  robot's frame in ``tf2_msgs/TFMessage`` topics (``/tf``, ``/tf_static``;
+  :mod:`drivers.bag_tf`).
 
 Each message is stamped with its header stamp when it has one, else with the time
 the bag received it. :func:`bag_to_log` turns a recording into today's
@@ -35,20 +38,20 @@ Examples
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import re
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
-from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.highlevel import AnyReader
 
 from drivers.bag_fields import decode_fields
+from drivers.bag_io import is_mcap, open_bag, raw_messages
+from drivers.bag_tf import TF_TYPE, tf_truth
 from drivers.exceptions import BagError
 
 __all__ = [
@@ -141,6 +144,8 @@ class BagRecording:
         The kinds of :data:`TOPIC_TYPES` found (``None``: the bag has none).
     joints : tuple of str
         The (left, right) joint names used, ``()`` without wheels.
+    truth_frames : tuple of str
+        The tf (parent, child) frames of ``truth`` when it came from tf, else ``()``.
     """
 
     path: Path
@@ -152,34 +157,7 @@ class BagRecording:
     imu: StampedSeries | None = None
     truth: StampedSeries | None = None
     joints: tuple[str, ...] = ()
-
-
-def _bag_paths(path: str | os.PathLike) -> list[Path]:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no such bag: {path}")
-    if path.suffix in (".db3", ".mcap") and path.is_file():
-        path = path.parent                      # the ROS 2 bag is the folder
-    if path.is_dir() and not (path / "metadata.yaml").is_file():
-        raise BagError(f"{path} is a folder without metadata.yaml: not a ROS 2 bag")
-    if path.is_file() and path.suffix != ".bag":
-        raise BagError(f"{path} is not a bag: give a ROS 1 .bag file or a ROS 2 bag folder "
-                       "(with metadata.yaml and a .db3 or .mcap file)")
-    return [path]
-
-
-@contextlib.contextmanager
-def _open(path: str | os.PathLike) -> Iterator[AnyReader]:
-    paths = _bag_paths(path)
-    reader = AnyReader(paths, default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    try:
-        reader.open()
-    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
-        raise BagError(f"cannot read {paths[0]} as a ROS bag: {exc}") from exc
-    try:
-        yield reader
-    finally:
-        reader.close()
+    truth_frames: tuple[str, ...] = ()
 
 
 def _listing(topics: Mapping[str, str]) -> str:
@@ -196,7 +174,7 @@ def bag_topics(path: str | os.PathLike) -> dict[str, str]:
     BagError
         If it is not a readable bag.
     """
-    with _open(path) as reader:
+    with open_bag(path) as reader:
         return {c.topic: c.msgtype for c in reader.connections}
 
 
@@ -232,6 +210,11 @@ def _yaw(q: np.ndarray) -> np.ndarray:
     """Yaw of quaternions (x, y, z, w) [rad], unwrapped along time."""
     x, y, z, w = q.T
     return np.unwrap(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def _planar(data: np.ndarray) -> np.ndarray:
+    """Columns (x, y, qx, qy, qz, qw, ...) as (x, y, yaw, ...)."""
+    return np.column_stack([data[:, :2], _yaw(data[:, 2:6]), data[:, 6:]])
 
 
 def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequence[bytes],
@@ -287,7 +270,7 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
     else:
         t_ns = recv_ns
     if kind in ("odom", "truth"):
-        data = np.column_stack([data[:, :2], _yaw(data[:, 2:6]), data[:, 6:]])
+        data = _planar(data)
     return StampedSeries(topic, msgtype, t_ns, data), names
 
 
@@ -295,6 +278,7 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
              wheels_topic: str | None = None, odom_topic: str | None = None,
              imu_topic: str | None = None, truth_topic: str | None = None,
              left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
+             truth_parent: str | None = None, truth_child: str | None = None,
              kinds: Collection[str] = tuple(TOPIC_TYPES)) -> BagRecording:
     """Find a drive's topics in a bag and decode them.
 
@@ -308,6 +292,11 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     left_joint, right_joint : str
         Regular expressions (case-insensitive, searched) that pick exactly one
         joint each from the first ``JointState`` message, or the joints' names.
+    truth_parent, truth_child : str, optional
+        Take the reference poses from tf: the transform of frame ``truth_child``
+        in frame ``truth_parent`` (:mod:`drivers.bag_tf`; either left out is
+        tried from its defaults). Without either, tf is read only when the bag
+        has no ``PoseStamped`` topic, and its default pair used when present.
     kinds : collection of str
         The kinds to read (default all); the others stay ``None`` and unread
         (calibration needs only ``cmd`` and ``wheels``).
@@ -324,12 +313,14 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     BagError
         A ``ValueError``: not a bag; a named topic missing or of the wrong type;
         several topics of a kind and none named; a named topic empty; joints not
-        found; stamps going backwards; a value not finite. The message names the
-        topic (and lists the bag's topics where that helps).
+        found; a tf frame pair named and absent (the pairs found listed), or named
+        in a bag without tf, or named with ``truth_topic``; stamps going backwards;
+        a value not finite. The message names the topic (and lists the bag's
+        topics where that helps).
     """
     chosen = {"cmd": cmd_topic, "wheels": wheels_topic, "odom": odom_topic,
               "imu": imu_topic, "truth": truth_topic}
-    with _open(path) as reader:
+    with open_bag(path) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
         counts: dict[str, int] = {}
         for c in reader.connections:
@@ -342,25 +333,70 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         for kind, topic in picked.items():
             if topic is not None and not counts.get(topic):
                 raise BagError(f"topic {topic} is empty: no messages to read as {kind}")
+        tf = _tf_topics(topics, counts, kinds, picked, truth_topic, truth_parent, truth_child)
         wanted = {t: k for k, t in picked.items() if t is not None}
         found, names = {}, ()
-        conns = [c for c in reader.connections if c.topic in wanted]
-        which, recv, raws = zip(*reader.messages(connections=conns), strict=True)
-        which = np.fromiter((c.id for c in which), np.int64, len(which))
-        recv = np.array(recv, np.int64)
+        conns = [c for c in reader.connections if c.topic in wanted or c.topic in tf]
+        got_raw = raw_messages(reader, conns, mcap=is_mcap(path))
         for topic, kind in wanted.items():
-            rows = np.flatnonzero(np.isin(which, [c.id for c in conns if c.topic == topic]))
-            series, got = _series(kind, topic, topics[topic], recv[rows],
-                                  [raws[i] for i in rows], reader, (left_joint, right_joint))
+            recv, raws = got_raw[topic]
+            series, got = _series(kind, topic, topics[topic], recv, raws, reader,
+                                  (left_joint, right_joint))
             _check(series)
             found[kind] = series
             names = got or names
+        frames: tuple[str, ...] = ()
+        if tf:
+            parts = [(t, *got_raw[t]) for t in tf]
+            series = _tf_series(reader, [t for t, r, _ in parts for _ in r],
+                                np.concatenate([r for _, r, _ in parts]),
+                                [raw for _, _, raws in parts for raw in raws],
+                                truth_parent, truth_child)
+            if series is not None:
+                (series, frames) = series
+                _check(series)
+                found["truth"] = series
     firsts = [int(s.t_ns[0]) for s in found.values()]
     start_ns = min(firsts) if firsts else 0
     _log.info("read %s: %s", path, ", ".join(f"{k} {s.topic} ({len(s)})"
                                              for k, s in found.items()))
     return BagRecording(path=Path(path), topics=MappingProxyType(topics), start_ns=start_ns,
-                        joints=names, **found)
+                        joints=names, truth_frames=frames, **found)
+
+
+def _tf_topics(topics: Mapping[str, str], counts: Mapping[str, int], kinds: Collection[str],
+               picked: dict[str, str | None], truth_topic: str | None,
+               truth_parent: str | None, truth_child: str | None) -> list[str]:
+    """The tf topics to read for the reference poses (``[]``: none); a named frame pair
+    replaces a ``PoseStamped`` topic found by type (``picked`` updated)."""
+    named = truth_parent is not None or truth_child is not None
+    if named and truth_topic is not None:
+        raise BagError("give --truth-topic (PoseStamped) or --truth-parent / --truth-child "
+                       "(tf), not both")
+    if "truth" not in kinds or truth_topic is not None or (picked.get("truth") and not named):
+        return []
+    tf = sorted(t for t, m in topics.items() if m == TF_TYPE and counts.get(t))
+    if named and not tf:
+        raise BagError("--truth-parent / --truth-child read tf, but the bag has no "
+                       f"tf2_msgs/TFMessage topic; it has {_listing(topics)}")
+    if tf:
+        picked["truth"] = None
+    return tf
+
+
+def _tf_series(reader: AnyReader, topics: Sequence[str], recv_ns: np.ndarray,
+               raws: Sequence[bytes], parent: str | None, child: str | None
+               ) -> tuple[StampedSeries, tuple[str, str]] | None:
+    """The reference poses in tf messages (:func:`drivers.bag_tf.tf_truth`), or None."""
+    store = reader.typestore
+    decode = store.deserialize_cdr if reader.is2 else store.deserialize_ros1
+    msgs = [decode(raw, TF_TYPE) for raw in raws]
+    got = tf_truth(msgs, recv_ns, topics, parent=parent, child=child)
+    if got is None:
+        _log.info("tf holds none of the default reference frame pairs; no reference poses")
+        return None
+    t_ns, rows, pair, where = got
+    return StampedSeries(", ".join(where), TF_TYPE, t_ns, _planar(rows)), pair
 
 
 def _check(series: StampedSeries) -> None:
@@ -380,6 +416,6 @@ def _check(series: StampedSeries) -> None:
 
 def _column(series: StampedSeries, j: int) -> str:
     for kind, types in TOPIC_TYPES.items():
-        if series.msgtype in types:
+        if series.msgtype in (*types, *((TF_TYPE,) if kind == "truth" else ())):
             return COLUMNS[kind][j]
     return f"column {j}"

@@ -55,6 +55,10 @@ class BagOptions:
         the bag holds several of a kind.
     left_joint, right_joint : str
         Joint-name patterns (:func:`drivers.bags.read_bag`).
+    truth_parent, truth_child : str or None
+        Reference poses from tf: the transform of this child frame in this parent
+        frame (:func:`drivers.bags.read_bag`); default ``None``: tf only when the
+        bag has no ``PoseStamped`` topic, with the default frames.
     ticks_per_rad : float
         Encoder counts per wheel radian (default the Create 2's).
     wheel_radius_m : float
@@ -74,6 +78,8 @@ class BagOptions:
     topics: dict = field(default_factory=dict)
     left_joint: str = r"left"
     right_joint: str = r"right"
+    truth_parent: str | None = None
+    truth_child: str | None = None
     ticks_per_rad: float = CREATE2_TICKS_PER_RAD
     wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M
     dt_s: float | None = None
@@ -94,6 +100,7 @@ def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
     """
     opt = options or BagOptions()
     rec = read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint, kinds=kinds,
+                   truth_parent=opt.truth_parent, truth_child=opt.truth_child,
                    **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
     return bag_to_log(rec, wheel_base_m=wheel_base_m, ticks_per_rad=opt.ticks_per_rad,
                       wheel_radius_m=opt.wheel_radius_m, dt_s=opt.dt_s,
@@ -215,7 +222,7 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                rpe_s: float = 1.0, print_fn: Callable[[str], object] = print) -> ReplayResult:
     """``lti-motion replay --bag``: :func:`~lti_motion.app.replay.run_replay` on a bag's drive.
 
-    The reference poses, if the bag has a ``PoseStamped`` topic, are the truth
+    The reference poses, from a ``PoseStamped`` topic or tf (:mod:`drivers.bag_tf`), are the truth
     the metrics compare against (the estimators start at the first one and never
     read them after). With ``out_bag``, the ``ekf`` estimator's poses and
     covariances go into a new bag (:func:`drivers.bag_writer.write_estimates_bag`).

@@ -101,6 +101,7 @@ def _bag_options(args: argparse.Namespace):
                                ("max_wheel_m_s", args.max_wheel_speed))
              if v is not None}
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
+                      truth_parent=args.truth_parent, truth_child=args.truth_child,
                       encoders=args.encoders, **extra)
 
 
@@ -291,6 +292,12 @@ def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool =
                        ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
                        ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
         group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
+    group.add_argument("--truth-parent", metavar="FRAME",
+                       help="reference poses from tf: the parent frame (default the first "
+                            "of world, map, odom with the child frame)")
+    group.add_argument("--truth-child", metavar="FRAME",
+                       help="reference poses from tf: the robot's frame (default base_link, "
+                            "else base_footprint)")
     group.add_argument("--left-joint", default="left", metavar="PATTERN",
                        help="left wheel joint: its name or a pattern (default 'left')")
     group.add_argument("--right-joint", default="right", metavar="PATTERN",

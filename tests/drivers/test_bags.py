@@ -128,6 +128,69 @@ def test_nothing_is_overwritten_or_half_written(tmp_path, drive):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bag"]
 
 
+# -- reference poses from tf -------------------------------------------------------------------
+@pytest.mark.parametrize(("name", "storage"), FORMATS, ids=["ros1", "db3", "mcap"])
+def test_reference_poses_from_tf_equal_the_truth_written(tmp_path, drive, name, storage):
+    path = write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS,
+                           truth="tf")
+    assert "/ground_truth" not in bag_topics(path)
+    rec = read_bag(path)                  # no PoseStamped topic: tf, with its default frames
+    assert rec.truth.topic == "/tf" and rec.truth_frames == ("world", "base_link")
+    ok = drive.valid
+    np.testing.assert_array_equal(rec.truth.t_ns, START_NS + np.rint(drive.t_s[ok] * 1e9))
+    np.testing.assert_allclose(rec.truth.values, drive.true_pose[ok], atol=1e-9)
+    log = bag_to_log(rec, wheel_base_m=0.235)
+    np.testing.assert_allclose(log.true_pose[ok], drive.true_pose[ok], atol=1e-9)
+    assert log.meta["topics"]["truth"] == "/tf"
+
+
+def _transform(t, t_ns, parent, child, x, yaw):
+    stamp = t["builtin_interfaces/msg/Time"](sec=int(t_ns // 10**9), nanosec=int(t_ns % 10**9))
+    return t["geometry_msgs/msg/TransformStamped"](
+        header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=parent), child_frame_id=child,
+        transform=t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=x, y=0.0, z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=np.sin(yaw / 2),
+                                                       w=np.cos(yaw / 2))))
+
+
+def test_tf_frames_by_default_or_named_and_a_missing_pair(tmp_path):
+    """/tf holds odom -> base_link (x = i) and /world -> base_link (x = 10 i); a
+    PoseStamped topic is there too."""
+    t = get_typestore(Stores.ROS2_HUMBLE).types
+    msgs = []
+    for i in range(5):
+        t_ns = 10**9 + i * 20_000_000
+        msgs.append(("/tf", "tf2_msgs/msg/TFMessage", t_ns, t["tf2_msgs/msg/TFMessage"](
+            transforms=[_transform(t, t_ns, "odom", "base_link", float(i), 0.1 * i),
+                        _transform(t, t_ns, "/world", "base_link", 10.0 * i, -0.1 * i)])))
+        tf = _transform(t, t_ns, "w", "", 0.0, 0.0)
+        msgs.append(("/mocap", "geometry_msgs/msg/PoseStamped", t_ns, t[
+            "geometry_msgs/msg/PoseStamped"](header=tf.header, pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
+                orientation=tf.transform.rotation))))
+    path, _ = _raw_bag(tmp_path / "tf", msgs, ros1=False)
+    assert read_bag(path).truth.topic == "/mocap"              # PoseStamped first
+    rec = read_bag(path, truth_child="base_link")              # named: tf, world preferred
+    assert rec.truth_frames == ("world", "base_link")
+    np.testing.assert_allclose(rec.truth.values, np.column_stack(
+        [10.0 * np.arange(5), np.zeros(5), -0.1 * np.arange(5)]), atol=1e-12)
+    odom = read_bag(path, truth_parent="odom").truth.values
+    np.testing.assert_allclose(odom[:, [0, 2]], np.column_stack([np.arange(5), 0.1 * np.arange(5)]),
+                               atol=1e-12)
+    with pytest.raises(BagError, match=r"no transform map -> base_footprint; it has "
+                                       r"odom -> base_link, world -> base_link \(choose"):
+        read_bag(path, truth_parent="map", truth_child="base_footprint")
+    with pytest.raises(BagError, match=r"--truth-topic .* not both"):
+        read_bag(path, truth_topic="/mocap", truth_parent="odom")
+
+
+def test_tf_named_in_a_bag_without_tf(bag):
+    with pytest.raises(BagError, match=r"the bag has no tf2_msgs/TFMessage topic; it has "
+                                       r"/cmd_vel"):
+        read_bag(bag, truth_child="base_link")
+
+
 # -- bad input -----------------------------------------------------------------------------
 def _raw_bag(path, messages, *, ros1=True):
     """A bag written with rosbags alone: ``messages`` is [(topic, msgtype, t_ns, msg)]."""

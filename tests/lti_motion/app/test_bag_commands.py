@@ -118,6 +118,8 @@ def test_monitor_stamps_the_alarms_with_bag_time(bags, model_file, tmp_path):
      "2 joints match the left wheel pattern 'wheel'"),
     (["calibrate", "--bag", "{spikes}", "--wheel-radius", "0"],
      "--wheel-radius must be positive"),
+    (["replay", "--bag", "{spikes}", "--model", "{model}", "--truth-child", "base_link"],
+     "--truth-parent / --truth-child read tf, but the bag has no tf2_msgs/TFMessage topic"),
 ])
 def test_bad_bag_input_is_one_line_and_exit_2(bags, model_file, capsys, argv, message):
     fill = {"spikes": bags["spikes"], "folder": bags["folder"], "model": model_file}
