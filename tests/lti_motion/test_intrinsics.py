@@ -54,3 +54,32 @@ def test_body_speeds_from_ticks_scale_given_twice_or_never():
                                intrinsics=OdometryIntrinsics(1e-3, 1e-3, 0.2))
     with pytest.raises(ValueError, match="give the encoder scale"):
         body_speeds_from_ticks(ticks, t, m_per_tick=1e-3)
+
+
+def test_scale_errors_round_trip_and_match_the_ground_motion():
+    """corrected() and scale_errors_to() invert each other, and the errors they give
+    reproduce the new intrinsics' body motion from the old one (module docstring)."""
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        old = OdometryIntrinsics(*rng.uniform(3e-4, 6e-4, 2), rng.uniform(0.15, 0.5))
+        new = OdometryIntrinsics(old.m_per_tick_left * rng.uniform(0.95, 1.05),
+                                 old.m_per_tick_right * rng.uniform(0.95, 1.05),
+                                 old.wheel_base_m * rng.uniform(0.95, 1.05))
+        k_v, k_w, kappa = old.scale_errors_to(new)
+        back = old.corrected(k_v, k_w, kappa)
+        np.testing.assert_allclose([back.m_per_tick_left, back.m_per_tick_right,
+                                    back.wheel_base_m],
+                                   [new.m_per_tick_left, new.m_per_tick_right,
+                                    new.wheel_base_m], rtol=1e-12)
+        ticks = rng.integers(-500, 500, size=2)
+        ds, dth = old.body_motion(ticks)
+        b_new = new.wheel_base_m
+        expected = [(1 + k_v) * ds + kappa * b_new * old.wheel_base_m * dth / 4,
+                    (1 + k_w) * dth + kappa * ds]
+        np.testing.assert_allclose(new.body_motion(ticks), expected, rtol=1e-10, atol=1e-15)
+
+
+def test_corrected_refuses_impossible_errors():
+    k = OdometryIntrinsics.symmetric(m_per_tick=4e-4, wheel_base_m=0.2)
+    with pytest.raises(ValueError, match="m_per_tick_left"):
+        k.corrected(-1.5, 0.0, 0.0)
