@@ -22,6 +22,16 @@ scatter of about 0.001 rad/s per calibration becomes decimetres at the end of a
 ten-metre route (``docs/route.md``). The same restriction serves the FIR
 model from steps (:func:`nearest_servo_gain`, :mod:`lti_motion.fir_steps`).
 
+**Output scales refined on the output error.** ``fit_arx(...,
+output_scale_horizons_s=...)`` then multiplies ``v`` and ``w`` by scales
+``s = (s_v, s_w)`` (:func:`output_scales`, :func:`scale_outputs`), chosen to
+minimise the low-frequency output-error criterion of
+:mod:`lti_motion.output_error` (moving sums of the free-run error over the
+horizons) with every other coefficient kept. The DC gain becomes
+``diag(s) c M``: straight commands still give no steady yaw rate, and the
+least-squares dynamics stay as fitted (docs/calibration.md has the
+measurements).
+
 References
 ----------
 Greene, W. H. (2012). Econometric Analysis, 7th ed., section 5.5.1, eq. 5-23
@@ -36,14 +46,16 @@ import dataclasses
 
 import numpy as np
 
-from lti_motion.arx import ArxFit, _split_theta
+from lti_motion.arx import ArxFit, _split_theta, free_run_errors
 from lti_motion.exceptions import ShapeError
 from lti_motion.kinematics import body_from_wheel_matrix
 
 __all__ = [
     "dc_gain",
     "nearest_servo_gain",
+    "output_scales",
     "restrict_dc_gain",
+    "scale_outputs",
     "servo_dc_gain",
 ]
 
@@ -202,3 +214,119 @@ def restrict_dc_gain(fit: ArxFit, gain: np.ndarray) -> ArxFit:
     return dataclasses.replace(
         fit, a=a, b=b, residual_cov=fit.residual_cov + (extra + extra.T) / 2.0,
         information_inv=p - pc @ cpc_inv @ pc.T)    # Greene eq. 5-26
+
+
+def _moving_sums(x: np.ndarray, h: int) -> np.ndarray:
+    """Sums of ``h`` consecutive rows (the prefilter ``L_h(q)``, :mod:`lti_motion.output_error`)."""
+    cs = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    return cs[h:] - cs[:-h]
+
+
+def output_scales(fit: ArxFit, runs, *, warmup: int, horizons: tuple[int, ...]) -> np.ndarray:
+    """Scales of ``v`` and ``w`` minimising the prefiltered output error of a fit.
+
+    Parameters
+    ----------
+    fit : ArxFit
+        The fit whose free run ``y_hat`` is scaled.
+    runs : sequence of (u, y)
+        Commands (n_i, 2) [m/s] and measured body speeds (n_i, 2) [m/s, rad/s].
+    warmup : int
+        Leading samples of each run that only set the state
+        (:func:`~lti_motion.arx.free_run_errors`).
+    horizons : tuple of int
+        Moving-sum lengths [samples] (1 is the plain simulation error).
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        ``(s_v, s_w)`` [-].
+
+    Raises
+    ------
+    ValueError
+        If no run is longer than ``warmup`` plus the shortest horizon, or the
+        free run is zero (nothing to scale).
+
+    Notes
+    -----
+    The criterion is that of :mod:`lti_motion.output_error` (Ljung 1999,
+    eq. 7.10 and 7.12) restricted to ``y_hat -> diag(s) y_hat``:
+    ``V(s) = sum_h w_h^2 || L_h y - s L_h y_hat ||^2`` per channel, with
+    ``w_h^2 = 1 / (N_h mean((L_h e)^2))`` the inverse mean square of the
+    start's prefiltered error ``e = y - y_hat``. ``V`` is quadratic in each
+    scale, so the minimum is the weighted least-squares ratio
+    ``s = sum_h w_h^2 <L_h y, L_h y_hat> / sum_h w_h^2 <L_h y_hat, L_h y_hat>``
+    (Greene 2012, eq. 3-6 with one regressor).
+
+    Examples
+    --------
+    >>> from lti_motion.arx import estimate_arx
+    >>> rng = np.random.default_rng(0)
+    >>> u = np.repeat(rng.normal(size=(60, 2)), 10, axis=0); y = np.zeros((600, 2))
+    >>> for n in range(1, 600): y[n] = 0.5 * y[n - 1] + 0.5 * u[n - 1]
+    >>> fit = estimate_arx([(u, y)], na=1, delay=1)
+    >>> s = output_scales(scale_outputs(fit, [0.9, 1.1]), [(u, y)], warmup=2, horizons=(1, 10))
+    >>> np.round(s * [0.9, 1.1], 4).tolist()
+    [1.0, 1.0]
+    """
+    errors = free_run_errors(fit.state_space(), runs, warmup=warmup)
+    y = [yy[warmup:] for _, yy in runs]
+    num, den = np.zeros(2), np.zeros(2)
+    for h in horizons:
+        pairs = [(_moving_sums(yy, h), _moving_sums(yy - e, h), _moving_sums(e, h))
+                 for yy, e in zip(y, errors, strict=True) if len(e) >= h]
+        if not pairs:
+            continue
+        ly, ls, le = (np.concatenate(p) for p in zip(*pairs, strict=True))
+        w2 = 1.0 / (len(le) * np.mean(le * le, axis=0) + 1e-300)
+        num += w2 * np.sum(ly * ls, axis=0)
+        den += w2 * np.sum(ls * ls, axis=0)
+    if not np.all(den > 0):
+        raise ValueError(f"no run is longer than the {warmup}-sample warm-up plus "
+                         f"{min(horizons)} samples, or the model predicts no motion; "
+                         "record longer runs")
+    return num / den
+
+
+def scale_outputs(fit: ArxFit, scales) -> ArxFit:
+    """The ARX fit whose outputs are ``diag(scales)`` times the given fit's.
+
+    Parameters
+    ----------
+    fit : ArxFit
+        Paper eq. 1 coefficients.
+    scales : array_like, shape (2,)
+        ``(s_v, s_w)``, positive [-].
+
+    Returns
+    -------
+    ArxFit
+        ``A_k -> S A_k S^-1``, ``B_j -> S B_j`` (``S = diag(scales)``): the same
+        poles and zeros, outputs ``S y``; ``residual_cov -> S R S`` and
+        ``information_inv -> T^-1 P T^-1`` with ``T`` the scaling of the
+        regressors (``1`` for commands, ``S`` for each output lag).
+
+    Raises
+    ------
+    ValueError
+        If ``scales`` are not two positive finite numbers.
+
+    Examples
+    --------
+    >>> from lti_motion.arx import estimate_arx
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.normal(size=(300, 2)); y = np.zeros((300, 2))
+    >>> for n in range(1, 300): y[n] = 0.5 * y[n - 1] + 0.5 * u[n - 1]
+    >>> g = dc_gain(scale_outputs(estimate_arx([(u, y)], na=1, delay=1), [2.0, 0.5]))
+    >>> (np.round(g, 6) + 0.0).tolist()
+    [[2.0, 0.0], [0.0, 0.5]]
+    """
+    s = np.asarray(scales, float)
+    if s.shape != (2,) or not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"scales must be two positive numbers, got {s.tolist()}")
+    a = s[None, :, None] * fit.a / s[None, None, :]
+    b = s[None, :, None] * fit.b
+    t = np.concatenate([np.ones(2 * fit.nb), np.tile(s, fit.na)])
+    return dataclasses.replace(fit, a=a, b=b, residual_cov=fit.residual_cov * np.outer(s, s),
+                               information_inv=fit.information_inv / np.outer(t, t))

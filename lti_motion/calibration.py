@@ -52,6 +52,10 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
+#: Horizons [s] of the output-error criterion of ``arx_criterion="output_scales"``
+#: (those of :class:`~lti_motion.output_error.OutputErrorOptions`).
+OUTPUT_SCALE_HORIZONS_S = (1.0, 3.0, 10.0, 30.0)
+
 
 class Robot(Protocol):
     """What calibration needs of a robot or a simulator."""
@@ -98,12 +102,16 @@ class CalibrationPlan:
         ``"settled"`` the mean of the settled part of each response;
         ``"wheel_servo"`` (default) the wheel-servo gain ``c M`` nearest it
         (docs/route.md has the measurements).
-    arx_criterion : {"equation", "output_error"}
-        The ARX fit: least squares on the equation error (default), or that
-        fit refined on the output-error criterion without offset
-        (:func:`lti_motion.output_error.refine_model`). The default is the
-        measured choice: on the simulator's route the refinement, which frees
-        the wheel-servo gain, closes worse (docs/calibration.md).
+    arx_criterion : {"equation", "output_scales", "output_error"}
+        The ARX fit: least squares on the equation error (default); that fit
+        with ``v`` and ``w`` scaled to minimise the output-error criterion
+        over 1, 3, 10 and 30 s (``"output_scales"``: the wheel-servo
+        structure and the least-squares dynamics kept,
+        :func:`lti_motion.arx_structure.output_scales`); or all its
+        coefficients refined on the output-error criterion without offset
+        (:func:`lti_motion.output_error.refine_model`), which frees the
+        wheel-servo gain and closes the simulator's route worse
+        (docs/calibration.md has the measurements).
     seed : int
         Seed of the random excitation.
     """
@@ -121,13 +129,13 @@ class CalibrationPlan:
     validation_fraction: float = 0.3
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo"
     fir_dc_gain: Literal["wheel_servo", "settled", "free"] = "wheel_servo"
-    arx_criterion: Literal["equation", "output_error"] = "equation"
+    arx_criterion: Literal["equation", "output_scales", "output_error"] = "equation"
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.arx_criterion not in ("equation", "output_error"):
-            raise ValueError("arx_criterion must be 'equation' or 'output_error', got "
-                             f"{self.arx_criterion!r}")
+        if self.arx_criterion not in ("equation", "output_scales", "output_error"):
+            raise ValueError("arx_criterion must be 'equation', 'output_scales' or "
+                             f"'output_error', got {self.arx_criterion!r}")
 
 
 @dataclass(frozen=True)
@@ -414,6 +422,8 @@ def calibrate(robot: Robot, *, wheel_base_m: float, plan: CalibrationPlan | None
 
     common = {"dt_s": dt, "wheel_base_m": wheel_base_m, "m_per_tick": scale, "floor": floor}
     arx = fit_arx([(u_x, y_x)], validation=plan.validation_fraction, dc_gain=plan.dc_gain,
+                  output_scale_horizons_s=(OUTPUT_SCALE_HORIZONS_S
+                                           if plan.arx_criterion == "output_scales" else None),
                   **common)
     if plan.arx_criterion == "output_error":
         arx = refine_model(arx, [(u_x, y_x)], options=OutputErrorOptions(offset=False))

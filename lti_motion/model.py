@@ -45,7 +45,12 @@ from lti_motion.arx import (
     select_arx,
     split_runs,
 )
-from lti_motion.arx_structure import restrict_dc_gain, servo_dc_gain
+from lti_motion.arx_structure import (
+    output_scales,
+    restrict_dc_gain,
+    scale_outputs,
+    servo_dc_gain,
+)
 from lti_motion.exceptions import (
     CalibrationError,
     ModelFileError,
@@ -647,6 +652,7 @@ def fit_arx(
     calibrated_at: str | None = None,
     max_condition: float = DEFAULT_MAX_CONDITION,
     dc_gain: Literal["free", "wheel_servo"] = "free",
+    output_scale_horizons_s: Sequence[float] | None = None,
 ) -> MotionModel:
     """Calibrate an ARX motion model from random-excitation runs (paper II.C, III.C).
 
@@ -672,6 +678,13 @@ def fit_arx(
         robot whose wheel speeds are servoed on its encoders (Roomba, Create 2)
         and ``y`` measured by those encoders. ``"free"`` (default) for any
         other pairing, e.g. commands against motion capture.
+    output_scale_horizons_s : sequence of float, optional
+        Horizons [s] of the output-error criterion whose minimum sets scales
+        of ``v`` and ``w`` (:func:`~lti_motion.arx_structure.output_scales`,
+        the one-sample error added), applied after the gain restriction: the
+        held-out fit's model takes them from the estimation part, the final
+        one from all data (``diagnostics["output_scale_v"]``, ``["_w"]``).
+        None (default): no scaling.
 
     Returns
     -------
@@ -698,7 +711,14 @@ def fit_arx(
         probe_fit = restrict_dc_gain(sel.fit, servo_dc_gain(sel.fit, wheel_base_m=wheel_base_m)[0])
         gain, diagnostics["dc_gain_scale"] = servo_dc_gain(final, wheel_base_m=wheel_base_m)
         final = restrict_dc_gain(final, gain)
-    _, val = split_runs(runs, validation, warmup=sel.warmup)
+    est, val = split_runs(runs, validation, warmup=sel.warmup)
+    if output_scale_horizons_s is not None:
+        lengths = (1, *(max(1, round(h / dt_s)) for h in output_scale_horizons_s))
+        probe_fit = scale_outputs(probe_fit, output_scales(probe_fit, est, warmup=sel.warmup,
+                                                           horizons=lengths))
+        scales = output_scales(final, runs, warmup=sel.warmup, horizons=lengths)
+        final = scale_outputs(final, scales)
+        diagnostics["output_scale_v"], diagnostics["output_scale_w"] = (float(x) for x in scales)
     probe = probe_fit.state_space()
     errors = free_run_errors(probe, val, warmup=sel.warmup)
     alpha = q_scale_from_errors(probe, probe_fit.residual_cov, errors)

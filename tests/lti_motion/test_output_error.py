@@ -89,5 +89,6 @@ def test_the_calibration_plan_takes_the_criterion_by_name():
     from lti_motion.calibration import CalibrationPlan
     assert CalibrationPlan().arx_criterion == "equation"
     assert CalibrationPlan(arx_criterion="output_error").arx_criterion == "output_error"
-    with pytest.raises(ValueError, match="arx_criterion must be 'equation' or 'output_error'"):
+    assert CalibrationPlan(arx_criterion="output_scales").arx_criterion == "output_scales"
+    with pytest.raises(ValueError, match="arx_criterion must be 'equation', 'output_scales' or"):
         CalibrationPlan(arx_criterion="simulation")
