@@ -129,3 +129,23 @@ def test_arx_drives_straight_when_commanded_straight(calibrated):
     turn = cal.arx.simulate(np.tile([-0.1, 0.1], (2000, 1)))
     assert turn[-1, 0] == pytest.approx(0.0, abs=1e-9)
     assert turn[-1, 1] == pytest.approx(0.2 / p.wheel_base_m * c, rel=1e-6)
+
+
+def test_output_scales_keep_the_servo_structure_and_the_fit(calibrated):
+    """``arx_criterion="output_scales"`` (lti_motion.arx_structure.output_scales): v and w
+    scaled by at most 1%, straight commands still give no steady yaw rate, the free-run fit
+    on the validation drives stays within 0.2 point of least squares'."""
+    p, cal, val = calibrated
+    sim = Simulator(p, seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT)
+    scaled = calibrate(sim, wheel_base_m=p.wheel_base_m, recorded=cal.logs,
+                       plan=CalibrationPlan(seed=3, arx_criterion="output_scales"))
+    d = scaled.arx.diagnostics
+    s = np.array([d["output_scale_v"], d["output_scale_w"]])
+    assert np.all(np.abs(s - 1.0) < 0.01), s
+    assert scaled.arx.orders == cal.arx.orders
+    y = scaled.arx.simulate(np.full((2000, 2), 0.2))
+    assert abs(y[-1, 1]) < 1e-9
+    assert y[-1, 0] == pytest.approx(0.2 * d["dc_gain_scale"] * s[0], rel=1e-6)
+    fit = np.mean([scaled.arx.fit_percent([run]) for run in val], axis=0)
+    ls_fit = np.mean([cal.arx.fit_percent([run]) for run in val], axis=0)
+    assert np.all(fit >= ls_fit - 0.2), (fit, ls_fit)
