@@ -37,17 +37,20 @@ References
 Greene, W. H. (2012). Econometric Analysis, 7th ed., section 5.5.1, eq. 5-23
 (restricted least squares) and eq. 5-26 (its covariance).
 Ljung, L. (1999). System Identification, 2nd ed., section 4.2 (static gain of
-an ARX model).
+an ARX model), section 7.2, eq. 7.10 and 7.12 (the prefiltered output-error
+criterion of the output scales), section 7.3 (the bias of equation-error fits).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from lti_motion.arx import ArxFit, _split_theta, free_run_errors
-from lti_motion.exceptions import ShapeError
+from lti_motion.exceptions import CalibrationError, ShapeError
 from lti_motion.kinematics import body_from_wheel_matrix
 
 __all__ = [
@@ -222,7 +225,8 @@ def _moving_sums(x: np.ndarray, h: int) -> np.ndarray:
     return cs[h:] - cs[:-h]
 
 
-def output_scales(fit: ArxFit, runs, *, warmup: int, horizons: tuple[int, ...]) -> np.ndarray:
+def output_scales(fit: ArxFit, runs: Sequence[tuple[np.ndarray, np.ndarray]], *, warmup: int,
+                  horizons: Sequence[int]) -> np.ndarray:
     """Scales of ``v`` and ``w`` minimising the prefiltered output error of a fit.
 
     Parameters
@@ -244,7 +248,7 @@ def output_scales(fit: ArxFit, runs, *, warmup: int, horizons: tuple[int, ...]) 
 
     Raises
     ------
-    ValueError
+    CalibrationError
         If no run is longer than ``warmup`` plus the shortest horizon, or the
         free run is zero (nothing to scale).
 
@@ -283,13 +287,13 @@ def output_scales(fit: ArxFit, runs, *, warmup: int, horizons: tuple[int, ...]) 
         num += w2 * np.sum(ly * ls, axis=0)
         den += w2 * np.sum(ls * ls, axis=0)
     if not np.all(den > 0):
-        raise ValueError(f"no run is longer than the {warmup}-sample warm-up plus "
+        raise CalibrationError(f"no run is longer than the {warmup}-sample warm-up plus "
                          f"{min(horizons)} samples, or the model predicts no motion; "
                          "record longer runs")
     return num / den
 
 
-def scale_outputs(fit: ArxFit, scales) -> ArxFit:
+def scale_outputs(fit: ArxFit, scales: ArrayLike) -> ArxFit:
     """The ARX fit whose outputs are ``diag(scales)`` times the given fit's.
 
     Parameters

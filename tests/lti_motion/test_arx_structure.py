@@ -14,7 +14,7 @@ from lti_motion.arx_structure import (
     scale_outputs,
     servo_dc_gain,
 )
-from lti_motion.exceptions import ShapeError
+from lti_motion.exceptions import CalibrationError, ShapeError
 from lti_motion.fir import simulate_state_space
 from lti_motion.kinematics import body_from_wheel_matrix
 
@@ -173,7 +173,7 @@ def test_output_scales_minimise_the_prefiltered_criterion(runs, free):
 
 def test_output_scales_refuse_runs_shorter_than_the_warm_up(free):
     u = np.zeros((5, 2))
-    with pytest.raises(ValueError, match="no run is longer than the 8-sample warm-up"):
+    with pytest.raises(CalibrationError, match="no run is longer than the 8-sample warm-up"):
         output_scales(free, [(u, u)], warmup=8, horizons=(1,))
 
 
