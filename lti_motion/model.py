@@ -683,7 +683,7 @@ def fit_arx(
         of ``v`` and ``w`` (:func:`~lti_motion.arx_structure.output_scales`,
         the one-sample error added), applied after the gain restriction: the
         held-out fit's model takes them from the estimation part, the final
-        one from all data (``diagnostics["output_scale_v"]``, ``["_w"]``).
+        one from all data (``diagnostics["output_scale_v"]``, ``["output_scale_w"]``).
         None (default): no scaling.
 
     Returns
