@@ -187,7 +187,7 @@ def _pass_rows(wp: WallPass, index: int, intrinsics: OdometryIntrinsics, side: f
 
 def calibrate_wall_run(passes: list[WallPass], intrinsics: OdometryIntrinsics, *,
                        wall_side: Literal["left", "right"] = "left",
-                       min_signal: float = 20.0, min_run_m: float = 1.0,
+                       min_signal: float = 20.0, min_run_m: float = 0.8,
                        min_level_gap_m: float = 0.05, max_saturated: float = 0.2
                        ) -> WallRunCalibration:
     """The diameter ratio from straight runs beside a wall (module docstring, eq. 1-2).
@@ -280,7 +280,9 @@ def calibrate_wall_run(passes: list[WallPass], intrinsics: OdometryIntrinsics, *
     z, sw = np.concatenate(zs), np.sqrt(np.concatenate(ws))
     coef, cov, resid = _weighted_lstsq(design, z, sw)
     b = coef[1]
-    if not b > 3.0 * np.sqrt(cov[1, 1]):
+    # the back-offs must change the signal clearly: S^-1/2 by 5% of its typical value
+    if not (b > 3.0 * np.sqrt(cov[1, 1])
+            and b * (max(levels) - min(levels)) > 0.05 * np.median(z)):
         raise UnidentifiableError(
             f"the signal does not fall with the back-off (law slope {b:.3g} +- "
             f"{np.sqrt(cov[1, 1]):.2g}); is the sensor the one facing the wall?")
