@@ -139,21 +139,21 @@ def test_a_short_run_is_refused():
     true = OdometryIntrinsics(1.01 * K, K, B)
     passes = [synthetic_pass(true, backoff_m=0.06, direction=1, run_m=0.5),
               synthetic_pass(true, backoff_m=0.16, direction=-1)]
-    with pytest.raises(UnidentifiableError, match="pass 1 runs 0.50 m"):
+    with pytest.raises(UnidentifiableError, match=r"pass 1 runs 0\.50 m"):
         calibrate_wall_run(passes, NOMINAL)
 
 
 def test_no_wall_seen():
     passes = _good_passes()
     passes[1] = WallPass(passes[1].ticks, np.zeros(len(passes[1].signal)), 0.16)
-    with pytest.raises(NoSignalError, match="pass 2: .* no wall seen"):
+    with pytest.raises(NoSignalError, match=r"pass 2: .* no wall seen"):
         calibrate_wall_run(passes, NOMINAL)
 
 
 def test_saturated_signal():
     passes = _good_passes()
     passes[0] = WallPass(passes[0].ticks, np.full(len(passes[0].signal), 4095), 0.06)
-    with pytest.raises(SaturatedSignalError, match="pass 1: .* saturated"):
+    with pytest.raises(SaturatedSignalError, match=r"pass 1: .* saturated"):
         calibrate_wall_run(passes, NOMINAL)
 
 

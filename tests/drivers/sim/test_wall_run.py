@@ -43,7 +43,7 @@ def test_the_asymmetric_robot_finds_its_ratio_beside_a_wall():
 
 def test_no_wall_ahead_is_an_error():
     sim = Simulator(PARAMS, seed=0, room=Room.empty(), initial_pose=(0, 0, 0))
-    with pytest.raises(SimulatorError, match="no bump within 0.3 m"):
+    with pytest.raises(SimulatorError, match=r"no bump within 0\.3 m"):
         drive_wall_run(sim, NOMINAL, max_approach_m=0.3)
 
 
