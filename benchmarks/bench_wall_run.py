@@ -16,6 +16,10 @@ Figures:
     Baseline: the nominal intrinsics' worst ratio error over the same seeds (they say 1.0).
 ``intrinsics.no_reference_ratio_error_mean_pct`` / ``..._std_pct``
     Mean and standard deviation of the signed error over the same seeds.
+``intrinsics.no_reference_ratio_error_mirrored_pct``
+    Worst over 10 seeds for the mirrored robot (the *right* wheel 1% larger, the right motor
+    10% weaker): it curves towards a wall on its left, stops its first run and drives the
+    manoeuvre with the wall on its right.
 ``intrinsics.no_reference_ratio_error_run_<L>m_pct``
     Worst over 10 seeds for runs of ``L`` m (the default is 2 m).
 ``intrinsics.no_reference_ratio_error_reflectance_<r>_pct``
@@ -49,7 +53,7 @@ def wall_run_trial(params: RobotParams, seed: int, *, run_m: float = 2.0,
     nominal = OdometryIntrinsics.symmetric(m_per_tick=params.m_per_tick,
                                            wheel_base_m=params.wheel_base_m)
     drive = drive_wall_run(sim, nominal, run_m=run_m)
-    cal = calibrate_wall_run(wall_passes(drive, nominal), nominal)
+    cal = calibrate_wall_run(wall_passes(drive, nominal), nominal, wall_side=drive.wall_side)
     truth = straight_line_truth(params, drive.log, drive.log.cmd_m_s)
     return cal, float(truth[0] / truth[1])
 
@@ -79,6 +83,10 @@ def run() -> list[Figure]:
         Figure("intrinsics.no_reference_ratio_error_std_pct", float(errors.std()), "%",
                better="lower"),
     ]
+    mirrored = params.replace(wheel_diameter_errors=(0.0, 0.01))
+    worst = np.abs(ratio_errors_pct(mirrored, SWEEP_SEEDS)[0]).max()
+    figures.append(Figure("intrinsics.no_reference_ratio_error_mirrored_pct", float(worst), "%",
+                          better="lower"))
     for run_m in RUN_LENGTHS_M:
         worst = np.abs(ratio_errors_pct(params, SWEEP_SEEDS, run_m=run_m)[0]).max()
         figures.append(Figure(f"intrinsics.no_reference_ratio_error_run_{run_m:g}m_pct",
