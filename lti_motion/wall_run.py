@@ -34,9 +34,14 @@ curvature ``kappa`` then gives the ratio through
 and the turn scales stay those of the intrinsics in use (the rotation manoeuvre's).
 
 What the law assumes: the inverse-square fall of the signal and a wall that is straight
-and equally reflective along the run; the heading's effect on the sensor's incidence is
-neglected (it biases ``kappa`` by a relative ``~2 theta`` for a run at ``theta`` [rad]
-to the wall). The robot builder's knowledge is enough: no sensor constant is needed.
+and equally reflective along the run. The heading's effect on the sensor's incidence and
+ray length is left out of eq. 2; it biases ``kappa_p`` in two ways: by a relative ``~2
+theta_0`` for a run started at ``theta_0`` [rad] to the wall (so the robot squares up
+before each run, :func:`mirror_heading_rad`), and through a term odd in the travel
+(``~kappa^2 x^3``) that biases a forward run's ``x^2`` coefficient one way and a backward
+run's the other (+14% and -17% on the simulated Create 2 of ``docs/intrinsics.md``): so
+``kappa`` is the mean of the forward runs' mean and the backward runs' mean. No sensor
+constant is needed: only what a robot builder knows.
 """
 
 from __future__ import annotations
@@ -56,7 +61,8 @@ from lti_motion.exceptions import (
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.odometry import tick_deltas
 
-__all__ = ["WallPass", "WallRunCalibration", "calibrate_wall_run", "run_path"]
+__all__ = ["WallPass", "WallRunCalibration", "calibrate_wall_run", "mirror_heading_rad",
+           "run_path"]
 
 _log = logging.getLogger(__name__)
 
@@ -146,7 +152,7 @@ def run_path(ticks: np.ndarray, intrinsics: OdometryIntrinsics) -> tuple[np.ndar
     --------
     >>> k = OdometryIntrinsics.symmetric(m_per_tick=1e-3, wheel_base_m=0.2)
     >>> x, y = run_path(np.array([[0, 0], [100, 100], [200, 200]]), k)
-    >>> x.round(12).tolist(), y.round(12).tolist()
+    >>> (x.round(12) + 0.0).tolist(), (y.round(12) + 0.0).tolist()
     ([0.0, 0.1, 0.2], [0.0, 0.0, 0.0])
     """
     motion = intrinsics.body_motion(tick_deltas(ticks, axis=0))
@@ -159,9 +165,9 @@ def run_path(ticks: np.ndarray, intrinsics: OdometryIntrinsics) -> tuple[np.ndar
 
 def _pass_rows(wp: WallPass, index: int, intrinsics: OdometryIntrinsics, side: float, *,
                min_signal: float, min_run_m: float, max_saturated: float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """One pass's columns of eq. 2 ``(1, e - side y, x, -side x^2 / 2)``, ``z``, the row
-    weights' square roots, the heading's sign and the samples dropped."""
+    weights and the number of samples dropped."""
     name = f"pass {index + 1}"
     x, y = run_path(wp.ticks, intrinsics)
     if abs(x[-1]) < min_run_m:
@@ -182,7 +188,7 @@ def _pass_rows(wp: WallPass, index: int, intrinsics: OdometryIntrinsics, side: f
     cols = np.column_stack([np.ones(keep.sum()), wp.gap_start_m - side * y[keep], x[keep],
                             -side * 0.5 * x[keep] ** 2])
     # var z = var S / (4 S^3) for z = S^-1/2 (first-order error propagation)
-    return cols, s ** -0.5, s ** 1.5, keep, int((~keep).sum())
+    return cols, s ** -0.5, s ** 3, int((~keep).sum())
 
 
 def calibrate_wall_run(passes: list[WallPass], intrinsics: OdometryIntrinsics, *,
@@ -256,12 +262,12 @@ def calibrate_wall_run(passes: list[WallPass], intrinsics: OdometryIntrinsics, *
         raise UnidentifiableError(
             f"the passes started {min(levels):.3f}-{max(levels):.3f} m from the wall; back "
             f"off by distances at least {min_level_gap_m} m apart to fix the signal's law")
-    side = 1.0 if wall_side == "left" else -1.0
     if wall_side not in ("left", "right"):
         raise ValueError(f"wall_side must be 'left' or 'right', got {wall_side!r}")
+    side = 1.0 if wall_side == "left" else -1.0
     blocks, zs, ws, signs, notes = [], [], [], [], []
     for i, wp in enumerate(passes):
-        cols, z, w, _, dropped = _pass_rows(wp, i, intrinsics, side, min_signal=min_signal,
+        cols, z, w, dropped = _pass_rows(wp, i, intrinsics, side, min_signal=min_signal,
                                             min_run_m=min_run_m, max_saturated=max_saturated)
         blocks.append(cols)
         signs.append(int(np.sign(cols[-1, 2])))
