@@ -242,8 +242,9 @@ def drive_wall_run(sim: Simulator, intrinsics: OdometryIntrinsics, *, run_m: flo
         # the robot came at the wall: start over with the wall on the other side
         mark([sim.run(np.vstack([_move(0.0, side * turn_rad_s, np.pi / 2, **opts), rest]))])
         facing_wall = True
-    raise SimulatorError("the wall run came at the wall on both sides; start it with the "
-                         "robot squarely facing a straight wall")
+    raise SimulatorError("the wall run came at the wall on both sides: its quarter turns "
+                         "are off; calibrate the encoder scale on this floor (the rotation "
+                         "manoeuvre) and pass those intrinsics")
 
 
 def wall_passes(drive: WallRunDrive, intrinsics: OdometryIntrinsics) -> list[WallPass]:
