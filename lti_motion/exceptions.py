@@ -18,6 +18,7 @@ __all__ = [
     "NotExcitedError",
     "NotPeriodicError",
     "PoseReferenceError",
+    "SaturatedSignalError",
     "ShapeError",
     "UnidentifiableError",
     "UnstableModelError",
@@ -54,6 +55,10 @@ class NotPeriodicError(CalibrationError):
 
 class NoSignalError(CalibrationError):
     """Every range-like sensor channel is flat: nothing was in range during the manoeuvre."""
+
+
+class SaturatedSignalError(CalibrationError):
+    """A range-like sensor stayed at its largest reading: the target is too close to measure."""
 
 
 class CalibrationShapeError(ShapeError, CalibrationError):
