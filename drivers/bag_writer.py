@@ -283,10 +283,11 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         raise ValueError("write_drive_bag writes one robot; pass log.robot(i)")
     rows = np.flatnonzero(log.valid)
     t_ns = start_ns + np.rint(log.t_s * 1e9).astype(np.int64)
-    angles = unwrap_ticks(log.ticks, axis=0) / ticks_per_rad
+    angles = unwrap_ticks(log.ticks, axis=0, counter_bits=log.counter_bits) / ticks_per_rad
     cmd_vw = body_from_wheel(log.cmd_m_s, wheel_base_m=wheel_base_m)
     cmd_ns = t_ns - round(log.dt_s * 1e9)
-    travel = tick_deltas(log.ticks[rows], axis=0) * (wheel_radius_m / ticks_per_rad)
+    travel = tick_deltas(log.ticks[rows], axis=0, counter_bits=log.counter_bits) * (
+        wheel_radius_m / ticks_per_rad)
     odom = integrate_poses(body_from_wheel(travel, wheel_base_m=wheel_base_m), 1.0)
     with _open_bag(path, storage) as bag:
         t, out = bag.types, []

@@ -101,7 +101,7 @@ class GridSignals:
 def _count_steps(counts: np.ndarray, counter_bits: int | None) -> np.ndarray:
     """Steps between consecutive counts, unwrapped on a ``2**counter_bits`` ring."""
     steps = np.diff(counts.astype(np.int64), axis=0)
-    if counter_bits is not None and counter_bits < 64:
+    if counter_bits is not None and counter_bits < 63:           # 63, 64: never wrap
         mod = 1 << counter_bits
         steps = (steps + mod // 2) % mod - mod // 2          # shortest signed step
     return steps

@@ -341,7 +341,7 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
             st[T_NOW] = t_k + period
             for wh in range(2):
                 raw = math.floor(st[TICK0 + wh] - st[OFF0 + wh])
-                out_ticks[i, k, wh] = int(raw) % 65536
+                out_ticks[i, k, wh] = int(raw)      # the caller wraps (counter_bits)
                 out_overcurrent[i, k, wh] = st[LIMIT0 + wh] >= OVERCURRENT_S - 1e-9
             _light_bumps(st, p, walls, nz, out_light[i, k])
             out_pose[i, k, 0] = st[X]
