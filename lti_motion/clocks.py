@@ -173,6 +173,14 @@ class PeriodAssignment:
                 f"{self.n_dropped} dropped, {self.n_moved} moved by their travel")
 
 
+def _line(k: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope and intercept of ``t`` against ``k`` (centred normal equations)."""
+    k_mean, t_mean = k.mean(), t.mean()
+    dk = k - k_mean
+    slope = float(np.sum(dk * (t - t_mean)) / np.sum(dk * dk))
+    return slope, float(t_mean - slope * k_mean)
+
+
 def _clock_line(k: np.ndarray, t: np.ndarray, nominal: float) -> tuple[float, float]:
     """Least-squares line ``t = offset + period k``, stamps far off it left out.
 
@@ -187,7 +195,7 @@ def _clock_line(k: np.ndarray, t: np.ndarray, nominal: float) -> tuple[float, fl
     numbered around (module Notes).
     """
     k = k.astype(float)
-    period, offset = np.polyfit(k, t, 1)
+    period, offset = _line(k, t)
     for _ in range(2):
         r = t - (offset + period * k)
         mid = np.median(r)
@@ -195,13 +203,13 @@ def _clock_line(k: np.ndarray, t: np.ndarray, nominal: float) -> tuple[float, fl
         inlier = np.abs(r - mid) <= _OUTLIER_MADS * max(spread, 1e-12)
         if inlier.sum() < 3 or np.ptp(k[inlier]) == 0:
             break
-        period, offset = np.polyfit(k[inlier], t[inlier], 1)
+        period, offset = _line(k[inlier], t[inlier])
     r = t[inlier] - (offset + period * k[inlier])
     # standard error of an LS slope: s / (sqrt(n) std(k)), Montgomery 2012 eq. 2.10
     se = float(np.std(r) / (np.sqrt(r.size) * max(float(np.std(k[inlier])), 1e-12)))
     low = r <= np.quantile(r, _ENVELOPE_FRACTION)     # the earliest arrivals
     if low.sum() >= 3 and np.ptp(k[inlier][low]) > 0:
-        envelope = float(np.polyfit(k[inlier][low], t[inlier][low], 1)[0])
+        envelope = _line(k[inlier][low], t[inlier][low])[0]
         if abs(envelope - period) <= 3.0 * se:        # a hard latency floor: sharper
             period = envelope
     if abs(period - nominal) <= 3.0 * se:
@@ -218,27 +226,45 @@ def _isotonic_periods(t: np.ndarray, period_s: float, offset_s: float) -> np.nda
     return idx + np.rint(g).astype(np.int64)
 
 
+def _unevenness(travel: np.ndarray, i: np.ndarray, k_prev: np.ndarray, k_i: np.ndarray,
+                k_next: np.ndarray) -> np.ndarray:
+    """Change of travel per period over the frames before and after frames ``i`` on periods
+    ``k_i``, summed over the columns (module Notes)."""
+    before = (travel[i] - travel[i - 1]) / (k_i - k_prev)[:, None]
+    after = (travel[i + 1] - travel[i]) / (k_next - k_i)[:, None]
+    return np.abs(after - before).sum(axis=1)
+
+
 def _even_travel(k: np.ndarray, x: np.ndarray, travel: np.ndarray) -> tuple[np.ndarray, int]:
     """Frames beside a free period moved into it where their travel says so (module Notes).
 
     ``k`` are the frames' periods, ``x`` their stamps in periods on the
     typical arrival line (envelope plus median latency), ``travel`` their
     cumulative travel, shape (n, c) (a row with a NaN is never moved nor
-    judged by).
+    judged by). The candidates are screened at once, then moved one by one,
+    each checked again against its neighbours' periods as they then are.
     """
     k = k.copy()
     gaps = np.diff(k) >= 2
+    cand = np.flatnonzero(gaps[:-1] | gaps[1:]) + 1           # beside a free period
     moved = 0
-    for i in np.flatnonzero(gaps[:-1] | gaps[1:]) + 1:        # beside a free period
+    if not cand.size:
+        return k, moved
+
+    def better(i: np.ndarray, new: np.ndarray) -> np.ndarray:
+        prev, nxt = k[i - 1], k[i + 1]
+        ok = (prev < new) & (new < nxt) & (x[i] - new > -_MAX_EARLY_PERIODS) & (
+            x[i] - new < _MAX_LATENCY_PERIODS)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            now = _unevenness(travel, i, prev, k[i], nxt)
+            then = _unevenness(travel, i, prev, np.where(ok, new, k[i]), nxt)
+        return ok & (_EVEN_GAIN * then < now)
+
+    screened = cand[better(cand, k[cand] - 1) | better(cand, k[cand] + 1)]
+    for i in screened:                         # few: one at a time, neighbours as they are
+        one = np.array([i])
         for new in (k[i] - 1, k[i] + 1):
-            if not (k[i - 1] < new < k[i + 1]
-                    and -_MAX_EARLY_PERIODS < x[i] - new < _MAX_LATENCY_PERIODS):
-                continue
-            # change of travel per period over the frames before and after, as is and moved
-            cost = [float(np.sum(np.abs((travel[i + 1] - travel[i]) / (k[i + 1] - ki)
-                                        - (travel[i] - travel[i - 1]) / (ki - k[i - 1]))))
-                    for ki in (k[i], new)]
-            if _EVEN_GAIN * cost[1] < cost[0]:
+            if better(one, np.array([new]))[0]:
                 k[i] = new
                 moved += 1
                 break
@@ -323,9 +349,13 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
         k = _isotonic_periods(t[:n], period, offset)
         offset = float(np.median(t[:n] - period * k))
     while t.size >= _FIRST_PREFIX:
+        k_before = None
         for _ in range(3):                    # assignment and line, to their fixed point
             k = _isotonic_periods(t[:n], period, offset)
+            if k_before is not None and np.array_equal(k, k_before):
+                break
             period, offset = _clock_line(k, t[:n], nominal)
+            k_before = k
         if n == t.size:
             break
         n = min(2 * n, t.size)
