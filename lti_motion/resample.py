@@ -141,12 +141,14 @@ def _integrate_at(stream: Stream, t_grid: np.ndarray) -> np.ndarray:
     return np.diff(at) / np.diff(t_grid)
 
 
-def _frame_travel(rec: Recording) -> np.ndarray | None:
+def _frame_travel(rec: Recording, encoders: str) -> np.ndarray | None:
     """Cumulative travel of each wheel frame in the stream's own unit, NaN where unusable;
     ``None`` for speeds (a speed has no travel to even)."""
     v = rec.wheel.values
     if rec.wheel_kind == "counts":
         steps = _count_steps(v, rec.counter_bits)
+        if encoders == "commanded":           # the count's sign flips with the command
+            steps = unfold_commanded_direction(steps)
         cum = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0, dtype=float)])
     elif rec.wheel_kind == "wheel_angles_rad":
         cum = np.unwrap(v, axis=0) if np.all(np.abs(v) <= np.pi) else v.astype(float)
@@ -156,13 +158,18 @@ def _frame_travel(rec: Recording) -> np.ndarray | None:
     return cum
 
 
-def wheel_periods(rec: Recording, *, periods_by: PeriodsBy = "stamps") -> PeriodAssignment:
+def wheel_periods(rec: Recording, *, periods_by: PeriodsBy = "stamps",
+                  encoders: Literal["quadrature", "commanded"] = "quadrature"
+                  ) -> PeriodAssignment:
     """The sensor period of each wheel frame of a recording (module Notes).
 
     A frame with the stamp and values of the one before is a duplicate and
     merged; the periods come from :func:`lti_motion.clocks.assign_periods`,
     given the frames' cumulative travel when ``periods_by`` is
     ``"stamps_and_travel"`` (counts and wheel angles; speeds have none).
+    Counts of ``encoders="commanded"`` (Roomba / Create 2) are unfolded
+    (:func:`~lti_motion.odometry.unfold_commanded_direction`) before their
+    travel is judged.
 
     Returns
     -------
@@ -171,7 +178,7 @@ def wheel_periods(rec: Recording, *, periods_by: PeriodsBy = "stamps") -> Period
     t, v = rec.wheel.t_s, rec.wheel.values
     repeat = np.zeros(t.size, bool)     # a frame delivered twice: same stamp, same values
     repeat[1:] = (np.diff(t) == 0) & np.all(v[1:] == v[:-1], axis=1)
-    travel = _frame_travel(rec) if periods_by == "stamps_and_travel" else None
+    travel = _frame_travel(rec, encoders) if periods_by == "stamps_and_travel" else None
     return assign_periods(t, dt_s=rec.dt_s, duplicate=repeat, travel=travel)
 
 
@@ -278,7 +285,7 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
     ((49, 2), True)
     """
     v = rec.wheel.values
-    a = wheel_periods(rec, periods_by=periods_by)
+    a = wheel_periods(rec, periods_by=periods_by, encoders=encoders)
     n_periods = a.n_periods - 1
     t_grid = a.clock.times_s(np.arange(n_periods + 1))
     used = a.keep & rec.wheel_valid & np.all(np.isfinite(v), axis=1)   # NaN: did not arrive
