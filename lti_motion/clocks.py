@@ -399,8 +399,9 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
     Raises
     ------
     ValueError
-        If a finite stamp is earlier than a finite stamp before it, or fewer
-        than 2 distinct finite stamps remain.
+        If a finite stamp is earlier than a finite stamp before it, fewer
+        than 2 distinct finite stamps remain, or ``travel`` has not one row
+        per frame.
 
     Examples
     --------
