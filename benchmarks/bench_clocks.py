@@ -79,8 +79,9 @@ def _as_received(log: FrameLog) -> FrameLog:
     """What a driver logs: lost frames absent, stamps on a host clock 100 ppm fast."""
     keep = log.valid
     kw = {f.name: getattr(log, f.name) for f in dataclasses.fields(log)}
-    for name in ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s", "valid"):
-        kw[name] = kw[name][keep]
+    for name, value in kw.items():                 # every per-frame array
+        if isinstance(value, np.ndarray) and value.shape[:1] == keep.shape:
+            kw[name] = value[keep]
     kw["t_s"] = kw["t_s"] * (1.0 + DRIFT_PPM * 1e-6)
     kw["true_pose"] = kw["true_body_m_s"] = None
     return FrameLog(**kw)

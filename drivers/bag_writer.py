@@ -15,7 +15,12 @@ renamed into place when complete; an existing path is refused.
   ``/joint_states`` (wheel angles from the counts), ``/odom`` (encoder odometry)
   and, with simulator truth, ``/ground_truth`` (``PoseStamped``) or, with
   ``truth="tf"``, ``/tf`` (``tf2_msgs/TFMessage``: ``world -> base_link``) and a
-  static ``base_link -> base_laser`` mount on ``/tf_static``.
+  static ``base_link -> base_laser`` mount on ``/tf_static``, or with
+  ``truth="tf_chain"`` the same poses as a chain: ``map -> odom`` on ``/tf`` every
+  tenth frame (a localiser's correction drifting at a constant rate: 20 mm/s in x,
+  -10 mm/s in y, 0.01 rad/s in yaw), ``odom -> base_footprint`` on ``/tf`` per frame
+  (the pose in ``odom`` that makes the chain the truth) and a static
+  ``base_footprint -> base_link`` mount 0.05 m up on ``/tf_static``.
 """
 
 from __future__ import annotations
@@ -239,7 +244,8 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     * 1_000_000_000, ticks_per_rad: float = CREATE2_TICKS_PER_RAD,
                     wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M, wheel_base_m: float = 0.235,
                     joints: tuple[str, str] = ("wheel_left_joint", "wheel_right_joint"),
-                    storage: Storage = "mcap", truth: Literal["pose", "tf"] = "pose") -> Path:
+                    storage: Storage = "mcap",
+                    truth: Literal["pose", "tf", "tf_chain"] = "pose") -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
@@ -261,8 +267,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         The (left, right) joint names.
     storage : {"mcap", "sqlite3"}
         ROS 2 storage.
-    truth : {"pose", "tf"}
-        How the simulator's poses go in: a ``PoseStamped`` topic, or tf (module
+    truth : {"pose", "tf", "tf_chain"}
+        How the simulator's poses go in: a ``PoseStamped`` topic, tf directly, or
+        tf as a chain ``map -> odom -> base_footprint -> base_link`` (module
         docstring).
 
     Returns
@@ -270,16 +277,17 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     Path
         The bag written.
     """
-    if truth not in ("pose", "tf"):
-        raise ValueError(f"truth must be 'pose' or 'tf', got {truth!r}")
+    if truth not in ("pose", "tf", "tf_chain"):
+        raise ValueError(f"truth must be 'pose', 'tf' or 'tf_chain', got {truth!r}")
     if log.n_robots is not None:
         raise ValueError("write_drive_bag writes one robot; pass log.robot(i)")
     rows = np.flatnonzero(log.valid)
     t_ns = start_ns + np.rint(log.t_s * 1e9).astype(np.int64)
-    angles = unwrap_ticks(log.ticks, axis=0) / ticks_per_rad
+    angles = unwrap_ticks(log.ticks, axis=0, counter_bits=log.counter_bits) / ticks_per_rad
     cmd_vw = body_from_wheel(log.cmd_m_s, wheel_base_m=wheel_base_m)
     cmd_ns = t_ns - round(log.dt_s * 1e9)
-    travel = tick_deltas(log.ticks[rows], axis=0) * (wheel_radius_m / ticks_per_rad)
+    travel = tick_deltas(log.ticks[rows], axis=0, counter_bits=log.counter_bits) * (
+        wheel_radius_m / ticks_per_rad)
     odom = integrate_poses(body_from_wheel(travel, wheel_base_m=wheel_base_m), 1.0)
     with _open_bag(path, storage) as bag:
         t, out = bag.types, []
@@ -290,7 +298,8 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         if log.true_pose is not None and truth == "pose":
             bag.topic("/ground_truth", "geometry_msgs/msg/PoseStamped")
         elif log.true_pose is not None:
-            out.extend(_tf_truth(bag, t_ns[rows], log.true_pose[rows]))
+            out.extend(_tf_truth(bag, t_ns[rows], log.true_pose[rows],
+                                 chain=truth == "tf_chain"))
         out += [(cmd_ns[k], "/cmd_vel", bag.twist(*cmd_vw[k]))    # sent, lost frame or not
                 for k in range(1, len(log))]
         empty = np.zeros(0)
@@ -313,8 +322,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     return Path(path)
 
 
-def _tf_truth(bag: _Bag, t_ns: np.ndarray, poses: np.ndarray) -> list[tuple[int, str, object]]:
-    """``world -> base_link`` on ``/tf`` per pose, a static laser mount on ``/tf_static``."""
+def _tf_truth(bag: _Bag, t_ns: np.ndarray, poses: np.ndarray, *, chain: bool
+              ) -> list[tuple[int, str, object]]:
+    """The poses on ``/tf`` (directly or as a chain) and static mounts on ``/tf_static``."""
     if "tf2_msgs/msg/TFMessage" not in bag.types:          # ROS 1 Noetic's store lacks it
         bag.store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms",
                                               "tf2_msgs/msg/TFMessage"))
@@ -323,17 +333,35 @@ def _tf_truth(bag: _Bag, t_ns: np.ndarray, poses: np.ndarray) -> list[tuple[int,
     for topic in ("/tf", "/tf_static"):
         bag.topic(topic, "tf2_msgs/msg/TFMessage")
 
-    def transform(stamp: int, parent: str, child: str, x: float, y: float, theta: float
-                  ) -> object:
+    def transform(stamp: int, parent: str, child: str, x: float, y: float, theta: float,
+                  z: float = 0.0) -> object:
         pose = bag.pose(x, y, theta)
         return t["geometry_msgs/msg/TransformStamped"](
             header=bag.header(stamp, parent), child_frame_id=child,
             transform=t["geometry_msgs/msg/Transform"](
-                translation=bag.vector3(pose.position.x, pose.position.y),
+                translation=bag.vector3(pose.position.x, pose.position.y, z),
                 rotation=pose.orientation))
-    mount = transform(int(t_ns[0]), "base_link", "base_laser", 0.1, 0.0, 0.0)
-    out = [(int(t_ns[0]), "/tf_static", t["tf2_msgs/msg/TFMessage"](transforms=[mount]))]
-    for stamp, pose in zip(t_ns, poses, strict=True):
-        out.append((int(stamp), "/tf", t["tf2_msgs/msg/TFMessage"](
-            transforms=[transform(int(stamp), "world", "base_link", *pose)])))
+
+    def message(*transforms: object) -> object:
+        return t["tf2_msgs/msg/TFMessage"](transforms=list(transforms))
+
+    first = int(t_ns[0])
+    if not chain:
+        mount = transform(first, "base_link", "base_laser", 0.1, 0.0, 0.0)
+        return [(first, "/tf_static", message(mount))] + [
+            (int(stamp), "/tf", message(transform(int(stamp), "world", "base_link", *pose)))
+            for stamp, pose in zip(t_ns, poses, strict=True)]
+    mount = transform(first, "base_footprint", "base_link", 0.0, 0.0, 0.0, z=0.05)
+    out = [(first, "/tf_static", message(mount))]
+    elapsed_s = (t_ns - first) * 1e-9
+    drift = np.column_stack([0.02 * elapsed_s, -0.01 * elapsed_s, 0.01 * elapsed_s])
+    for j in sorted({*range(0, len(t_ns), 10), len(t_ns) - 1}):
+        out.append((int(t_ns[j]), "/tf", message(transform(int(t_ns[j]), "map", "odom",
+                                                           *drift[j]))))
+    # odom_T_base = (map_T_odom)^-1 map_T_base, in the plane
+    c, s = np.cos(drift[:, 2]), np.sin(drift[:, 2])
+    dx, dy = poses[:, 0] - drift[:, 0], poses[:, 1] - drift[:, 1]
+    in_odom = np.column_stack([c * dx + s * dy, -s * dx + c * dy, poses[:, 2] - drift[:, 2]])
+    out += [(int(stamp), "/tf", message(transform(int(stamp), "odom", "base_footprint", *p)))
+            for stamp, p in zip(t_ns, in_odom, strict=True)]
     return out

@@ -8,36 +8,56 @@ robot's clock drifts against the host's by tens of ppm. This module recovers,
 without raising on any of that:
 
 - the clock line ``t = offset_s + period_s k`` (host seconds of the sensor
-  period ``k``), fitted to the *lower envelope* of the stamps, since latency is
-  one-sided: a least-squares line through the earliest arrivals
-  (:func:`fit_clock`);
+  period ``k``) on the *lower envelope* of the stamps, the latency-free
+  arrival (:func:`fit_clock`);
 - the sensor period each frame belongs to, strictly increasing along the
   frames (:func:`assign_periods`), with counts of what was merged, dropped,
-  pulled back and lost.
+  late, lost and moved.
 
 Notes
 -----
-Assignment rule. With the envelope line, frame ``i`` cannot have been sampled
-after period ``u_i = floor((t_i - offset_s) / period_s + 1/4)`` (latency >= 0;
-the quarter period absorbs the envelope's own error). Frames arrive in the
-order they were sampled, so frame ``i``'s period is at most one less than
-frame ``i + 1``'s: ``k_i = min(u_i, k_{i+1} - 1)``, the latest period
-consistent with every later frame (a backward running minimum). A frame that
-arrived more than a period late is pulled back by the on-time frame after it;
-a gap in ``k`` is a lost frame. Frames the caller marks as duplicates (same
-stamp and payload as the one before) are merged; frames whose stamp is not
-finite are dropped. The period is found by fitting on a growing prefix (64 frames,
-then doubling), so a drift of 100 ppm over hours never accumulates into a
-wrong period count. The fitted period replaces the nominal one only where
-they differ by more than three standard errors of the fit (a short record
-cannot resolve a drift: 100 frames with 1 ms of jitter leave 200 ppm of
-uncertainty); under 64 frames only the offset is fitted.
+Assignment rule. Frames arrive in the order they were sampled, so frame ``i``
+closes period ``k_i = i + g_i``, where ``g_i``, the frames lost before it, never
+decreases. With the clock line through the median stamp, ``g`` is the
+nondecreasing staircase nearest (least squares) to ``(t_i - offset) / period
+- i``: an isotonic regression (pool adjacent violators, Barlow et al. 1972,
+section 1.2, [2]_), rounded to whole periods. A frame that arrived late is pulled
+back by the on-time frames around it (their violations pool); a step in ``g``
+is a lost frame. This holds for latency with a hard floor (a serial link:
+most frames at the floor, a tail of late ones) and for jitter on both sides
+of its mean (a bag's host stamps) alike; a frame is misnumbered only where
+it strays half a period from the typical arrival beside a lost frame, whose
+period it then takes. Given the frames' cumulative *travel* (wheel angles,
+unwrapped counts), such a frame is moved into the free period beside it when
+that makes the travel per period at least twice as even (the sum over the
+columns of the change of travel per period over the frame before and the one
+after, which a robot's inertia keeps small: a misplaced frame shows as one
+period of double travel and one of none), where its stamp lies at most three
+quarters of a period before the period's time on the typical arrival line
+(envelope plus median latency) and at most two periods after it. Frames the
+caller marks as duplicates (same stamp and payload as the one before) are
+merged; frames whose stamp is not finite are dropped.
+
+Clock line. The period is the slope of a least-squares line through the
+numbered stamps (stamps more than five MADs off it left out), or of the
+earliest 30 % of them where the two agree within three standard errors (a
+hard latency floor makes the earliest arrivals the sharpest, [1]_). It is
+found on a growing prefix (64 frames, the offset alone first, then
+doubling), so a drift of 100 ppm over hours never accumulates into a wrong
+period count. The fitted period replaces the nominal one only where they
+differ by more than three standard errors of the fit (a short record cannot
+resolve a drift: 100 frames with 1 ms of jitter leave 200 ppm of
+uncertainty); under 64 frames only the offset is fitted. The envelope lies
+at the 1 % quantile of the residuals (the lowest under 100 frames).
 
 References
 ----------
 .. [1] Olson, E. "A passive solution to the sensor synchronization problem",
    IROS 2010, section III: the minimum of (host - sensor) time differences as
    the latency-free envelope.
+.. [2] Barlow, R. E., Bartholomew, D. J., Bremner, J. M., Brunk, H. D.
+   "Statistical inference under order restrictions", Wiley 1972, section 1.2:
+   the pool-adjacent-violators algorithm.
 """
 
 from __future__ import annotations
@@ -46,17 +66,28 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import isotonic_regression
 
-__all__ = ["ClockFit", "PeriodAssignment", "assign_periods", "fit_clock"]
+__all__ = ["ClockFit", "PeriodAssignment", "assign_periods", "fit_clock", "median_period_s",
+           "snap_period_s"]
 
 _log = logging.getLogger(__name__)
 
-#: Fraction of a period by which a stamp may fall below the envelope line.
+#: A frame later than (1 - this) periods above the envelope counts as late.
 _ENVELOPE_SLACK = 0.25
-#: Fraction of the residuals, lowest first, the envelope line is fitted to.
+#: Fraction of the residuals, lowest first, the envelope's slope is fitted to.
 _ENVELOPE_FRACTION = 0.3
+#: Residuals further than this many (scaled) MADs from their median are left out of the line.
+_OUTLIER_MADS = 5.0
 #: Size of the first prefix the period is fitted on [frames].
 _FIRST_PREFIX = 64
+#: A move into a free period must make the travel per period this much more even.
+_EVEN_GAIN = 2.0
+#: Latest a frame may arrive after the period it is moved into, on the typical arrival
+#: line [periods].
+_MAX_LATENCY_PERIODS = 2.0
+#: Earliest a frame may arrive before the period it is moved into, on that line [periods].
+_MAX_EARLY_PERIODS = 0.75
 
 
 @dataclass(frozen=True)
@@ -108,9 +139,13 @@ class PeriodAssignment:
     n_dropped : int
         Frames dropped (stamp not finite).
     n_late : int
-        Frames that arrived more than a period late, pulled back to their period.
+        Frames that arrived later than three quarters of a period after their
+        period's envelope time (they would have been taken for the next period).
     n_missing : int
         Periods between the first and last kept frame with no frame (lost).
+    n_moved : int
+        Frames moved into a free period beside them by their travel
+        (module Notes; 0 without ``travel``).
     """
 
     period: np.ndarray
@@ -120,6 +155,7 @@ class PeriodAssignment:
     n_dropped: int
     n_late: int
     n_missing: int
+    n_moved: int = 0
 
     @property
     def n_periods(self) -> int:
@@ -134,42 +170,148 @@ class PeriodAssignment:
                 f"the nominal {c.period_s / c.rate * 1e3:.4f} ms), "
                 f"median latency {c.latency_median_s * 1e3:.1f} ms; {self.n_missing} periods "
                 f"lost, {self.n_late} frames late, {self.n_merged} merged, "
-                f"{self.n_dropped} dropped")
+                f"{self.n_dropped} dropped, {self.n_moved} moved by their travel")
 
 
-def _envelope_line(k: np.ndarray, t: np.ndarray, nominal: float
-                   ) -> tuple[float, float, np.ndarray]:
-    """Least-squares line through the lowest residuals, then lowered onto the envelope.
+def _line(k: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope and intercept of ``t`` against ``k`` (centred normal equations)."""
+    k_mean, t_mean = k.mean(), t.mean()
+    dk = k - k_mean
+    slope = float(np.sum(dk * (t - t_mean)) / np.sum(dk * dk))
+    return slope, float(t_mean - slope * k_mean)
 
-    The slope stays ``nominal`` unless the fitted one differs from it by more
-    than three standard errors (a short record cannot resolve a drift).
+
+def _clock_line(k: np.ndarray, t: np.ndarray, nominal: float) -> tuple[float, float]:
+    """Least-squares line ``t = offset + period k``, stamps far off it left out.
+
+    Stamps more than :data:`_OUTLIER_MADS` scaled median absolute deviations
+    from the median residual (a misnumbered frame, a burst) are left out of
+    the fit. The slope of the earliest :data:`_ENVELOPE_FRACTION` of the
+    arrivals replaces it where the two agree within three standard errors
+    (latency with a hard floor: the earliest arrivals scatter least, Olson
+    2010 section III). The slope stays ``nominal`` unless the fitted one
+    differs from it by more than three standard errors (a short record cannot
+    resolve a drift). The offset is the median line's, the centre the frames are
+    numbered around (module Notes).
     """
     k = k.astype(float)
-    period, offset = np.polyfit(k, t, 1)
-    low = np.ones(k.size, bool)
-    for _ in range(3):                        # reweight: keep the earliest arrivals
+    period, offset = _line(k, t)
+    for _ in range(2):
         r = t - (offset + period * k)
-        sub = r <= np.quantile(r, _ENVELOPE_FRACTION)
-        if sub.sum() < 3 or np.ptp(k[sub]) == 0:
+        mid = np.median(r)
+        spread = 1.4826 * float(np.median(np.abs(r - mid)))      # MAD as a std
+        inlier = np.abs(r - mid) <= _OUTLIER_MADS * max(spread, 1e-12)
+        if inlier.sum() < 3 or np.ptp(k[inlier]) == 0:
             break
-        low = sub
-        period, offset = np.polyfit(k[low], t[low], 1)
-    r_low = t[low] - (offset + period * k[low])
-    # standard error of an LS slope: s / (sqrt(m) std(k)), Montgomery 2012 eq. 2.10
-    se = float(np.std(r_low) / (np.sqrt(low.sum()) * max(np.std(k[low]), 1e-12)))
+        period, offset = _line(k[inlier], t[inlier])
+    r = t[inlier] - (offset + period * k[inlier])
+    # standard error of an LS slope: s / (sqrt(n) std(k)), Montgomery 2012 eq. 2.10
+    se = float(np.std(r) / (np.sqrt(r.size) * max(float(np.std(k[inlier])), 1e-12)))
+    low = r <= np.quantile(r, _ENVELOPE_FRACTION)     # the earliest arrivals
+    if low.sum() >= 3 and np.ptp(k[inlier][low]) > 0:
+        envelope = _line(k[inlier][low], t[inlier][low])[0]
+        if abs(envelope - period) <= 3.0 * se:        # a hard latency floor: sharper
+            period = envelope
     if abs(period - nominal) <= 3.0 * se:
-        period, offset = nominal, float(np.mean(t[low] - nominal * k[low]))
-    r = t - (offset + period * k)
-    floor = np.quantile(r, 0.01) if r.size >= 100 else r.min()
-    return float(period), float(offset + floor), r - floor
+        period = nominal
+    return float(period), float(np.median(t - period * k))
 
 
-def _monotone_periods(t: np.ndarray, period_s: float, offset_s: float) -> np.ndarray:
-    """Latest strictly increasing periods no later than each stamp allows (module Notes)."""
-    upper = np.floor((t - offset_s) / period_s + _ENVELOPE_SLACK).astype(np.int64)
+def _isotonic_periods(t: np.ndarray, period_s: float, offset_s: float) -> np.ndarray:
+    """Strictly increasing periods nearest the stamps (module Notes): ``k_i = i + g_i``
+    with ``g`` the frames lost before frame ``i``, a nondecreasing staircase."""
     idx = np.arange(t.size, dtype=np.int64)
-    # k_i = min_{j >= i} (u_j - (j - i)): a backward running minimum of u_j - j
-    return idx + np.minimum.accumulate((upper - idx)[::-1])[::-1]
+    y = (t - offset_s) / period_s - idx
+    g = isotonic_regression(y).x              # pool adjacent violators, L2
+    return idx + np.rint(g).astype(np.int64)
+
+
+def _unevenness(travel: np.ndarray, i: np.ndarray, k_prev: np.ndarray, k_i: np.ndarray,
+                k_next: np.ndarray) -> np.ndarray:
+    """Change of travel per period over the frames before and after frames ``i`` on periods
+    ``k_i``, summed over the columns (module Notes)."""
+    before = (travel[i] - travel[i - 1]) / (k_i - k_prev)[:, None]
+    after = (travel[i + 1] - travel[i]) / (k_next - k_i)[:, None]
+    return np.abs(after - before).sum(axis=1)
+
+
+def _even_travel(k: np.ndarray, x: np.ndarray, travel: np.ndarray) -> tuple[np.ndarray, int]:
+    """Frames beside a free period moved into it where their travel says so (module Notes).
+
+    ``k`` are the frames' periods, ``x`` their stamps in periods on the
+    typical arrival line (envelope plus median latency), ``travel`` their
+    cumulative travel, shape (n, c) (a row with a NaN is never moved nor
+    judged by). The candidates are screened at once, then moved one by one,
+    each checked again against its neighbours' periods as they then are.
+    """
+    k = k.copy()
+    gaps = np.diff(k) >= 2
+    cand = np.flatnonzero(gaps[:-1] | gaps[1:]) + 1           # beside a free period
+    moved = 0
+    if not cand.size:
+        return k, moved
+
+    def better(i: np.ndarray, new: np.ndarray) -> np.ndarray:
+        prev, nxt = k[i - 1], k[i + 1]
+        ok = (prev < new) & (new < nxt) & (x[i] - new > -_MAX_EARLY_PERIODS) & (
+            x[i] - new < _MAX_LATENCY_PERIODS)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            now = _unevenness(travel, i, prev, k[i], nxt)
+            then = _unevenness(travel, i, prev, np.where(ok, new, k[i]), nxt)
+        return ok & (_EVEN_GAIN * then < now)
+
+    screened = cand[better(cand, k[cand] - 1) | better(cand, k[cand] + 1)]
+    for i in screened:                         # few: one at a time, neighbours as they are
+        one = np.array([i])
+        for new in (k[i] - 1, k[i] + 1):
+            if better(one, np.array([new]))[0]:
+                k[i] = new
+                moved += 1
+                break
+    return k, moved
+
+
+def median_period_s(t_s: np.ndarray) -> float:
+    """The median interval of increasing stamps, lost frames and bursts aside [s].
+
+    The median of the positive intervals, then the median of those between
+    half and 1.5 times it (a lost frame's double interval and a burst's
+    short one left out).
+
+    Raises
+    ------
+    ValueError
+        If no two stamps differ.
+
+    Examples
+    --------
+    >>> median_period_s(np.array([0.0, 0.02, 0.04, 0.08, 0.1, 0.1]))
+    0.02
+    """
+    steps = np.diff(np.asarray(t_s, dtype=float))
+    steps = steps[steps > 0]
+    if not steps.size:
+        raise ValueError("no sensor period in the stamps: no two of them differ")
+    rough = float(np.median(steps))
+    return float(np.median(steps[(steps > 0.5 * rough) & (steps < 1.5 * rough)]))
+
+
+def snap_period_s(period_s: float, *, rel_tol: float = 1e-3) -> float:
+    """A fitted period as the nominal one a robot is configured with [s].
+
+    A whole 0.1 ms (15 ms) or a whole rate in Hz (30 Hz: 33.33 ms) within
+    ``rel_tol``, else the period rounded to 0.1 us. A clock drift of 100 ppm
+    is well inside the default 0.1 %.
+
+    Examples
+    --------
+    >>> snap_period_s(0.0200013), round(snap_period_s(0.033339), 9), snap_period_s(0.0173456)
+    (0.02, 0.033333333, 0.0173456)
+    """
+    for nominal in (round(period_s, 4), 1.0 / round(1.0 / period_s)):
+        if abs(nominal - period_s) <= rel_tol * period_s:
+            return float(nominal)
+    return round(float(period_s), 7)
 
 
 def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, np.ndarray]:
@@ -181,7 +323,7 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
         Host stamps [s], finite and never decreasing, no two equal
         (:func:`assign_periods` cleans raw stamps first).
     dt_s : float, optional
-        Nominal sensor period [s]; by default the median frame interval.
+        Nominal sensor period [s]; by default :func:`median_period_s`.
 
     Returns
     -------
@@ -197,28 +339,31 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
     t = np.asarray(t_s, dtype=float)
     if t.ndim != 1 or t.size < 2:
         raise ValueError(f"a clock fit needs at least 2 frame times, got shape {t.shape}")
-    nominal = float(np.median(np.diff(t))) if dt_s is None else float(dt_s)
+    nominal = median_period_s(t) if dt_s is None else float(dt_s)
     if not (np.isfinite(nominal) and nominal > 0):
         raise ValueError(f"the sensor period must be a positive number of seconds, got {dt_s}")
     n = min(_FIRST_PREFIX, t.size)
-    # a lower bound of the envelope: lost frames only make t_i - T i larger, latency too
-    period, offset = nominal, float(np.min(t[:n] - nominal * np.arange(n)))
+    period = nominal
+    offset = float(np.median(t[:n] - nominal * np.arange(n)))
+    for _ in range(3):                        # the offset first, on the nominal period
+        k = _isotonic_periods(t[:n], period, offset)
+        offset = float(np.median(t[:n] - period * k))
     while t.size >= _FIRST_PREFIX:
-        for _ in range(2):                    # assignment and line, to their fixed point
-            k = _monotone_periods(t[:n], period, offset)
-            period, offset, _ = _envelope_line(k, t[:n], nominal)
+        k_before = None
+        for _ in range(3):                    # assignment and line, to their fixed point
+            k = _isotonic_periods(t[:n], period, offset)
+            if k_before is not None and np.array_equal(k, k_before):
+                break
+            period, offset = _clock_line(k, t[:n], nominal)
+            k_before = k
         if n == t.size:
             break
         n = min(2 * n, t.size)
-    k = _monotone_periods(t, period, offset)
-    if t.size >= _FIRST_PREFIX:
-        period, offset, latency = _envelope_line(k, t, nominal)
-    else:                                     # too few frames to beat the nominal period
-        latency = t - period * k
-        offset = float(latency.min())
-        latency = latency - offset
-    k = _monotone_periods(t, period, offset)
-    offset += period * k[0]
+    k = _isotonic_periods(t, period, offset)
+    r = t - (offset + period * k)
+    floor = float(np.quantile(r, 0.01) if r.size >= 100 else r.min())
+    latency = r - floor                       # above the latency-free envelope
+    offset += floor + period * k[0]
     k = k - k[0]
     clock = ClockFit(period_s=period, offset_s=offset, rate=period / nominal,
                      latency_median_s=float(np.median(latency)))
@@ -226,7 +371,8 @@ def fit_clock(t_s: np.ndarray, *, dt_s: float | None = None) -> tuple[ClockFit, 
 
 
 def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
-                   duplicate: np.ndarray | None = None) -> PeriodAssignment:
+                   duplicate: np.ndarray | None = None,
+                   travel: np.ndarray | None = None) -> PeriodAssignment:
     """Assign frames to the robot's sensor periods; never raises on jitter, gaps or repeats.
 
     Parameters
@@ -240,6 +386,11 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
     duplicate : array_like of bool, shape (n,), optional
         Frames known to repeat the one before (same stamp and payload):
         merged into it.
+    travel : array_like, shape (n, c), optional
+        Cumulative travel of each frame (wheel angles [rad], unwrapped counts;
+        NaN for a frame whose reading is unusable): a frame beside a free
+        period moves into it where that evens the travel per period (module
+        Notes). Without it the stamps alone decide.
 
     Returns
     -------
@@ -248,18 +399,19 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
     Raises
     ------
     ValueError
-        If a finite stamp is earlier than a finite stamp before it, or fewer
-        than 2 distinct finite stamps remain.
+        If a finite stamp is earlier than a finite stamp before it, fewer
+        than 2 distinct finite stamps remain, or ``travel`` has not one row
+        per frame.
 
     Examples
     --------
-    Frames every 15 ms with up to 9 ms latency, the 4th lost and the 6th
-    arriving 20 ms late (after the 7th would have, were the 7th not later):
+    Frames every 15 ms with 1-2 ms latency, the 4th lost, the 6th arriving
+    20 ms late together with the 7th (a burst), the 9th lost:
 
-    >>> t = np.array([0.002, 0.016, 0.031, 0.062, 0.097, 0.1, 0.121])
+    >>> t = np.array([0.002, 0.016, 0.031, 0.062, 0.095, 0.095, 0.106, 0.122, 0.152])
     >>> a = assign_periods(t, dt_s=0.015)
     >>> a.period.tolist(), a.n_missing, a.n_late
-    ([0, 1, 2, 4, 5, 6, 8], 2, 1)
+    ([0, 1, 2, 4, 5, 6, 7, 8, 10], 2, 1)
     """
     t = np.asarray(t_s, dtype=float).ravel()
     finite = np.isfinite(t)
@@ -275,14 +427,25 @@ def assign_periods(t_s: np.ndarray, *, dt_s: float | None = None,
     if keep.sum() < 2:
         raise ValueError(f"at least 2 distinct finite frame times are needed, got {keep.sum()}")
     clock, k = fit_clock(t[keep], dt_s=dt_s)
+    x = (t[keep] - clock.offset_s) / clock.period_s
+    typical = x - clock.latency_median_s / clock.period_s     # on the typical arrival line
+    moved = 0
+    if travel is not None:
+        cum = np.asarray(travel, dtype=float)
+        cum = cum[:, None] if cum.ndim == 1 else cum
+        if cum.shape[0] != t.size:
+            raise ValueError(f"travel must have {t.size} rows, one per frame, got "
+                             f"{cum.shape[0]}")
+        if k.size >= 3:
+            k, moved = _even_travel(k, typical, cum[keep])
     period = np.full(t.size, -1, dtype=np.int64)
     period[keep] = k
-    upper = np.floor((t[keep] - clock.offset_s) / clock.period_s + _ENVELOPE_SLACK)
-    n_late = int(np.sum(upper > k))
+    n_late = int(np.sum(np.floor(x + _ENVELOPE_SLACK) > k))
     n_missing = int(k[-1] + 1 - k.size)
     out = PeriodAssignment(period=period, keep=keep, clock=clock,
                            n_merged=int((dup & finite).sum()),
-                           n_dropped=int((~finite).sum()), n_late=n_late, n_missing=n_missing)
+                           n_dropped=int((~finite).sum()), n_late=n_late, n_missing=n_missing,
+                           n_moved=moved)
     if out.n_merged or out.n_dropped:
         _log.info("clock: %s", out.summary())
     return out

@@ -14,7 +14,8 @@ Two containers share the same field names:
   along axis 1 (what the batch simulator returns).
 
 Units are SI: seconds, metres per second, radians. Encoder counts are the
-robot's raw unsigned 16-bit values (``0..65535``) and wrap; unwrap them with
+robot's raw unsigned 16-bit values (``0..65535``) and wrap (another width in
+``meta["counter_bits"]``, :attr:`FrameLog.counter_bits`); unwrap them with
 :func:`lti_motion.odometry.unwrap_ticks`.
 """
 
@@ -171,6 +172,16 @@ class FrameLog:
     def __len__(self) -> int:
         """Number of frames (periods) per robot."""
         return self.t_s.shape[-1]
+
+    @property
+    def counter_bits(self) -> int:
+        """Width of the encoder counters [bits]: ``meta["counter_bits"]`` (per robot when
+        a list, as the batch simulator gives it), 16 (the Open Interface's) when absent;
+        63 and 64 never wrap."""
+        bits = self.meta.get("counter_bits", 16)
+        if isinstance(bits, list | tuple):
+            bits = bits[self.meta.get("robot", 0)] if self.n_robots is None else bits[0]
+        return int(bits)
 
     @property
     def has_truth(self) -> bool:

@@ -31,34 +31,43 @@ __all__ = [
 TICK_MODULUS = 1 << 16
 
 
-def tick_deltas(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
+def tick_deltas(ticks: np.ndarray, *, axis: int = 0, counter_bits: int = 16) -> np.ndarray:
     """Signed tick increments between consecutive raw counts.
 
     Parameters
     ----------
     ticks : array_like of int
-        Raw counts (any integer values; taken modulo 65536).
+        Raw counts (any integer values; taken modulo ``2**counter_bits``).
     axis : int
         The time axis.
+    counter_bits : int
+        Width of the counters (16: the Open Interface's); 63 or 64: they never
+        wrap (signed 64-bit counts, plain differences).
 
     Returns
     -------
     ndarray of int64
         One element fewer than ``ticks`` along ``axis``:
-        ``((c - p + 32768) mod 65536) - 32768`` (spec section 7.2).
+        ``((c - p + 32768) mod 65536) - 32768`` (spec section 7.2), on a
+        ``2**counter_bits`` ring in general: the shortest signed step.
 
     Examples
     --------
     >>> tick_deltas(np.array([65530, 5, 65530])).tolist()
     [11, -11]
+    >>> tick_deltas(np.array([2**24 - 6, 5]), counter_bits=24).tolist()
+    [11]
     """
     diff = np.diff(np.asarray(ticks, dtype=np.int64), axis=axis)
-    half = TICK_MODULUS // 2
-    return (diff + half) % TICK_MODULUS - half
+    if counter_bits >= 63:
+        return diff
+    modulus = 1 << counter_bits
+    half = modulus // 2
+    return (diff + half) % modulus - half
 
 
-def unwrap_ticks(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
-    """Unwrap raw 16-bit counts into a continuous count starting at the first sample.
+def unwrap_ticks(ticks: np.ndarray, *, axis: int = 0, counter_bits: int = 16) -> np.ndarray:
+    """Unwrap raw counts into a continuous count starting at the first sample.
 
     Parameters
     ----------
@@ -66,6 +75,8 @@ def unwrap_ticks(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
         Raw counts; the first sample along ``axis`` is the origin.
     axis : int
         The time axis.
+    counter_bits : int
+        Width of the counters (16: the Open Interface's; :func:`tick_deltas`).
 
     Returns
     -------
@@ -78,7 +89,7 @@ def unwrap_ticks(ticks: np.ndarray, *, axis: int = 0) -> np.ndarray:
     [0, 1, 2, 3, 2, 1]
     """
     ticks = np.asarray(ticks, dtype=np.int64)
-    steps = tick_deltas(ticks, axis=axis)
+    steps = tick_deltas(ticks, axis=axis, counter_bits=counter_bits)
     zero_shape = list(ticks.shape)
     zero_shape[axis] = 1
     return np.cumsum(np.concatenate([np.zeros(zero_shape, np.int64), steps], axis=axis), axis=axis)

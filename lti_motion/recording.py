@@ -282,8 +282,10 @@ array_like, shape (n, 2)
     def from_frame_log(cls, log: FrameLog) -> Recording:
         """The recording of a single-robot :class:`~lti_motion.frames.FrameLog`.
 
-        Counts are 16-bit wrapping, commands one per frame, ``valid`` kept,
-        simulator ground truth (pose) kept when present.
+        Counts wrap at ``2**log.counter_bits`` (16 bits unless the log's
+        ``meta["counter_bits"]`` says otherwise; 63, 64: they never wrap), commands
+        one per frame, ``valid`` kept, simulator ground truth (pose) kept when
+        present.
 
         Raises
         ------
@@ -295,8 +297,10 @@ array_like, shape (n, 2)
                              "log.robot(i) first")
         truth = {} if log.true_pose is None else {"true_pose_t_s": log.t_s,
                                                   "true_pose": log.true_pose}
+        bits = log.counter_bits
         rec = cls.from_streams(wheel_t_s=log.t_s, dt_s=log.dt_s, counts=log.ticks,
-                               counter_bits=16, valid=log.valid, cmd_wheel_m_s=log.cmd_m_s,
+                               counter_bits=None if bits >= 63 else bits, valid=log.valid,
+                               cmd_wheel_m_s=log.cmd_m_s,
                                meta=dict(log.meta), **truth)
         return replace(rec, light_bump=log.light_bump, bumps=log.bumps)
 

@@ -26,9 +26,19 @@ measured stream:
    (those periods are flagged ``measured = False``).
 
 Commands are held (zero-order hold, as a robot holds its last command): the
-command of period ``k`` is the last one sent before the middle of the period,
-zero before the first; a command stored per wheel frame belongs to the period
-that frame closes, and a period with no frame takes the next frame's command.
+command of period ``k`` is the last one stamped at or before the middle of the
+period on the host's typical arrival line (the envelope time plus the median
+latency of the wheel frames: commands and wheel frames are stamped by the same
+host, and a frame typically arrives that much after its period ends), zero
+before the first; a command stored per wheel frame belongs to the period that
+frame closes, and a period with no frame takes the next frame's command.
+
+The periods are assigned by the stamps alone (``periods_by="stamps"``), or
+by the stamps and the wheels' cumulative travel (``"stamps_and_travel"``,
+counts and wheel angles only): a frame that jitter put on a lost neighbour's
+period moves back into its own where that evens the travel per period
+(:func:`lti_motion.clocks.assign_periods`, ``travel``). ROS bags use the
+latter (:func:`drivers.bag_log.bag_to_log`).
 A body twist becomes wheel speeds through the wheel base
 (:func:`lti_motion.kinematics.wheel_from_body`).
 """
@@ -45,7 +55,10 @@ from lti_motion.kinematics import body_from_wheel, wheel_from_body
 from lti_motion.odometry import unfold_commanded_direction
 from lti_motion.recording import Recording, Stream
 
-__all__ = ["MAX_WHEEL_SPEED_M_S", "GridSignals", "on_grid"]
+__all__ = ["MAX_WHEEL_SPEED_M_S", "GridSignals", "commands_at", "on_grid", "wheel_periods"]
+
+#: How wheel frames find their periods (module Notes).
+PeriodsBy = Literal["stamps", "stamps_and_travel"]
 
 #: Fastest wheel (or body) speed taken as physically possible by default [m/s].
 MAX_WHEEL_SPEED_M_S = 5.0
@@ -85,6 +98,15 @@ class GridSignals:
     assignment: PeriodAssignment
 
 
+def _count_steps(counts: np.ndarray, counter_bits: int | None) -> np.ndarray:
+    """Steps between consecutive counts, unwrapped on a ``2**counter_bits`` ring."""
+    steps = np.diff(counts.astype(np.int64), axis=0)
+    if counter_bits is not None and counter_bits < 63:           # 63, 64: never wrap
+        mod = 1 << counter_bits
+        steps = (steps + mod // 2) % mod - mod // 2          # shortest signed step
+    return steps
+
+
 def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
                 m_per_tick: float | np.ndarray | None, wheel_radius_m: float | None,
                 encoders: str) -> np.ndarray:
@@ -94,10 +116,7 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
     if kind == "counts":
         if m_per_tick is None:
             raise ValueError("counts need the encoder scale m_per_tick [m/tick]")
-        steps = np.diff(v.astype(np.int64), axis=0)
-        if rec.counter_bits is not None and rec.counter_bits < 64:
-            mod = 1 << rec.counter_bits
-            steps = (steps + mod // 2) % mod - mod // 2      # shortest signed step
+        steps = _count_steps(v, rec.counter_bits)
         if encoders == "commanded":
             steps = unfold_commanded_direction(steps)
         travel = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0) * m_per_tick])
@@ -122,16 +141,72 @@ def _integrate_at(stream: Stream, t_grid: np.ndarray) -> np.ndarray:
     return np.diff(at) / np.diff(t_grid)
 
 
-def _commands(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray) -> np.ndarray:
-    """Wheel or body commands of periods 1..P by the hold rule of the module Notes."""
-    n_periods = t_grid.size - 1
+def _frame_travel(rec: Recording, encoders: str) -> np.ndarray | None:
+    """Cumulative travel of each wheel frame in the stream's own unit, NaN where unusable;
+    ``None`` for speeds (a speed has no travel to even)."""
+    v = rec.wheel.values
+    if rec.wheel_kind == "counts":
+        steps = _count_steps(v, rec.counter_bits)
+        if encoders == "commanded":           # the count's sign flips with the command
+            steps = unfold_commanded_direction(steps)
+        cum = np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0, dtype=float)])
+    elif rec.wheel_kind == "wheel_angles_rad":
+        cum = np.unwrap(v, axis=0) if np.all(np.abs(v) <= np.pi) else v.astype(float)
+    else:
+        return None
+    cum[~rec.wheel_valid] = np.nan
+    return cum
+
+
+def wheel_periods(rec: Recording, *, periods_by: PeriodsBy = "stamps",
+                  encoders: Literal["quadrature", "commanded"] = "quadrature"
+                  ) -> PeriodAssignment:
+    """The sensor period of each wheel frame of a recording (module Notes).
+
+    A frame with the stamp and values of the one before is a duplicate and
+    merged; the periods come from :func:`lti_motion.clocks.assign_periods`,
+    given the frames' cumulative travel when ``periods_by`` is
+    ``"stamps_and_travel"`` (counts and wheel angles; speeds have none).
+    Counts of ``encoders="commanded"`` (Roomba / Create 2) are unfolded
+    (:func:`~lti_motion.odometry.unfold_commanded_direction`) before their
+    travel is judged.
+
+    Returns
+    -------
+    PeriodAssignment
+    """
+    t, v = rec.wheel.t_s, rec.wheel.values
+    repeat = np.zeros(t.size, bool)     # a frame delivered twice: same stamp, same values
+    repeat[1:] = (np.diff(t) == 0) & np.all(v[1:] == v[:-1], axis=1)
+    travel = _frame_travel(rec, encoders) if periods_by == "stamps_and_travel" else None
+    return assign_periods(t, dt_s=rec.dt_s, duplicate=repeat, travel=travel)
+
+
+def commands_at(rec: Recording, a: PeriodAssignment, periods: np.ndarray) -> np.ndarray:
+    """The commands in effect in the given periods by the hold rule of the module Notes.
+
+    Parameters
+    ----------
+    rec : Recording
+    a : PeriodAssignment
+        From :func:`wheel_periods` of ``rec``.
+    periods : array_like of int, shape (p,)
+        Period indices (0 is the first kept wheel frame's).
+
+    Returns
+    -------
+    ndarray, shape (p, 2)
+        In the unit of ``rec.cmd_kind`` (wheel speeds [m/s] or a body twist).
+    """
+    periods = np.asarray(periods, dtype=np.int64)
     if rec.cmd_per_frame:
         k = a.period[a.keep]
         vals = rec.cmd.values[a.keep].astype(float)
         # each period takes the command of the first frame at or after it
-        nxt = np.searchsorted(k, np.arange(1, n_periods + 1))
+        nxt = np.searchsorted(k, periods)
         return vals[np.minimum(nxt, k.size - 1)]
-    mid = t_grid[:-1] + 0.5 * np.diff(t_grid)
+    c = a.clock
+    mid = c.times_s(periods) + c.latency_median_s - 0.5 * c.period_s
     last = np.searchsorted(rec.cmd.t_s, mid, side="right") - 1
     out = rec.cmd.values[np.maximum(last, 0)].astype(float)
     out[last < 0] = 0.0
@@ -164,7 +239,8 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
             m_per_tick: float | np.ndarray | None = None,
             wheel_radius_m: float | None = None,
             encoders: Literal["quadrature", "commanded"] = "quadrature",
-            max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S) -> GridSignals:
+            max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S,
+            periods_by: PeriodsBy = "stamps") -> GridSignals:
     """Per-period wheel commands and body speeds of any recording (module Notes).
 
     Parameters
@@ -183,6 +259,8 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
         (Roomba / Create 2; :func:`~lti_motion.odometry.unfold_commanded_direction`).
     max_wheel_speed_m_s : float
         Fastest wheel speed that can be right [m/s]; faster is bad input.
+    periods_by : {"stamps", "stamps_and_travel"}
+        How wheel frames find their periods (module Notes, :func:`wheel_periods`).
 
     Returns
     -------
@@ -206,10 +284,8 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
     >>> g.speeds.shape, np.allclose(g.speeds, [0.2, 0.0])
     ((49, 2), True)
     """
-    t, v = rec.wheel.t_s, rec.wheel.values
-    repeat = np.zeros(t.size, bool)     # a frame delivered twice: same stamp, same values
-    repeat[1:] = (np.diff(t) == 0) & np.all(v[1:] == v[:-1], axis=1)
-    a = assign_periods(t, dt_s=rec.dt_s, duplicate=repeat)
+    v = rec.wheel.values
+    a = wheel_periods(rec, periods_by=periods_by, encoders=encoders)
     n_periods = a.n_periods - 1
     t_grid = a.clock.times_s(np.arange(n_periods + 1))
     used = a.keep & rec.wheel_valid & np.all(np.isfinite(v), axis=1)   # NaN: did not arrive
@@ -227,7 +303,7 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
     else:
         wheel, speeds = rate, body_from_wheel(rate, wheel_base_m=wheel_base_m)
     _check_speed(rec.wheel_kind, wheel, t_grid[1:], max_wheel_speed_m_s)
-    cmd = _commands(rec, a, t_grid)
+    cmd = commands_at(rec, a, np.arange(1, n_periods + 1))
     if rec.cmd_kind == "cmd_body":
         cmd = wheel_from_body(cmd, wheel_base_m=wheel_base_m)
     _check_speed(rec.cmd_kind, cmd, t_grid[1:], max_wheel_speed_m_s)

@@ -228,6 +228,10 @@ class RobotParams:
         its real Roomba (6.8 cm, Table II): reality is the reference.
     ticks_per_rev : float
         Encoder counts per wheel revolution.
+    counter_bits : int
+        Width of the encoder counters, 8 .. 64: counts wrap at
+        ``2**counter_bits`` (16: the Open Interface's); 63 and 64 never wrap
+        in a drive (held as a signed 64-bit count).
     max_speed_m_s : float
         Largest wheel-speed command accepted [m/s].
     mass_kg, payload_kg : float
@@ -287,6 +291,7 @@ class RobotParams:
     wheel_base_error: float = 0.004
     wheel_diameter_errors: tuple[float, float] = (0.0003, -0.0003)
     ticks_per_rev: float = 508.8
+    counter_bits: int = 16
     max_speed_m_s: float = 0.5
     mass_kg: float = 3.6
     payload_kg: float = 0.0
@@ -341,6 +346,9 @@ class RobotParams:
             if getattr(self, name) <= 0:
                 raise SimulatorError(
                     f"RobotParams.{name} must be positive, got {getattr(self, name)}")
+        if isinstance(self.counter_bits, bool) or self.counter_bits not in range(8, 65):
+            raise SimulatorError(f"RobotParams.counter_bits must be a whole number of bits "
+                                 f"from 8 to 64 (16 for a Roomba), got {self.counter_bits!r}")
         if self.payload_kg < 0:
             raise SimulatorError(f"RobotParams.payload_kg must be >= 0, got {self.payload_kg}")
         if len(self.wheel_diameter_errors) != 2 or max(map(abs, self.wheel_diameter_errors)) > 0.2:

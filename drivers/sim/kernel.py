@@ -205,7 +205,8 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
     out_bumps : (N, n, 2) bool, out_pose : (N, n, 3), out_body : (N, n, 2),
     out_current : (N, n, 2), out_overcurrent : (N, n, 2) bool
         Filled with the frame taken at the end of each period (the motor
-        currents [A] are means over the period).
+        currents [A] are means over the period; the counts unwrapped, the
+        caller wraps them at the robot's ``counter_bits``).
     """
     n_rob, n_per = cmd.shape[0], cmd.shape[1]
     for i in range(n_rob):
@@ -341,7 +342,7 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
             st[T_NOW] = t_k + period
             for wh in range(2):
                 raw = math.floor(st[TICK0 + wh] - st[OFF0 + wh])
-                out_ticks[i, k, wh] = int(raw) % 65536
+                out_ticks[i, k, wh] = int(raw)      # the caller wraps (counter_bits)
                 out_overcurrent[i, k, wh] = st[LIMIT0 + wh] >= OVERCURRENT_S - 1e-9
             _light_bumps(st, p, walls, nz, out_light[i, k])
             out_pose[i, k, 0] = st[X]

@@ -43,12 +43,12 @@ class Field(NamedTuple):
     ----------
     key : str
         Name in the file; also the :class:`~drivers.sim.config.RobotParams` field, except
-        ``ir_angles_deg`` (radians in ``ir_angles_rad``) and ``counter_bits``.
+        ``ir_angles_deg`` (radians in ``ir_angles_rad``).
     check : str
         ``"positive"``, ``"nonnegative"``, ``"real"``, ``"fraction"`` (0 < x <= 1),
         ``"error"`` (|x| <= 0.2), ``"delay"`` (0 .. 30), ``"weakening"`` (0 <= x < 1),
         ``"probability"`` (0 .. 1), ``"pair_error"`` (two errors), ``"six_angles"``,
-        ``"counter_bits"`` (16), ``"wheel"``, ``"text"``.
+        ``"counter_bits"`` (8 .. 64), ``"wheel"``, ``"text"``.
     unit : str
         Unit as the messages and the schema page state it.
     required : bool
@@ -231,10 +231,11 @@ def _value(spec: Field, value: object, where: str) -> tuple[str, object]:
                                  f"got {value!r}")
         return spec.key, value
     if spec.check == "counter_bits":
-        if isinstance(value, bool) or value != 16:
-            raise RobotFileError(f"{where} must be 16 (the simulator's encoder counters are "
-                                 f"16-bit, as the Open Interface's), got {value!r}")
-        return spec.key, 16
+        if not isinstance(value, int) or isinstance(value, bool) or not 8 <= value <= 64:
+            raise RobotFileError(f"{where} must be a whole number of bits from 8 to 64 (16 "
+                                 f"for the Open Interface's counters; 63 and 64 never wrap), "
+                                 f"got {value!r}")
+        return spec.key, value
     if spec.check in ("pair_error", "six_angles"):
         n = 2 if spec.check == "pair_error" else 6
         if not isinstance(value, list) or len(value) != n:
@@ -366,7 +367,6 @@ def read_robot_file(name_or_path: str | os.PathLike[str]) -> RobotSpec:
     params: dict[str, object] = {}
     for section in SCHEMA:
         params.update(_section(doc, section, label))
-    params.pop("counter_bits", None)
     floor_default = params.pop("default", "hard")
     return RobotSpec(source=label, params=params, floor_default=floor_default,
                      floor_regions=_regions(doc, label), faults=_faults(doc, label))

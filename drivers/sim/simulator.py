@@ -8,7 +8,8 @@ floor contact with a traction limit, rolling resistance, tyre compression and
 slip (see :mod:`drivers.sim.kernel` for the equations). The mechanics runs at
 a quarter of a 1 ms controller step; frames come out once per sensor period.
 
-A frame carries what a real Create 2 streams (raw 16-bit encoder counts that
+A frame carries what a real Create 2 streams (raw encoder counts, 16-bit as the
+Open Interface's unless ``RobotParams.counter_bits`` says otherwise, that
 count wheel rotation in the commanded direction, six light-bump IR signals of
 the walls and boxes of a :class:`~drivers.sim.config.Room`, bump flags, the
 commands in effect, the wheel motors' currents and overcurrent flags) plus the
@@ -78,6 +79,14 @@ def _params_row(p: RobotParams, floor_default: int) -> np.ndarray:
     row[K.P_DERR0:K.P_DERR0 + 2] = p.wheel_diameter_errors
     row[K.P_CASTER] = p.caster_offset_m
     return row
+
+
+def _wrap(ticks: np.ndarray, params: Sequence[RobotParams]) -> np.ndarray:
+    """Counts of shape (N, n, 2) on each robot's ``2**counter_bits`` ring (63, 64: unwrapped,
+    a signed 64-bit count that no drive overflows)."""
+    bits = np.array([p.counter_bits for p in params], np.int64)[:, None, None]
+    modulus = np.left_shift(np.int64(1), np.minimum(bits, 62))
+    return np.where(bits <= 62, ticks % modulus, ticks)
 
 
 def _own_faults(params: Sequence[RobotParams]) -> list[Fault]:
@@ -382,7 +391,7 @@ class Simulator:
         K.run_periods(self._state, self._queue, self._qinfo, self._params, self._floors,
                       self._regions, self._walls, np.ascontiguousarray(cmd), per, noise,
                       ticks, light, bumps, pose, body, current, overcurrent)
-        ticks = (ticks + np.round(spikes).astype(np.int64)) % 65536
+        ticks = _wrap(ticks + np.round(spikes).astype(np.int64), self.params)
         # host timestamps: end of each period plus a jittered, never negative latency
         lat_mean = np.array([p.latency_s for p in self.params])[:, None]
         lat_std = np.array([p.latency_jitter_s for p in self.params])[:, None]
@@ -395,5 +404,6 @@ class Simulator:
             dt_s=self.dt_s, true_pose=pose, true_body_m_s=body, motor_current_a=current,
             wheel_overcurrent=overcurrent,
             meta={"preset": [p.name for p in self.params], "seeds": list(self.seeds),
+                  "counter_bits": [p.counter_bits for p in self.params],
                   "floor": self.floor_map.default, "k0": k0},
         )

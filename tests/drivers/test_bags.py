@@ -178,11 +178,57 @@ def test_tf_frames_by_default_or_named_and_a_missing_pair(tmp_path):
     odom = read_bag(path, truth_parent="odom").truth.values
     np.testing.assert_allclose(odom[:, [0, 2]], np.column_stack([np.arange(5), 0.1 * np.arange(5)]),
                                atol=1e-12)
-    with pytest.raises(BagError, match=r"no transform map -> base_footprint; it has "
+    with pytest.raises(BagError, match=r"no transform map -> base_footprint \(no frame map "
+                                       r"nor base_footprint in it\); it has "
                                        r"odom -> base_link, world -> base_link \(choose"):
         read_bag(path, truth_parent="map", truth_child="base_footprint")
     with pytest.raises(BagError, match=r"--truth-topic .* not both"):
         read_bag(path, truth_topic="/mocap", truth_parent="odom")
+
+
+@pytest.mark.parametrize(("name", "storage"), FORMATS, ids=["ros1", "db3", "mcap"])
+def test_a_tf_chain_is_composed_into_the_truth_written(tmp_path, drive, name, storage):
+    """map -> odom (every 10th frame, interpolated between), odom -> base_footprint (per
+    frame), base_footprint -> base_link (static, 5 cm up): composed, the simulator's poses."""
+    path = write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS,
+                           truth="tf_chain")
+    rec = read_bag(path)                  # defaults: world absent, map -> base_link chained
+    assert rec.truth_frames == ("map", "base_link")
+    assert rec.truth.topic == "/tf, /tf_static"
+    ok = drive.valid
+    np.testing.assert_array_equal(rec.truth.t_ns, START_NS + np.rint(drive.t_s[ok] * 1e9))
+    np.testing.assert_allclose(rec.truth.values, drive.true_pose[ok], atol=1e-9)
+    # the chain walked up: base_link in base_footprint's parent, odom, at the start
+    # (where map and odom coincide) is the truth; later it is off by the drift
+    odom = read_bag(path, truth_parent="odom").truth
+    assert read_bag(path, truth_parent="odom").truth_frames == ("odom", "base_link")
+    np.testing.assert_allclose(odom.values[0], drive.true_pose[ok][0], atol=1e-9)
+    assert np.max(np.abs(odom.values[:, 2] - drive.true_pose[ok][:, 2])) > 0.03
+    # and down: map in base_link, the inverse of the truth
+    inv = read_bag(path, truth_parent="base_link", truth_child="map").truth.values
+    x, y, th = drive.true_pose[ok].T
+    np.testing.assert_allclose(inv[:, 0], -(np.cos(th) * x + np.sin(th) * y), atol=1e-9)
+    np.testing.assert_allclose(np.cos(inv[:, 2] + th), 1.0, atol=1e-9)
+
+
+def test_a_static_mount_composes_and_a_missing_link_is_named(tmp_path, drive):
+    path = write_drive_bag(tmp_path / "mount.bag", drive, truth="tf")
+    laser = read_bag(path, truth_parent="world", truth_child="base_laser").truth.values
+    x, y, th = drive.true_pose[drive.valid].T        # the laser 0.1 m ahead of base_link
+    np.testing.assert_allclose(laser, np.column_stack(
+        [x + 0.1 * np.cos(th), y + 0.1 * np.sin(th), th]), atol=1e-9)
+    t = get_typestore(Stores.ROS2_HUMBLE).types
+    msgs = [("/tf", "tf2_msgs/msg/TFMessage", 10**9 + i * 20_000_000, t[
+        "tf2_msgs/msg/TFMessage"](transforms=[
+            _transform(t, 10**9 + i * 20_000_000, "odom", "base_link", 0.1 * i, 0.0),
+            _transform(t, 10**9 + i * 20_000_000, "map", "marker", 1.0, 0.0)]))
+        for i in range(5)]
+    two, _ = _raw_bag(tmp_path / "two_trees", msgs, ros1=False)
+    with pytest.raises(BagError, match=r"no transform map -> base_link \(no chain: map's "
+                                       r"transforms lead up to map, base_link's to odom; the "
+                                       r"link map -> odom is missing\); it has map -> marker, "
+                                       r"odom -> base_link"):
+        read_bag(two, truth_parent="map", truth_child="base_link")
 
 
 def test_tf_named_in_a_bag_without_tf(bag):

@@ -74,6 +74,33 @@ def test_a_minimal_file_takes_the_create2_values_for_the_rest(tmp_path):
     assert robot.floor == "hard" and robot.faults == ()
 
 
+@pytest.mark.parametrize("bits", [10, 24, 32, 64])
+def test_counters_of_any_width_wrap_in_the_simulator_and_unwrap_in_the_odometry(tmp_path, bits):
+    """A 10-bit counter wraps every 1024 ticks (0.22 m of a 0.07 m wheel at 1000 ticks per
+    turn): the drive's speeds are those of the same drive with 16-bit counters."""
+    from drivers.sim.simulator import Simulator
+    from lti_motion.calibration import speeds_from_log
+    from lti_motion.odometry import unwrap_ticks
+
+    text = _replace(MINIMAL, "ticks_per_rev = 1000", f"ticks_per_rev = 1000\ncounter_bits = {bits}")
+    robot = load_robot(_write(tmp_path, text))
+    assert robot.counter_bits == bits
+    cmd = np.tile([[0.3, 0.25]], (300, 1))
+    wide = Simulator(robot, seed=4).run(cmd)
+    narrow = Simulator(robot.replace(counter_bits=16), seed=4).run(cmd)
+    assert wide.counter_bits == bits and narrow.counter_bits == 16
+    if bits < 63:
+        assert wide.ticks.min() >= 0 and wide.ticks.max() < 2**bits
+    np.testing.assert_array_equal(unwrap_ticks(wide.ticks, counter_bits=bits),
+                                  unwrap_ticks(narrow.ticks))
+    if bits == 10:
+        assert np.any(np.diff(wide.ticks[:, 0]) < 0)              # it wrapped
+    scale = {"m_per_tick": robot.m_per_tick, "wheel_base_m": robot.wheel_base_m}
+    for a, b in zip(speeds_from_log(wide, **scale), speeds_from_log(narrow, **scale),
+                    strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_json_and_toml_of_the_same_robot_agree(tmp_path):
     doc = tomllib.loads(MINIMAL)
     doc["floor"] = {"default": "carpet"}
@@ -172,8 +199,11 @@ BAD = [
      "delay_periods must exceed half of delay_jitter_periods"),
     (lambda t: t + "[geometry.x]\n", "[geometry] unknown field 'x'"),
     (lambda t: t + "[encoders.more]\n", "[encoders] unknown field 'more'"),
-    (lambda t: _replace(t, "ticks_per_rev = 1000", "ticks_per_rev = 1000\ncounter_bits = 24"),
-     "[encoders] counter_bits must be 16"),
+    (lambda t: _replace(t, "ticks_per_rev = 1000", "ticks_per_rev = 1000\ncounter_bits = 12.5"),
+     "[encoders] counter_bits must be a whole number of bits from 8 to 64 (16 for the Open "
+     "Interface's counters; 63 and 64 never wrap), got 12.5"),
+    (lambda t: _replace(t, "ticks_per_rev = 1000", "ticks_per_rev = 1000\ncounter_bits = 4"),
+     "[encoders] counter_bits must be a whole number of bits from 8 to 64"),
     (lambda t: t + "[light_bumps]\nir_angles_deg = [1, 2]\n",
      "[light_bumps] ir_angles_deg must be a list of 6 numbers [degrees], got [1, 2]"),
     (lambda t: t + '[floor]\ndefault = "ice"\n', "[floor] unknown floor 'ice'"),
