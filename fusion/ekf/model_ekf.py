@@ -69,6 +69,7 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
     DivergenceWatch,
@@ -84,6 +85,7 @@ from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRec
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -101,7 +103,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     Parameters
     ----------
     model : MotionModel
-        The calibrated model (its ``m_per_tick`` scales the encoders).
+        The calibrated model (its :attr:`~lti_motion.model.MotionModel.encoder_intrinsics`,
+        each wheel's scale and the wheel base, map the encoder counts).
     initial_pose : array_like, shape (3,)
         Start pose ``(x [m], y [m], theta [rad])``.
     pose_std : tuple of 3 float
@@ -115,11 +118,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         White ground-versus-encoder speed noise (:mod:`fusion.ekf.functions`).
     scales : ScaleErrors, optional
         Prior, drift and plausibility bound of the scale-error states
-        ``(k_v, k_w)`` (:mod:`fusion.ekf.resets`).
+        ``(k_v, k_w, kappa)`` (:mod:`fusion.ekf.resets`).
     encoder_std : tuple of 2 float
         Floor of the encoder reading noise ``(v [m/s], w [rad/s])``.
     m_per_tick : float, optional
-        Encoder scale, if the model has none.
+        Encoder scale of both wheels, if the model has none (it replaces the
+        model's intrinsics).
     gate_probability : float or None
         Chi-square gate of every update (0.999: a good reading is rejected
         once in a thousand); ``None`` fuses everything.
@@ -174,7 +178,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     ------
     FilterOptionError, MeasurementShapeError
         For invalid options (a scale prior whose plausibility bound reaches
-        the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR`, too).
+        the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR` or
+        :data:`~fusion.ekf.resets.MAX_RATIO_ERROR`, too).
 
     Examples
     --------
@@ -240,8 +245,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if not max_jump_ticks > 0:
             raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
         self.max_jump_ticks = float(max_jump_ticks)
-        self._bound = ScaleBound.from_scales(fm.scales)
-        self._inv_prior_var = (1.0 / self._bound.prior_var[0], 1.0 / self._bound.prior_var[1])
+        self._bound = ScaleBound.from_scales(
+            fm.scales, wheel_base_m=model.wheel_base_m if fm.intrinsics is None
+            else fm.intrinsics.wheel_base_m)
+        self._inv_prior_var = tuple(1.0 / v for v in self._bound.prior_var)
         self._watch = DivergenceWatch(diverged_after)
         self.resets: deque[FilterReset] = deque(maxlen=1000)
         self.n_resets = 0
@@ -307,8 +314,38 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     @property
     def scale_errors(self) -> np.ndarray:
-        """Estimated relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, (2,)."""
+        """Estimated scale errors ``(k_v, k_w, kappa [rad/m])`` of ground against encoder
+        motion, (3,) (:mod:`fusion.ekf.functions`, *Pose noise*)."""
         return self.x[SCALES].copy()
+
+    @property
+    def scale_bound(self) -> ScaleBound:
+        """The plausibility bound of the scale errors (:mod:`fusion.ekf.resets`)."""
+        return self._bound
+
+    def intrinsics_estimate(self) -> IntrinsicsEstimate:
+        """The odometry intrinsics the current scale errors say the robot has.
+
+        Returns
+        -------
+        IntrinsicsEstimate
+            ``fm.intrinsics.corrected(k_v, k_w, kappa)``
+            (:meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected`) with
+            the standard deviation of its diameter ratio from ``P``. Write it
+            into a model with :meth:`lti_motion.model.MotionModel.with_intrinsics`.
+
+        Raises
+        ------
+        lti_motion.exceptions.MissingEncoderScaleError
+            If the filter has no encoder scale.
+        ValueError
+            If the estimate is not a possible robot (a non-positive scale).
+        """
+        if self.fm.intrinsics is None:
+            raise MissingEncoderScaleError.needed_by(
+                "estimating the odometry intrinsics", keyword="m_per_tick=... to ModelEKF")
+        return intrinsics_estimate(self.fm.intrinsics, self.x[SCALES], self.P[SCALES, SCALES],
+                                   t_s=self.t_s)
 
     # -- predict ---------------------------------------------------------------------------------
     def predict_x(self, cmd_m_s: np.ndarray = 0) -> None:
@@ -358,9 +395,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if record.accepted:
             # d^2 at the prior's own spread is the largest over time: below the threshold there,
             # the scales are plausible (and inside the physical bound); two products a step
-            k_v, k_w = self.x[SCALES].tolist()
-            if k_v * k_v * self._inv_prior_var[0] + k_w * k_w * self._inv_prior_var[1] > \
-                    self._bound.threshold:
+            k_v, k_w, kappa = self.x[SCALES].tolist()
+            iv, iw, ik = self._inv_prior_var
+            if k_v * k_v * iv + k_w * k_w * iw + kappa * kappa * ik > self._bound.threshold:
                 self._bound_scales(t)
         # a pose fix counts as a landmark of its own (each a new source): it places the robot
         if kind != "encoders" and self._watch.observe(
@@ -374,25 +411,27 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     def _bound_scales(self, t: float) -> None:
         """Reset implausible scale errors; clip them to the physical bound."""
-        k_v, k_w = self.x[SCALES].tolist()
-        d2 = scale_statistic(k_v, k_w, self._bound, t - self._scales_since_s)
+        k_v, k_w, kappa = self.x[SCALES].tolist()
+        d2 = scale_statistic(k_v, k_w, kappa, self._bound, t - self._scales_since_s)
+        k_max = self._bound.max_kappa_rad_per_m
         if d2 > self._bound.threshold:
             self._reset(t, "scale_implausible", d2, self._bound.threshold)
-        elif abs(k_v) > MAX_SCALE_ERROR or abs(k_w) > MAX_SCALE_ERROR:
+        elif abs(k_v) > MAX_SCALE_ERROR or abs(k_w) > MAX_SCALE_ERROR or abs(kappa) > k_max:
             x = self.x.copy()
-            x[SCALES] = np.clip(x[SCALES], -MAX_SCALE_ERROR, MAX_SCALE_ERROR)
+            x[SCALES] = np.clip(x[SCALES], (-MAX_SCALE_ERROR, -MAX_SCALE_ERROR, -k_max),
+                                (MAX_SCALE_ERROR, MAX_SCALE_ERROR, k_max))
             self.x = self.x_post = x
 
     def _reset(self, t: float, cause: ResetCause, statistic: float, threshold: float) -> None:
-        k_v, k_w = self.x[SCALES].tolist()
+        k_v, k_w, kappa = self.x[SCALES].tolist()
         self.x, self.P = reset_scales(self.x, self.P, self._bound)
         self.x_post, self.P_post = self.x, self.P
         self._scales_since_s = t
-        event = FilterReset(t, cause, statistic, threshold, (k_v, k_w))
+        event = FilterReset(t, cause, statistic, threshold, (k_v, k_w, kappa))
         self.resets.append(event)
         self.n_resets += 1
         _log.warning("filter reset at t=%.3f s: %s (%.3g > %.3g), scale errors were "
-                     "(%.4f, %.4f)", t, cause, statistic, threshold, k_v, k_w)
+                     "(%.4f, %.4f, %.4f rad/m)", t, cause, statistic, threshold, k_v, k_w, kappa)
 
     # -- updates ---------------------------------------------------------------------------------
     @staticmethod
