@@ -267,6 +267,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s = float(t0_s)
         self._dt_s = fm.dt_s
         self._speed_at = fm.n - 2
+        self._t2s = None if fm.ticks_to_speeds is None else fm.ticks_to_speeds.tolist()
         # rows: counts of the last fused (or anchoring) frame, counts of the current frame
         self._tick_pair = np.zeros((2, 2), dtype=np.int64)
         self._have_ref = False
@@ -491,7 +492,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         pair[1] = ticks
         jump = self._frame_jump(ticks)
         speeds = self.x[self._speed_at:]
-        y = encoder_speeds(pair, self.fm)           # summed over `periods` periods
+        y = self._span_speeds()                     # summed over `periods` periods
         verdict = "young"
         if periods >= self.reanchor_periods:
             verdict = span_verdict(tick_deltas(pair, axis=0)[0],
@@ -507,6 +508,18 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         else:
             self._span_jump = max(self._span_jump, jump)
         return record
+
+    def _span_speeds(self) -> np.ndarray:
+        """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
+        arithmetic (it runs at every reading): rollover-safe increments as
+        :func:`lti_motion.odometry.tick_deltas`, times ``fm.ticks_to_speeds``."""
+        if self._t2s is None:
+            return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
+        (l0, r0), (l1, r1) = self._tick_pair.tolist()
+        dl = (l1 - l0 + 32768) % 65536 - 32768
+        dr = (r1 - r0 + 32768) % 65536 - 32768
+        (a, b), (c, d) = self._t2s
+        return np.array((a * dl + b * dr, c * dl + d * dr))
 
     def _frame_jump(self, ticks: np.ndarray) -> float:
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
