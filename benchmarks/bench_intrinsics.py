@@ -54,6 +54,8 @@ scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 rout
     (:meth:`lti_motion.model.MotionModel.with_intrinsics`), driven with route seed + 100
     (another slip realisation than the one it learned on); baseline the same filter with
     the symmetric model on the same seeds (the issue's 0.908 m row).
+``intrinsics.online_*_std_m``
+    The standard deviations over the seeds of those closures.
 """
 
 from __future__ import annotations
@@ -349,4 +351,15 @@ def online_figures(seeds: list[int]) -> list[Figure]:
         Figure("intrinsics.online_writeback_closure_m", float(written.mean()), "m",
                better="lower", baseline="the same filter, the symmetric model",
                baseline_value=float(symmetric.mean())),
+        # spreads over the seeds (standard deviations) of the closures above
+        Figure("intrinsics.online_closure_landmarks_std_m", float(res.closure_offset_m.std()),
+               "m", better="lower"),
+        Figure("intrinsics.online_closure_half_landmarks_std_m",
+               float(half.closure_offset_m.std()), "m", better="lower"),
+        Figure("intrinsics.online_closure_half_landmarks_held_std_m",
+               float(half_held.closure_offset_m.std()), "m", better="lower"),
+        Figure("intrinsics.online_writeback_closure_std_m", float(written.std()), "m",
+               better="lower"),
+        Figure("intrinsics.online_writeback_symmetric_std_m", float(symmetric.std()), "m",
+               better="lower"),
     ]
