@@ -286,3 +286,27 @@ def test_an_implausible_curvature_alone_is_reset(model):
     assert np.all(ekf.scale_errors == 0)
     assert ekf.P[5, 5] == pytest.approx((0.01 / B) ** 2)
     assert np.linalg.eigvalsh(ekf.P).min() > -1e-15
+
+
+def test_a_symmetric_robot_is_tracked_as_well_as_without_the_ratio_state(model):
+    """kappa = 0 in truth: the estimate stays near 0 and the pose error is the 2-state
+    filter's (the route comparison on the simulator is in docs/intrinsics.md)."""
+    rng = np.random.default_rng([5, 17])
+    n = round(60.0 / DT)
+    u, ticks, truth = _drive(model, rng, n, kappa=0.0)
+    sightings = [_sightings(truth[k + 1], k + 1, rng) for k in range(n)]
+    errors = {}
+    for name, scales in (("kappa", ScaleErrors()),
+                         ("held", ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0))):
+        ekf = ModelEKF(model, initial_pose=truth[0], initial_ticks=ticks[0],
+                       landmarks=LANDMARKS, history=0, scales=scales)
+        err = np.empty(n)
+        for k in range(n):
+            ekf.predict(u[k])
+            ekf.update_encoders(ticks[k + 1])
+            ekf.update_landmarks(sightings[k])
+            err[k] = np.linalg.norm(ekf.pose[:2] - truth[k + 1, :2])
+        errors[name] = float(np.sqrt(np.mean(err ** 2)))
+        if name == "kappa":
+            assert abs(ekf.scale_errors[2]) < 3.0 * math.sqrt(ekf.P[5, 5])
+    assert errors["kappa"] <= 1.1 * errors["held"] + 0.001, errors
