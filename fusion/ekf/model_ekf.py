@@ -395,7 +395,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
                                      PHt=PHt, force=force)
         if record.accepted:
             # d^2 at the prior's own spread is the largest over time: below the threshold there,
-            # the scales are plausible (and inside the physical bound); two products a step
+            # the scales are plausible (and inside the physical bounds); three products a step
             k_v, k_w, kappa = self.x[SCALES].tolist()
             iv, iw, ik = self._inv_prior_var
             if k_v * k_v * iv + k_w * k_w * iw + kappa * kappa * ik > self._bound.threshold:
