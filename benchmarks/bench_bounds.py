@@ -81,7 +81,7 @@ def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None
     """Poses, the largest scale d^2 and the resets of one filter over one drive."""
     ekf = cls(model, initial_pose=START, pose_std=(0.005,) * 3, landmarks=LANDMARKS,
               history=0)
-    bound = ScaleBound.from_scales(ScaleErrors())
+    bound = ekf.scale_bound
     by_frame, none = sightings.by_index(), RangeBearing.empty()
     poses = np.empty((len(log.t_s), 3))
     poses[0] = ekf.pose
@@ -181,7 +181,8 @@ def bounds() -> list[Figure]:
         Figure("bounds.ate_odometry_m", mean["odometry"], "m", better="lower"),
         Figure("bounds.ate_landmarks_only_m", mean["landmarks_only"], "m", better="lower"),
         Figure("bounds.scale_d2_max_bounded", max(acc["d2_bounded"]), "", better="lower",
-               target=ScaleBound.from_scales(ScaleErrors()).threshold),
+               target=ScaleBound.from_scales(ScaleErrors(),
+                                             wheel_base_m=model.wheel_base_m).threshold),
         Figure("bounds.scale_d2_max_unbounded", max(acc["d2_unbounded"]), "", better="lower"),
         Figure("bounds.resets_per_run", mean["resets"], "resets", better="lower"),
         Figure("bounds.step_cost_ratio", bounded_s / bypassed_s, "x", target=1.05,

@@ -3,7 +3,7 @@
 - ``ekf.predict_update_us``: one :meth:`fusion.ekf.ModelEKF.predict` plus one
   :meth:`~fusion.ekf.ModelEKF.update_encoders` (raw counts, rollover-safe
   increments, chi-square gate, Joseph-form update, record), per sensor period,
-  with the ARX model calibrated on the simulator (``nz = 10``, 15 states).
+  with the ARX model calibrated on the simulator (``nz = 12``; 20 states).
   Baseline, run in the same process and interleaved with ours: a stock
   ``filterpy.kalman.ExtendedKalmanFilter`` with the textbook 3-state velocity
   motion model (Thrun, Burgard & Fox 2005, table 5.3: ``G``, ``V``, ``M``,

@@ -28,6 +28,35 @@ Figures:
     The same calibration drive with the reference the EKF with landmarks instead of
     motion capture (an ARX model calibrated on this robot, the route's four landmarks
     at 2 Hz): worst errors over 10 seeds, and the route closure of 5 of them (no targets).
+
+``python -m benchmarks intrinsics_online`` (issue 17 item 3: the model EKF learns the diameter
+ratio from landmarks; :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`). The same robot and
+floor, the ARX model of the ``landmarks_*`` figures (calibrated symmetric: the rotation
+scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 route seeds:
+
+``intrinsics.online_ratio_converged_s``
+    Time from the start after which the filter's diameter ratio (left over right) stays
+    within 0.2% of the truth (the straight-line truth above, from a calibration drive of
+    the same simulator seed; scoring only), median over the seeds (target 60 s);
+    ``..._worst_s`` the worst seed (a seed that ends outside the band counts its whole
+    route), ``online_ratio_unconverged`` how many ended outside.
+``intrinsics.online_ratio_error_pct``
+    ``|ratio / truth - 1|`` at the end of the route [%], median (``..._worst_pct``: worst).
+``intrinsics.online_closure_landmarks_m``
+    Closure of the EKF with landmarks all the way (the default robot's row is 0.024 m);
+    baseline the same filter with the ratio state held at zero.
+``intrinsics.online_closure_half_landmarks_m``
+    Closure of the EKF with landmarks only for the first half of the route's time (the
+    median route length of the full-landmark runs), with the ratio state; baseline the same
+    filter with the ratio state held at zero (the 2-state filter before this change).
+``intrinsics.online_writeback_closure_m``
+    The EKF with the model and encoders alone (no landmarks) on the route, the model moved
+    to the intrinsics each full-landmark run ended with
+    (:meth:`lti_motion.model.MotionModel.with_intrinsics`), driven with route seed + 100
+    (another slip realisation than the one it learned on); baseline the same filter with
+    the symmetric model on the same seeds (the issue's 0.908 m row).
+``intrinsics.online_*_std_m``
+    The standard deviations over the seeds of those closures.
 """
 
 from __future__ import annotations
@@ -42,7 +71,9 @@ from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import RobotParams, Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive, motion_capture
 from drivers.sim.simulator import Simulator
-from fusion.noise import LandmarkNoise
+from fusion.ekf.functions import SCALES
+from fusion.ekf.model_ekf import ModelEKF
+from fusion.noise import LandmarkNoise, ScaleErrors
 from lti_motion.app.route import ROUTE_LANDMARKS, EkfEstimator, Odometry, _observe, drive_route
 from lti_motion.calibration import CalibrationPlan
 from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
@@ -53,6 +84,10 @@ from lti_motion.odometry import tick_deltas, unwrap_ticks
 
 FLOOR = "tile"
 ROUTE_SEEDS = range(30)
+ONLINE_BAND = 0.002                  # the issue's 0.2% on the diameter ratio
+WRITEBACK_SEED_OFFSET = 100          # the write-back's second drive: other seeds, other slip
+#: The ratio state held at zero: the filter as it was before kappa (scale errors k_v, k_w)
+HELD_RATIO = ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0)
 CAL_SEEDS = range(20)
 CLOSURE_CAL_SEEDS = range(5)
 LANDMARK_SEEDS = range(10)
@@ -193,5 +228,141 @@ def run() -> list[Figure]:
         Figure("intrinsics.asymmetric_odometry_closure_worst_cal_m",
                float(after.mean(axis=1).max()), "m", better="lower"),
         Figure("intrinsics.default_odometry_tile_m", float(base_tile.mean()), "m",
+               better="lower"),
+    ]
+
+
+class LearningEkf(EkfEstimator):
+    """:class:`~lti_motion.app.route.EkfEstimator` that keeps every filter's scale errors
+    ``(k_v, k_w, kappa)`` per period and stops reading landmarks after ``landmarks_until_s``."""
+
+    def __init__(self, model, *, landmarks_until_s: float = np.inf,
+                 scales: ScaleErrors | None = None, **kwargs) -> None:
+        super().__init__(model, **kwargs)
+        self.landmarks_until_s = landmarks_until_s
+        self.scales = scales or ScaleErrors()
+
+    def reset(self, n_robots: int, initial_pose: np.ndarray) -> None:
+        super().reset(n_robots, initial_pose)
+        self.k = 0
+        self.errors: list[np.ndarray] = []
+
+    def step(self, frame, cmd_m_s, observations=None):
+        if self.filters is None:            # as EkfEstimator, with this estimator's scales
+            ticks = np.asarray(frame.ticks, np.int64).reshape(len(self.pose), 2)
+            valid = np.broadcast_to(np.asarray(frame.valid, bool), (len(ticks),))
+            self.filters = [
+                ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
+                         initial_ticks=t if ok else None, landmarks=self.landmarks,
+                         landmark_noise=self.landmark_noise, history=0, scales=self.scales)
+                for pose, t, ok in zip(self.pose, ticks, valid, strict=True)]
+            return self.pose
+        self.k += 1
+        if self.k * self.model.dt_s > self.landmarks_until_s:
+            observations = None
+        pose = super().step(frame, cmd_m_s, observations)
+        self.errors.append(np.array([f.x[SCALES] for f in self.filters]))
+        return pose
+
+
+def online_scores(errors: np.ndarray, intrinsics: OdometryIntrinsics, truth_ratio: np.ndarray,
+                  dt_s: float, finished_step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per seed: the time [s] after which the ratio stays within :data:`ONLINE_BAND` of the
+    truth (the route's end if it ends outside), and the relative error at the end [%].
+
+    ``errors`` (periods, seeds, 3) are the filters' scale errors, ``finished_step`` each
+    seed's last period of the route; ratios through ``intrinsics.corrected``."""
+    conv, final = [], []
+    for i, truth in enumerate(truth_ratio):
+        n = int(finished_step[i])
+        ratio = np.array([intrinsics.corrected(*c).diameter_ratio for c in errors[:n, i]])
+        rel = ratio / truth - 1.0
+        outside = np.flatnonzero(np.abs(rel) > ONLINE_BAND)
+        # sample j is the estimate at (j + 1) dt_s (the first frame only anchors the counts)
+        conv.append(0.0 if outside.size == 0 else (outside[-1] + 1) * dt_s)
+        final.append(100.0 * abs(rel[-1]))
+    return np.array(conv), np.array(final)
+
+
+def _route_end(res) -> np.ndarray:
+    """Each seed's periods of the route after the anchoring frame, up to where its true pose
+    stopped changing (the length of its :attr:`LearningEkf.errors`)."""
+    moved = np.any(np.abs(np.diff(res.true_poses, axis=1)) > 1e-9, axis=2)
+    return np.array([np.flatnonzero(m)[-1] + 1 if m.any() else m.size for m in moved])
+
+
+@benchmark("intrinsics_online")
+def online() -> list[Figure]:
+    return online_figures(list(ROUTE_SEEDS))
+
+
+def online_figures(seeds: list[int]) -> list[Figure]:
+    """The ``intrinsics_online`` figures over the route seeds ``seeds``."""
+    params = asymmetric_robot()
+    model = calibrate_simulator(params, seed=0, floor=FLOOR,
+                                plan=CalibrationPlan(seed=2, excitation_s=60.0)).arx
+    cmd = intrinsics_drive(params.period_s, repeats=REPEATS)
+    truth = []
+    for seed in seeds:                                  # scoring only
+        log = Simulator(params, seed=seed, floor=FLOOR, room=Room.empty(),
+                        initial_pose=(0, 0, 0)).run(cmd)
+        left, right, _ = straight_line_truth(params, log, cmd)
+        truth.append(left / right)
+    truth = np.array(truth)
+
+    def route(est, landmarks=ROUTE_LANDMARKS):
+        return drive_route(params, est, seeds=seeds, floor=FLOOR, landmarks=landmarks)
+
+    full = LearningEkf(model, landmarks=ROUTE_LANDMARKS)
+    res = route(full)
+    errors = np.stack(full.errors)
+    ends = _route_end(res)
+    conv, final = online_scores(errors, model.encoder_intrinsics, truth, params.period_s, ends)
+    full_held = route(LearningEkf(model, landmarks=ROUTE_LANDMARKS, scales=HELD_RATIO))
+    half_s = 0.5 * float(np.median(ends)) * params.period_s
+    half = route(LearningEkf(model, landmarks=ROUTE_LANDMARKS, landmarks_until_s=half_s))
+    half_held = route(LearningEkf(model, landmarks=ROUTE_LANDMARKS, landmarks_until_s=half_s,
+                                  scales=HELD_RATIO))
+    learned = [model.encoder_intrinsics.corrected(*errors[ends[i] - 1, i])
+               for i in range(len(seeds))]
+    # each run's model drives the route again, no landmarks, on another seed (new slip)
+    written = np.array([drive_route(params, EkfEstimator(model.with_intrinsics(k)),
+                                    seeds=[seed + WRITEBACK_SEED_OFFSET],
+                                    floor=FLOOR).closure_offset_m[0]
+                        for seed, k in zip(seeds, learned, strict=True)])
+    symmetric = drive_route(params, EkfEstimator(model), floor=FLOOR,
+                            seeds=[s + WRITEBACK_SEED_OFFSET for s in seeds]).closure_offset_m
+    return [
+        Figure("intrinsics.online_ratio_converged_s", float(np.median(conv)), "s", target=60.0,
+               better="lower"),
+        Figure("intrinsics.online_ratio_converged_worst_s", float(conv.max()), "s",
+               better="lower"),
+        Figure("intrinsics.online_ratio_unconverged", float(np.sum(final > 100 * ONLINE_BAND)),
+               "seeds", better="lower"),
+        Figure("intrinsics.online_ratio_error_pct", float(np.median(final)), "%",
+               target=100 * ONLINE_BAND, better="lower"),
+        Figure("intrinsics.online_ratio_error_worst_pct", float(final.max()), "%",
+               better="lower"),
+        Figure("intrinsics.online_route_s", float(np.median(ends)) * params.period_s, "s",
+               better="lower"),
+        Figure("intrinsics.online_closure_landmarks_m", float(res.closure_offset_m.mean()), "m",
+               better="lower", baseline="the same filter, ratio state held at zero",
+               baseline_value=float(full_held.closure_offset_m.mean())),
+        Figure("intrinsics.online_closure_half_landmarks_m", float(half.closure_offset_m.mean()),
+               "m", better="lower", baseline="the same filter, ratio state held at zero",
+               baseline_value=float(half_held.closure_offset_m.mean())),
+        Figure("intrinsics.online_writeback_closure_m", float(written.mean()), "m",
+               better="lower", baseline="the same filter, the symmetric model",
+               baseline_value=float(symmetric.mean())),
+        # spreads over the seeds (standard deviations) of the closures above
+        Figure("intrinsics.online_closure_landmarks_std_m", float(res.closure_offset_m.std()),
+               "m", better="lower"),
+        Figure("intrinsics.online_closure_half_landmarks_std_m",
+               float(half.closure_offset_m.std()), "m", better="lower"),
+        Figure("intrinsics.online_closure_half_landmarks_held_std_m",
+               float(half_held.closure_offset_m.std()), "m", better="lower"),
+        Figure("intrinsics.online_writeback_closure_std_m", float(written.std()), "m",
+               better="lower"),
+        Figure("intrinsics.online_writeback_symmetric_std_m", float(symmetric.std()), "m",
                better="lower"),
     ]

@@ -2,8 +2,8 @@
 
 - :class:`SlipNoise`: white ground-versus-encoder speed noise (the EKF's and the
   graph's slip model).
-- :class:`ScaleErrors`: prior and random walk of the relative scale errors
-  ``(k_v, k_w)`` of ground against encoder speeds.
+- :class:`ScaleErrors`: prior and random walk of the scale errors
+  ``(k_v, k_w, kappa)`` of ground against encoder speeds.
 - :class:`LandmarkNoise`: standard deviations of a range-bearing sensor.
 - :func:`nis`, :func:`inverse_covariance`, :func:`gate_threshold`: the
   normalised innovation squared and its chi-square gate (Bar-Shalom, Li &
@@ -75,7 +75,11 @@ class SlipNoise:
 
 @dataclass(frozen=True)
 class ScaleErrors:
-    """Relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, as random walks.
+    """Scale errors ``(k_v, k_w, kappa)`` of ground against encoder motion, as random walks.
+
+    ``k_v``, ``k_w`` are the relative errors of the travel and of the turn,
+    ``kappa`` [rad/m] the curvature a straight run of equal counts drives (a
+    left/right diameter ratio; :mod:`lti_motion.intrinsics`, *Scale errors*).
 
     Attributes
     ----------
@@ -83,24 +87,38 @@ class ScaleErrors:
         Start standard deviations of ``(k_v, k_w)``: the encoder scale from
         three turns is within 1% (``docs/calibration.md``).
     walk_per_sqrt_s : tuple of 2 float
-        Random-walk rates [1/sqrt(s)]: how fast the scales may wander
-        (floor, load, tyre wear); 1e-4 is 0.1% in 100 s.
+        Random-walk rates of ``(k_v, k_w)`` [1/sqrt(s)]: how fast the scales
+        may wander (floor, load, tyre wear); 1e-4 is 0.1% in 100 s.
     plausible_probability : float
-        Chi-square probability (2 degrees of freedom) of the plausibility
+        Chi-square probability (3 degrees of freedom) of the plausibility
         test of the estimated scale errors against their prior spread: beyond
         it the filter resets them (:mod:`fusion.ekf.resets`; the default
-        ``1 - 1e-6`` is 5.3 standard deviations, 5.3% at the 1% prior).
+        ``1 - 1e-6`` is 5.5 standard deviations, 5.5% at the 1% prior).
+    ratio_prior_std : float
+        Start standard deviation of the wheels' diameter ratio (relative),
+        which sets ``kappa``'s: ``ratio_prior_std / b`` [rad/m] for wheel base
+        ``b`` (a ratio ``1 + r`` curves a straight run of equal counts by
+        ``r / b``). The rotation manoeuvre measures the wheels' *mean* scale
+        and says nothing of their ratio, so the prior is the tyres' own
+        tolerance: 1%, i.e. 0.043 rad/m on a Create 2's 0.235 m wheel base
+        (the issue-17 robot has exactly that).
+    ratio_walk_per_sqrt_s : float
+        Random-walk rate of the diameter ratio [1/sqrt(s)] (``kappa``'s is
+        this over ``b``); 1e-4, as for ``(k_v, k_w)``: 0.1% in 100 s.
 
     Raises
     ------
     FilterOptionError
         If a value is negative or not finite, a prior is zero, or
         ``plausible_probability`` is not in (0, 1).
+
     """
 
     prior_std: tuple[float, float] = (0.01, 0.01)
     walk_per_sqrt_s: tuple[float, float] = (1e-4, 1e-4)
     plausible_probability: float = 1.0 - 1e-6
+    ratio_prior_std: float = 0.01
+    ratio_walk_per_sqrt_s: float = 1e-4
 
     def __post_init__(self) -> None:
         values = (*self.prior_std, *self.walk_per_sqrt_s)
@@ -108,10 +126,28 @@ class ScaleErrors:
                 min(self.prior_std) <= 0:
             raise FilterOptionError(f"ScaleErrors needs positive priors and non-negative walk "
                                     f"rates, two of each, got {self}")
+        kp, kq = self.ratio_prior_std, self.ratio_walk_per_sqrt_s
+        if not (math.isfinite(kp) and kp > 0 and math.isfinite(kq) and kq >= 0):
+            raise FilterOptionError(f"ScaleErrors needs a positive ratio prior and a non-negative "
+                                    f"ratio walk rate, got {kp} and {kq}")
         p = self.plausible_probability
         if not (isinstance(p, (int, float)) and 0.0 < p < 1.0):
             raise FilterOptionError(f"ScaleErrors.plausible_probability must be in (0, 1), got "
                                     f"{self.plausible_probability}")
+
+    def prior_stds(self, wheel_base_m: float) -> tuple[float, float, float]:
+        """Prior standard deviations of ``(k_v, k_w, kappa [rad/m])`` for wheel base ``b`` [m].
+
+        Examples
+        --------
+        >>> [round(p, 4) for p in ScaleErrors().prior_stds(0.235)]
+        [0.01, 0.01, 0.0426]
+        """
+        return (*self.prior_std, self.ratio_prior_std / wheel_base_m)
+
+    def walk_rates(self, wheel_base_m: float) -> tuple[float, float, float]:
+        """Random-walk rates of ``(k_v, k_w, kappa)`` [1/sqrt(s), 1/sqrt(s), rad/m/sqrt(s)]."""
+        return (*self.walk_per_sqrt_s, self.ratio_walk_per_sqrt_s / wheel_base_m)
 
 
 def nis(innovation: np.ndarray, SI: np.ndarray) -> float:

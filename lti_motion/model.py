@@ -53,6 +53,7 @@ from lti_motion.arx_structure import (
 )
 from lti_motion.exceptions import (
     CalibrationError,
+    MissingEncoderScaleError,
     ModelFileError,
     NonFiniteError,
     ShapeError,
@@ -377,6 +378,62 @@ class MotionModel:
     def updated(self, **changes: Any) -> MotionModel:
         """A copy with some fields changed (validated again), e.g. ``m_per_tick``."""
         return dataclasses.replace(self, **changes)
+
+    def with_intrinsics(self, intrinsics: OdometryIntrinsics) -> MotionModel:
+        """A copy that maps counts with ``intrinsics`` and predicts the same counts.
+
+        The outputs are encoder body speeds, ``y = J n / dt`` for tick increments
+        ``n`` (:meth:`OdometryIntrinsics.jacobian`); new intrinsics give
+        ``y' = T y`` with ``T = J' J^-1`` from the same counts, so the outputs
+        are transformed by ``T`` (a similarity transform on the output space of
+        the innovations form, Ljung 1999, section 4.6): ``C' = T C``, ``D' = T D``,
+        ``K' = K T^-1``, ``R' = T R T^T``, the offset ``T c``, ARX ``A_k' = T A_k
+        T^-1``, ``B_j' = T B_j`` (FIR taps ``T h_i``, noise AR ``T Phi_k T^-1``);
+        ``A``, ``B`` and ``Q = alpha K R K^T`` are unchanged, and so is the one-step
+        predictor ``A - K C``. For a diagonal ``T`` this is
+        :func:`fusion.monitoring.rescale.rescaled_model`.
+
+        Parameters
+        ----------
+        intrinsics : OdometryIntrinsics
+            Each wheel's ground travel per tick and the wheel base, e.g. from
+            :meth:`fusion.ekf.ModelEKF.intrinsics_estimate` or
+            :func:`lti_motion.intrinsics_calibration.calibrate_intrinsics`.
+
+        Returns
+        -------
+        MotionModel
+            ``intrinsics`` set, ``m_per_tick`` their mean, ``wheel_base_m`` theirs.
+
+        Raises
+        ------
+        MissingEncoderScaleError
+            If this model has no encoder scale (nothing to transform from).
+        ValueError
+            If ``intrinsics`` is not an :class:`OdometryIntrinsics`.
+        """
+        if not isinstance(intrinsics, OdometryIntrinsics):
+            raise ValueError(f"intrinsics must be an OdometryIntrinsics, got "
+                             f"{type(intrinsics).__name__}")
+        old = self.encoder_intrinsics
+        if old is None:
+            raise MissingEncoderScaleError.needed_by("moving the model to new intrinsics")
+        T = intrinsics.jacobian() @ np.linalg.inv(old.jacobian())
+        T_inv = np.linalg.inv(T)
+        coef = {}
+        for name, arr in self.coefficients.items():
+            arr = np.asarray(arr, dtype=float)
+            if name in ("a", "noise_a") and arr.size:      # output lags: T A_k T^-1
+                coef[name] = T @ arr @ T_inv
+            elif name in ("b", "taps") and arr.size:       # input lags: T B_j
+                coef[name] = T @ arr
+            else:
+                coef[name] = arr
+        r = T @ self.R @ T.T
+        return self.updated(C=T @ self.C, D=T @ self.D, K=self.K @ T_inv, R=0.5 * (r + r.T),
+                            coefficients=coef, offset_speeds=T @ self.offset_speeds,
+                            intrinsics=intrinsics, m_per_tick=intrinsics.m_per_tick,
+                            wheel_base_m=intrinsics.wheel_base_m)
 
     # -- prediction ------------------------------------------------------------------------
     def propagate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None

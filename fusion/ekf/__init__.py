@@ -9,14 +9,17 @@
   :class:`UpdateRecord`, :class:`FilterStats` and the landmark updates
   (``update_landmark``, ``update_landmarks``);
 - :mod:`fusion.ekf.resets`: the bounds on :class:`ModelEKF`'s scale-error states
-  and its resets (:class:`FilterReset`).
+  and its resets (:class:`FilterReset`);
+- :mod:`fusion.ekf.intrinsics_estimate`: the odometry intrinsics the scale errors
+  imply (:class:`IntrinsicsEstimate`, from :meth:`ModelEKF.intrinsics_estimate`).
 """
 
 from fusion.ekf.functions import FilterModel
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import FilterReset
 from fusion.ekf.updates import FilterStats, UpdateRecord
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 
-__all__ = ["FilterModel", "FilterReset", "FilterStats", "ModelEKF", "UpdateRecord",
-           "VelocityModelEKF"]
+__all__ = ["FilterModel", "FilterReset", "FilterStats", "IntrinsicsEstimate", "ModelEKF",
+           "UpdateRecord", "VelocityModelEKF"]

@@ -4,14 +4,15 @@
 functions; users who keep their own ``ExtendedKalmanFilter`` or
 ``UnscentedKalmanFilter`` call them directly (see Examples).
 
-**State** (``n = nz + 7`` entries, :class:`FilterModel` gives the slices)::
+**State** (``n = nz + 8`` entries, :class:`FilterModel` gives the slices)::
 
-    x = (x, y, theta,  k_v, k_w,  z[k+1],  v, w)
-         pose p[k]     scale c    model    speeds s[k]
+    x = (x, y, theta,  k_v, k_w, kappa,  z[k+1],  v, w)
+         pose p[k]     scale errors c    model    speeds s[k]
 
 the pose (m, m, rad; heading continuous, not wrapped) at the end of sensor
-period ``k``; the relative scale errors of the ground speeds against the
-encoder speeds; the motion model's state; the body speeds over period ``k``
+period ``k``; the scale errors of the ground speeds against the encoder
+speeds (relative, relative, rad/m); the motion model's state; the body speeds
+over period ``k``
 [m/s, rad/s] (summed over the periods since the last fused encoder counts,
 see *Gated readings*).
 
@@ -47,18 +48,31 @@ from the model with covariance ``C P_zz C^T + R``, the pose takes it through
 **Pose noise.** Encoders count wheel rotation and cannot see the ground. The
 ground speeds are::
 
-    g[k] = ((1 + k_v) v[k], (1 + k_w) w[k]) + eta[k],   eta ~ N(0, R_slip(s))
+    g[k] = D_c s[k] + eta[k],   D_c = [[1 + k_v, 0      ],   eta ~ N(0, R_slip(s))
+                                       [kappa,   1 + k_w]]
     p[k] = pose_step(p[k-1], g[k])                      (paper eq. 11)
     c[k] = c[k-1] + b[k],                                b ~ N(0, diag(q_c) dt)
 
-``c = (k_v, k_w)`` are what a scale calibration leaves behind (a few tenths
-of a percent on the simulator, ``docs/ekf.md``: wheel base, creep on turns);
-being systematic they grow the pose error linearly in distance, not
-as a random walk, so they are states (odometry auto-calibration, Larsen et al.
-1998), slow random walks with a prior of 1% (:class:`ScaleErrors`). Encoders
-cannot observe them: without absolute measurements their estimate stays 0
-(the pose is odometry's) while their variance makes the pose covariance grow
-as drift does; landmarks estimate them. ``eta`` is white slip
+``c = (k_v, k_w, kappa)`` are what the encoder mapping (the model's
+:attr:`~lti_motion.model.MotionModel.encoder_intrinsics`) leaves behind: a
+scale calibration's few tenths of a percent of travel and turn (``docs/ekf.md``:
+wheel base, creep on turns), and ``kappa`` [rad/m], the curvature a straight
+run of equal counts drives, i.e. a left/right diameter ratio (UMBmark's "type
+B" error; the definition, exact for per-wheel scales and a wheel base, is
+:mod:`lti_motion.intrinsics`, *Scale errors*:
+``ds_g = (1 + k_v) ds + kappa b' b dtheta / 4``,
+``dtheta_g = (1 + k_w) dtheta + kappa ds``). The filter drops the second-order
+term ``kappa b' b w / 4`` of the ground speed: at a 1% ratio it moves a Create
+2 by 0.6 mm per radian turned, far below a landmark's noise; the estimated
+errors still map exactly to intrinsics
+(:meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected`). Being systematic
+they grow the pose error linearly in distance, not as a random walk, so they
+are states (odometry auto-calibration, Larsen et al. 1998), slow random walks
+(:class:`ScaleErrors`: a prior of 1% for the travel and the turn, and a 1%
+diameter ratio, ``0.01 / b`` rad/m, for ``kappa``). Encoders cannot observe
+them: without absolute measurements their estimate stays 0 (the pose is
+odometry's) while their variance makes the pose covariance grow as drift
+does; landmarks estimate them. ``eta`` is white slip
 (:class:`SlipNoise`: ``sigma_v = v0 + a_v |v|``, ``sigma_w = w0 + a_w |w| +
 b_w |v|``, defaults from the simulator's floor roughness). The encoders'
 quantisation error is a difference of rounding errors: it does not
@@ -69,16 +83,17 @@ rejects (or a frame that is lost) loses no motion if the next counts are
 taken against the last *fused* ones. The speed state then accumulates,
 ``a[k] = a[k-1] + s[k]`` (``accumulate=True`` in :func:`predict_terms`), and
 the next reading measures the sum over the periods since, still linearly
-(``H`` unchanged, counts times ``m_per_tick / dt_s``); the cross-covariances
+(``H`` unchanged, counts through the intrinsics' Jacobian over ``dt_s``); the cross-covariances
 carry the correction to the pose of every period in the sum. A single-frame
 spike is rejected and the motion recovered at the next frame; a reading
 rejected while it spans several periods (16 by default) renews the reference:
 a stuck encoder's lost ticks are lost for good.
 
 **Linearisation.** With ``F_p``, ``F_s`` the pose step's Jacobians with respect
-to the pose and to the ground speeds at ``g_hat``
-(:func:`lti_motion.kinematics.pose_step_jacobians`), ``D_c = diag(1 + k_v,
-1 + k_w)`` and ``D_s = diag(v, w)``::
+to the pose and to the ground speeds at ``g_hat = D_c s_hat``
+(:func:`lti_motion.kinematics.pose_step_jacobians`), ``D_c`` as above and
+``D_s = dg/dc = [[v, 0, 0], [0, w, v]]`` (``g`` is bilinear in ``c`` and
+``s``: ``dg/ds = D_c``)::
 
     F = [[F_p, F_s D_s, F_s D_c C, 0  ],   Q = G2 blkdiag(R, R_slip) G2^T + Q_c
          [0,   I,       0,         0  ],   G2 = [[F_s D_c, F_s],
@@ -88,7 +103,11 @@ to the pose and to the ground speeds at ``g_hat``
 
 (``r = 1`` when accumulating, else 0).
 
-``Q_c = blkdiag(0, diag(q_c) dt, Q - K R K^T, 0)``. ``A``, ``C``, ``K`` and
+``Q_c = blkdiag(0, diag(q_c) dt, Q - K R K^T, 0)``, ``q_c`` the three walk
+rates. Written out, with ``F_s = [[a, b], [c, d], [0, dt]]`` the pose rows are
+``F_s D_c = [[a (1+k_v) + b kappa, b (1+k_w)], [c (1+k_v) + d kappa, d (1+k_w)],
+[dt kappa, dt (1+k_w)]]`` and ``F_s D_s = [[a v, b w, b v], [c v, d w, d v],
+[0, dt w, dt v]]``. ``A``, ``C``, ``K`` and
 ``Q_c`` are constant and precomputed (:class:`FilterModel`); per step only the
 pose rows of ``F`` and ``G2`` change: no numerical Jacobian.
 
@@ -154,7 +173,8 @@ from fusion.range_bearing import (
 )
 from fusion.sensor_pose import SensorPose
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.kinematics import body_from_wheel, sinc_and_derivative, wrap_angle
+from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.kinematics import sinc_and_derivative, wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -201,8 +221,8 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
 
 #: Where the pose and the scale errors sit; the model state follows, the speeds close.
 POSE = slice(0, 3)
-SCALES = slice(3, 5)
-_Z0 = 5
+SCALES = slice(3, 6)
+_Z0 = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,13 +242,24 @@ class FilterModel:
         state, ``(v [m/s], w [rad/s])``: a floor that keeps the update well
         posed; the model's ``R`` already holds the quantisation.
     m_per_tick : float, optional
-        Encoder scale [m/tick]; default ``model.m_per_tick``. Needed only
-        for :func:`encoder_speeds`.
+        Encoder scale of both wheels [m/tick], with the model's wheel base;
+        default the model's :attr:`~lti_motion.model.MotionModel.encoder_intrinsics`
+        (each wheel's scale and the wheel base, else both wheels at
+        ``model.m_per_tick``). Needed only for :func:`encoder_speeds`.
 
     Attributes
     ----------
     n, nz : int
-        State size ``nz + 7`` and model-state size.
+        State size ``nz + 8`` and model-state size.
+    intrinsics : OdometryIntrinsics or None
+        The counts-to-speeds mapping in use (None without an encoder scale);
+        the scale errors are relative to it.
+    m_per_tick : float or None
+        Its mean scale [m/tick].
+    scale_prior_std, scale_walk : tuple of 3 float
+        Prior standard deviations and walk rates of ``(k_v, k_w, kappa)``
+        (:meth:`ScaleErrors.prior_stds` at the intrinsics' wheel base, else
+        the model's).
     dt_s : float
         Sensor period [s].
     encoder_cov : ndarray, shape (2, 2)
@@ -236,7 +267,8 @@ class FilterModel:
     H_encoders : ndarray, shape (2, n)
         ``[0 0 0 I]``.
     ticks_to_speeds : ndarray, shape (2, 2) or None
-        Tick increments (left, right) of one period -> ``(v, w)``.
+        Tick increments (left, right) of one period -> ``(v, w)``: the
+        intrinsics' Jacobian over ``dt_s``.
     F_template, G_template, W_template, Q_const : ndarray
         Constant parts of ``F`` (n, n), ``G2`` (n, 4), ``blkdiag(R, 0)`` (4, 4)
         and ``Q_c`` (n, n) (module notes).
@@ -253,6 +285,9 @@ class FilterModel:
     encoder_std: tuple[float, float] = (1e-5, 1e-4)
     m_per_tick: float | None = None
     n: int = field(init=False)
+    intrinsics: OdometryIntrinsics | None = field(init=False)
+    scale_prior_std: tuple[float, float, float] = field(init=False)
+    scale_walk: tuple[float, float, float] = field(init=False)
     nz: int = field(init=False)
     dt_s: float = field(init=False)
     encoder_cov: np.ndarray = field(init=False, repr=False)
@@ -269,29 +304,38 @@ class FilterModel:
         setf = object.__setattr__
         m = self.model
         nz = m.n_states
-        n = nz + 7
+        n = nz + 8
         zs, ss = slice(_Z0, _Z0 + nz), slice(_Z0 + nz, n)
         std = tuple(float(s) for s in self.encoder_std)
         if len(std) != 2 or not all(math.isfinite(s) and s > 0 for s in std):
             raise FilterOptionError(f"encoder_std must be two positive numbers, got {std}")
-        scale = m.m_per_tick if self.m_per_tick is None else float(self.m_per_tick)
-        if scale is not None and not (math.isfinite(scale) and scale > 0):
-            raise FilterOptionError(f"m_per_tick must be positive, got {scale}")
-        for name, value in (("m_per_tick", scale), ("encoder_std", std), ("n", n), ("nz", nz),
-                            ("dt_s", m.dt_s)):
+        if self.m_per_tick is None:
+            intrinsics = m.encoder_intrinsics
+        else:
+            scale = float(self.m_per_tick)
+            if not (math.isfinite(scale) and scale > 0):
+                raise FilterOptionError(f"m_per_tick must be positive, got {scale}")
+            intrinsics = OdometryIntrinsics.symmetric(m_per_tick=scale,
+                                                      wheel_base_m=m.wheel_base_m)
+        base = m.wheel_base_m if intrinsics is None else intrinsics.wheel_base_m
+        for name, value in (("m_per_tick", None if intrinsics is None else intrinsics.m_per_tick),
+                            ("intrinsics", intrinsics), ("encoder_std", std), ("n", n),
+                            ("nz", nz), ("dt_s", m.dt_s),
+                            ("scale_prior_std", self.scales.prior_stds(base)),
+                            ("scale_walk", self.scales.walk_rates(base))):
             setf(self, name, value)
         setf(self, "encoder_cov", _readonly(np.diag(np.square(std))))
         h = np.zeros((2, n))
         h[:, ss] = np.eye(2)
         setf(self, "H_encoders", _readonly(h))
-        # body speeds are linear in the tick increments: body_from_wheel of unit increments
-        setf(self, "ticks_to_speeds", None if scale is None else _readonly(
-            body_from_wheel(np.eye(2) * (scale / m.dt_s), wheel_base_m=m.wheel_base_m).T))
+        # body speeds are linear in the tick increments (Censi et al. 2013, sec. III)
+        setf(self, "ticks_to_speeds", None if intrinsics is None else _readonly(
+            intrinsics.jacobian() / m.dt_s))
         setf(self, "ACD", _readonly(np.vstack([m.A, m.C])))
         setf(self, "BD", _readonly(np.vstack([m.B, m.D])))
         f = np.zeros((n, n))
         f[POSE, POSE] = np.eye(3)
-        f[SCALES, SCALES] = np.eye(2)
+        f[SCALES, SCALES] = np.eye(3)
         f[zs, zs] = m.A
         f[ss, zs] = m.C
         setf(self, "F_template", _readonly(f))
@@ -311,7 +355,7 @@ class FilterModel:
         extra = (evecs * np.clip(evals, 0.0, None)) @ evecs.T
         q = np.zeros((n, n))
         q[zs, zs] = 0.5 * (extra + extra.T)
-        q[SCALES, SCALES] = np.diag(np.square(self.scales.walk_per_sqrt_s) * m.dt_s)
+        q[SCALES, SCALES] = np.diag(np.square(self.scale_walk) * m.dt_s)
         setf(self, "Q_const", _readonly(q))
 
     @property
@@ -404,24 +448,26 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     v, w = tail[nz:].tolist()
     if accumulate:
         x_new[_Z0 + nz:] += x[_Z0 + nz:]
-    px, py, theta, k_v, k_w = x[:_Z0].tolist()
+    px, py, theta, k_v, k_w, kappa = x[:_Z0].tolist()
     c_v, c_w = 1.0 + k_v, 1.0 + k_w
-    vg, wg = c_v * v, c_w * w               # ground speeds
+    vg, wg = c_v * v, c_w * w + kappa * v   # ground speeds g = D_c s (module notes)
     h = 0.5 * wg * dt
     sinc, dsinc = sinc_and_derivative(h)
     mid = theta + h
     cm, sm = math.cos(mid), math.sin(mid)
     chord = vg * dt * sinc                  # paper eq. 11, chord form
-    x_new[:_Z0] = (px + chord * cm, py + chord * sm, theta + 2.0 * h, k_v, k_w)
+    x_new[:_Z0] = (px + chord * cm, py + chord * sm, theta + 2.0 * h, k_v, k_w, kappa)
     k = 0.5 * vg * dt * dt
     a, b = dt * sinc * cm, k * (dsinc * cm - sinc * sm)      # F_s = d pose / d g
     c, d = dt * sinc * sm, k * (dsinc * sm + sinc * cm)
     g2 = np.array(fm.G_template)
-    g2[:3] = ((a * c_v, b * c_w, a, b), (c * c_v, d * c_w, c, d), (0.0, dt * c_w, 0.0, dt))
+    g2[:3] = ((a * c_v + b * kappa, b * c_w, a, b),          # [F_s D_c, F_s]
+              (c * c_v + d * kappa, d * c_w, c, d),
+              (dt * kappa, dt * c_w, 0.0, dt))
     F = np.array(fm.F_template) if out_F is None else out_F
-    F[:3, :_Z0] = ((1.0, 0.0, -chord * sm, a * v, b * w),  # [F_p, F_s D_s]
-                   (0.0, 1.0, chord * cm, c * v, d * w),
-                   (0.0, 0.0, 1.0, 0.0, dt * w))
+    F[:3, :_Z0] = ((1.0, 0.0, -chord * sm, a * v, b * w, b * v),  # [F_p, F_s D_s]
+                   (0.0, 1.0, chord * cm, c * v, d * w, d * v),
+                   (0.0, 0.0, 1.0, 0.0, dt * w, dt * v))
     F[:3, _Z0:_Z0 + nz] = g2[:3, :2] @ fm.model.C             # F_s D_c C
     F[n - 2, n - 2] = F[n - 1, n - 1] = 1.0 if accumulate else 0.0
     sv, sw = fm.slip.stds(v, w)
@@ -520,8 +566,9 @@ def encoder_speeds(ticks: np.ndarray, fm: FilterModel) -> np.ndarray:
     -------
     ndarray, shape (2,)
         Rollover-safe: increments by :func:`lti_motion.odometry.tick_deltas`,
-        speeds by :func:`lti_motion.kinematics.body_from_wheel` (as the 2 x 2
-        matrix ``fm.ticks_to_speeds``, increments times ``m_per_tick / dt_s``).
+        speeds through the intrinsics (each wheel's scale and the wheel base)
+        as the 2 x 2 matrix ``fm.ticks_to_speeds``, ``J / dt_s``
+        (:meth:`lti_motion.intrinsics.OdometryIntrinsics.jacobian`).
 
     Raises
     ------
@@ -684,7 +731,7 @@ def state_mean(sigmas: np.ndarray, Wm: np.ndarray) -> np.ndarray:
 # -- start ------------------------------------------------------------------------------------
 def initial_state(fm: FilterModel, pose: np.ndarray, *, z: np.ndarray | None = None
                   ) -> np.ndarray:
-    """A start state: the pose, zero scale errors, the model state (zeros: at rest), ``C z``.
+    """A start state: the pose, zero scale errors (3), the model state (zeros: at rest), ``C z``.
 
     Returns
     -------
@@ -704,7 +751,7 @@ def initial_state(fm: FilterModel, pose: np.ndarray, *, z: np.ndarray | None = N
                                     f"and {zz.shape}")
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(zz))):
         raise NonFiniteInputError("the start pose and model state must be finite")
-    return np.concatenate([pose, np.zeros(2), zz, fm.model.C @ zz + fm.model.offset_speeds])
+    return np.concatenate([pose, np.zeros(3), zz, fm.model.C @ zz + fm.model.offset_speeds])
 
 
 def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] = (0.01, 0.01,
@@ -714,7 +761,7 @@ def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] 
     Parameters
     ----------
     fm : FilterModel
-        Layout (``fm.scales.prior_std`` for the scale errors).
+        Layout (``fm.scale_prior_std`` for the three scale errors).
     pose_std : tuple of 3 float
         ``(x [m], y [m], theta [rad])`` standard deviations.
     z_cov : ndarray, shape (nz, nz), optional
@@ -746,7 +793,7 @@ def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] 
     zs, ss = fm.model_slice, fm.speed_slice
     p = np.zeros((fm.n, fm.n))
     p[POSE, POSE] = np.diag(std ** 2)
-    p[SCALES, SCALES] = np.diag(np.square(fm.scales.prior_std))
+    p[SCALES, SCALES] = np.diag(np.square(fm.scale_prior_std))
     p[zs, zs] = pz
     p[zs, ss] = pz @ c.T
     p[ss, zs] = c @ pz

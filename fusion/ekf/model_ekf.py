@@ -69,6 +69,7 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
     DivergenceWatch,
@@ -84,6 +85,7 @@ from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRec
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -101,7 +103,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     Parameters
     ----------
     model : MotionModel
-        The calibrated model (its ``m_per_tick`` scales the encoders).
+        The calibrated model (its :attr:`~lti_motion.model.MotionModel.encoder_intrinsics`,
+        each wheel's scale and the wheel base, map the encoder counts).
     initial_pose : array_like, shape (3,)
         Start pose ``(x [m], y [m], theta [rad])``.
     pose_std : tuple of 3 float
@@ -115,11 +118,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         White ground-versus-encoder speed noise (:mod:`fusion.ekf.functions`).
     scales : ScaleErrors, optional
         Prior, drift and plausibility bound of the scale-error states
-        ``(k_v, k_w)`` (:mod:`fusion.ekf.resets`).
+        ``(k_v, k_w, kappa)`` (:mod:`fusion.ekf.resets`).
     encoder_std : tuple of 2 float
         Floor of the encoder reading noise ``(v [m/s], w [rad/s])``.
     m_per_tick : float, optional
-        Encoder scale, if the model has none.
+        Encoder scale of both wheels, if the model has none (it replaces the
+        model's intrinsics).
     gate_probability : float or None
         Chi-square gate of every update (0.999: a good reading is rejected
         once in a thousand); ``None`` fuses everything.
@@ -174,7 +178,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     ------
     FilterOptionError, MeasurementShapeError
         For invalid options (a scale prior whose plausibility bound reaches
-        the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR`, too).
+        the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR` or
+        :data:`~fusion.ekf.resets.MAX_RATIO_ERROR`, too).
 
     Examples
     --------
@@ -240,8 +245,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if not max_jump_ticks > 0:
             raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
         self.max_jump_ticks = float(max_jump_ticks)
-        self._bound = ScaleBound.from_scales(fm.scales)
-        self._inv_prior_var = (1.0 / self._bound.prior_var[0], 1.0 / self._bound.prior_var[1])
+        self._bound = ScaleBound.from_scales(
+            fm.scales, wheel_base_m=model.wheel_base_m if fm.intrinsics is None
+            else fm.intrinsics.wheel_base_m)
+        self._inv_prior_var = tuple(1.0 / v for v in self._bound.prior_var)
         self._watch = DivergenceWatch(diverged_after)
         self.resets: deque[FilterReset] = deque(maxlen=1000)
         self.n_resets = 0
@@ -260,6 +267,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s = float(t0_s)
         self._dt_s = fm.dt_s
         self._speed_at = fm.n - 2
+        self._t2s = None if fm.ticks_to_speeds is None else fm.ticks_to_speeds.tolist()
         # rows: counts of the last fused (or anchoring) frame, counts of the current frame
         self._tick_pair = np.zeros((2, 2), dtype=np.int64)
         self._have_ref = False
@@ -307,8 +315,38 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     @property
     def scale_errors(self) -> np.ndarray:
-        """Estimated relative scale errors ``(k_v, k_w)`` of ground against encoder speeds, (2,)."""
+        """Estimated scale errors ``(k_v, k_w, kappa [rad/m])`` of ground against encoder
+        motion, (3,) (:mod:`fusion.ekf.functions`, *Pose noise*)."""
         return self.x[SCALES].copy()
+
+    @property
+    def scale_bound(self) -> ScaleBound:
+        """The plausibility bound of the scale errors (:mod:`fusion.ekf.resets`)."""
+        return self._bound
+
+    def intrinsics_estimate(self) -> IntrinsicsEstimate:
+        """The odometry intrinsics the current scale errors say the robot has.
+
+        Returns
+        -------
+        IntrinsicsEstimate
+            ``fm.intrinsics.corrected(k_v, k_w, kappa)``
+            (:meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected`) with
+            the standard deviation of its diameter ratio from ``P``. Write it
+            into a model with :meth:`lti_motion.model.MotionModel.with_intrinsics`.
+
+        Raises
+        ------
+        lti_motion.exceptions.MissingEncoderScaleError
+            If the filter has no encoder scale.
+        ValueError
+            If the estimate is not a possible robot (a non-positive scale).
+        """
+        if self.fm.intrinsics is None:
+            raise MissingEncoderScaleError.needed_by(
+                "estimating the odometry intrinsics", keyword="m_per_tick=... to ModelEKF")
+        return intrinsics_estimate(self.fm.intrinsics, self.x[SCALES], self.P[SCALES, SCALES],
+                                   t_s=self.t_s)
 
     # -- predict ---------------------------------------------------------------------------------
     def predict_x(self, cmd_m_s: np.ndarray = 0) -> None:
@@ -357,10 +395,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
                                      PHt=PHt, force=force)
         if record.accepted:
             # d^2 at the prior's own spread is the largest over time: below the threshold there,
-            # the scales are plausible (and inside the physical bound); two products a step
-            k_v, k_w = self.x[SCALES].tolist()
-            if k_v * k_v * self._inv_prior_var[0] + k_w * k_w * self._inv_prior_var[1] > \
-                    self._bound.threshold:
+            # the scales are plausible (and inside the physical bounds); three products a step
+            k_v, k_w, kappa = self.x[SCALES].tolist()
+            iv, iw, ik = self._inv_prior_var
+            if k_v * k_v * iv + k_w * k_w * iw + kappa * kappa * ik > self._bound.threshold:
                 self._bound_scales(t)
         # a pose fix counts as a landmark of its own (each a new source): it places the robot
         if kind != "encoders" and self._watch.observe(
@@ -374,25 +412,27 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     def _bound_scales(self, t: float) -> None:
         """Reset implausible scale errors; clip them to the physical bound."""
-        k_v, k_w = self.x[SCALES].tolist()
-        d2 = scale_statistic(k_v, k_w, self._bound, t - self._scales_since_s)
+        k_v, k_w, kappa = self.x[SCALES].tolist()
+        d2 = scale_statistic(k_v, k_w, kappa, self._bound, t - self._scales_since_s)
+        k_max = self._bound.max_kappa_rad_per_m
         if d2 > self._bound.threshold:
             self._reset(t, "scale_implausible", d2, self._bound.threshold)
-        elif abs(k_v) > MAX_SCALE_ERROR or abs(k_w) > MAX_SCALE_ERROR:
+        elif abs(k_v) > MAX_SCALE_ERROR or abs(k_w) > MAX_SCALE_ERROR or abs(kappa) > k_max:
             x = self.x.copy()
-            x[SCALES] = np.clip(x[SCALES], -MAX_SCALE_ERROR, MAX_SCALE_ERROR)
+            x[SCALES] = np.clip(x[SCALES], (-MAX_SCALE_ERROR, -MAX_SCALE_ERROR, -k_max),
+                                (MAX_SCALE_ERROR, MAX_SCALE_ERROR, k_max))
             self.x = self.x_post = x
 
     def _reset(self, t: float, cause: ResetCause, statistic: float, threshold: float) -> None:
-        k_v, k_w = self.x[SCALES].tolist()
+        k_v, k_w, kappa = self.x[SCALES].tolist()
         self.x, self.P = reset_scales(self.x, self.P, self._bound)
         self.x_post, self.P_post = self.x, self.P
         self._scales_since_s = t
-        event = FilterReset(t, cause, statistic, threshold, (k_v, k_w))
+        event = FilterReset(t, cause, statistic, threshold, (k_v, k_w, kappa))
         self.resets.append(event)
         self.n_resets += 1
         _log.warning("filter reset at t=%.3f s: %s (%.3g > %.3g), scale errors were "
-                     "(%.4f, %.4f)", t, cause, statistic, threshold, k_v, k_w)
+                     "(%.4f, %.4f, %.4f rad/m)", t, cause, statistic, threshold, k_v, k_w, kappa)
 
     # -- updates ---------------------------------------------------------------------------------
     @staticmethod
@@ -452,7 +492,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         pair[1] = ticks
         jump = self._frame_jump(ticks)
         speeds = self.x[self._speed_at:]
-        y = encoder_speeds(pair, self.fm)           # summed over `periods` periods
+        y = self._span_speeds()                     # summed over `periods` periods
         verdict = "young"
         if periods >= self.reanchor_periods:
             verdict = span_verdict(tick_deltas(pair, axis=0)[0],
@@ -468,6 +508,18 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         else:
             self._span_jump = max(self._span_jump, jump)
         return record
+
+    def _span_speeds(self) -> np.ndarray:
+        """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
+        arithmetic (it runs at every reading): rollover-safe increments as
+        :func:`lti_motion.odometry.tick_deltas`, times ``fm.ticks_to_speeds``."""
+        if self._t2s is None:
+            return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
+        (l0, r0), (l1, r1) = self._tick_pair.tolist()
+        dl = (l1 - l0 + 32768) % 65536 - 32768
+        dr = (r1 - r0 + 32768) % 65536 - 32768
+        (a, b), (c, d) = self._t2s
+        return np.array((a * dl + b * dr, c * dl + d * dr))
 
     def _frame_jump(self, ticks: np.ndarray) -> float:
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's

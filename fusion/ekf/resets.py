@@ -1,7 +1,7 @@
 """Bounds on the model EKF's scale-error states, and the resets that stop a filter running away.
 
-:class:`fusion.ekf.ModelEKF` carries the relative scale errors ``c = (k_v,
-k_w)`` of ground against encoder speeds as random walks
+:class:`fusion.ekf.ModelEKF` carries the scale errors ``c = (k_v, k_w,
+kappa)`` of ground against encoder speeds as random walks
 (:mod:`fusion.ekf.functions`, *Pose noise*). Nothing in the Kalman update
 keeps them physical: an encoder that reads motion while landmarks say the
 robot stands still (a bias at rest) is best explained by ``k_v -> -1``, a
@@ -15,18 +15,22 @@ filter's own model the scale errors are ``c(t) ~ N(0, diag(sigma(t)^2))``
 with ``sigma_i(t)^2 = p_i^2 + q_i^2 (t - t_0)`` (prior ``p``, walk rate ``q``,
 time since the start or the last reset ``t - t_0``). The estimate has at most
 that spread (its covariance is the prior's minus the information gained), so
-``d^2 = sum_i (k_i / sigma_i(t))^2`` is at most chi-square with 2 degrees of
-freedom (Bar-Shalom, Li & Kirubarajan 2001, section 5.4.2, the NEES test on a
-part of the state). ``d^2`` above the ``plausible_probability`` quantile
-(:class:`~fusion.noise.ScaleErrors`, default ``1 - 1e-6``: ``d^2 > 27.6``,
-5.3 sigma, 5.3% at the 1% prior) is implausible: the scale states are reset
-to their prior (:func:`reset_scales`), counted, logged, and reported as a
-:class:`FilterReset`. Besides, each ``|k_i|`` is clipped to
-:data:`MAX_SCALE_ERROR` (0.5: a ground speed between half and one and a half
-times the encoder speed; ``k = -1`` would be wheels turning on the spot
-without moving the robot). With the default prior the reset comes first;
-the clip is the bound for a wide prior. Clipping moves the mean only, so the
-covariance stays as it was, positive semi-definite.
+``d^2 = sum_i (k_i / sigma_i(t))^2`` over ``(k_v, k_w, kappa)`` is at most
+chi-square with 3 degrees of freedom (Bar-Shalom, Li & Kirubarajan 2001,
+section 5.4.2, the NEES test on a part of the state). ``d^2`` above the
+``plausible_probability`` quantile (:class:`~fusion.noise.ScaleErrors`,
+default ``1 - 1e-6``: ``d^2 > 30.7``, 5.5 sigma, 5.5% at the 1% prior, a
+diameter ratio 5.5% off for ``kappa`` alone) is implausible: the scale states
+are reset to their prior (:func:`reset_scales`), counted, logged, and reported
+as a :class:`FilterReset`. Besides, the states are clipped to what a robot
+can be: ``|k_v|, |k_w|`` to :data:`MAX_SCALE_ERROR` (0.5: a ground speed
+between half and one and a half times the encoder speed; ``k = -1`` would be
+wheels turning on the spot without moving the robot) and ``|kappa|`` to
+:data:`MAX_RATIO_ERROR` over the wheel base (0.1: wheels whose diameters
+differ by 10%, more than any tyre wear or hair; 0.43 rad/m on a Create 2).
+With the default prior the reset comes first; the clip is the bound for a
+wide prior. Clipping moves the mean only, so the covariance stays as it was,
+positive semi-definite.
 
 **Divergence** (:class:`DivergenceWatch`). When ``n`` absolute readings in a
 row (landmark sightings, pose fixes) of at least two different landmarks (a
@@ -64,6 +68,7 @@ from fusion.exceptions import FilterOptionError
 from fusion.noise import ScaleErrors, gate_threshold
 
 __all__ = [
+    "MAX_RATIO_ERROR",
     "MAX_SCALE_ERROR",
     "DivergenceWatch",
     "FilterReset",
@@ -75,8 +80,12 @@ __all__ = [
     "widen_pose",
 ]
 
-#: Largest physically possible relative scale error ``|k|`` (module notes).
+#: Largest physically possible relative scale error ``|k_v|``, ``|k_w|`` (module notes).
 MAX_SCALE_ERROR = 0.5
+
+#: Largest physically possible relative difference of the wheels' diameters, which bounds
+#: ``|kappa| <= MAX_RATIO_ERROR / b`` (module notes).
+MAX_RATIO_ERROR = 0.1
 
 ResetCause = Literal["scale_implausible", "diverged"]
 
@@ -96,15 +105,15 @@ class FilterReset:
         The evidence: ``d^2`` of the scale errors and its chi-square bound,
         or the number of readings gated in a row and the number that means
         divergence.
-    scale_errors : tuple of 2 float
-        ``(k_v, k_w)`` just before the reset.
+    scale_errors : tuple of 3 float
+        ``(k_v, k_w, kappa [rad/m])`` just before the reset.
     """
 
     t_s: float
     cause: ResetCause
     statistic: float
     threshold: float
-    scale_errors: tuple[float, float]
+    scale_errors: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -113,52 +122,67 @@ class ScaleBound:
 
     Attributes
     ----------
-    prior_var : tuple of 2 float
-        ``p_i^2``, the prior variances of ``(k_v, k_w)``.
-    walk_var_per_s : tuple of 2 float
-        ``q_i^2`` [1/s].
+    prior_var : tuple of 3 float
+        ``p_i^2``, the prior variances of ``(k_v, k_w, kappa)``.
+    walk_var_per_s : tuple of 3 float
+        ``q_i^2`` [1/s, 1/s, (rad/m)^2/s].
     threshold : float
-        ``chi2.ppf(plausible_probability, 2)``.
+        ``chi2.ppf(plausible_probability, 3)``.
+    max_kappa_rad_per_m : float
+        The physical bound of ``|kappa|``, ``MAX_RATIO_ERROR / b`` [rad/m].
 
     Raises
     ------
     FilterOptionError
-        If the bound reaches :data:`MAX_SCALE_ERROR` at the prior (the test
-        could never fire before the clip).
+        If the bound reaches :data:`MAX_SCALE_ERROR` or :data:`MAX_RATIO_ERROR`
+        at the prior (the test could never fire before the clip).
 
     Examples
     --------
-    >>> b = ScaleBound.from_scales(ScaleErrors())
+    >>> b = ScaleBound.from_scales(ScaleErrors(), wheel_base_m=0.235)
     >>> round(b.threshold, 2), round(math.sqrt(b.threshold * b.prior_var[0]), 4)
-    (27.63, 0.0526)
+    (30.66, 0.0554)
+    >>> round(b.max_kappa_rad_per_m, 3)
+    0.426
     """
 
-    prior_var: tuple[float, float]
-    walk_var_per_s: tuple[float, float]
+    prior_var: tuple[float, float, float]
+    walk_var_per_s: tuple[float, float, float]
     threshold: float
+    max_kappa_rad_per_m: float
 
     @classmethod
-    def from_scales(cls, scales: ScaleErrors) -> ScaleBound:
-        """The bound of ``scales`` (its prior, walk and ``plausible_probability``)."""
-        threshold = gate_threshold(scales.plausible_probability, 2)
+    def from_scales(cls, scales: ScaleErrors, *, wheel_base_m: float) -> ScaleBound:
+        """The bound of ``scales`` (its priors, walks and ``plausible_probability``) for a
+        robot of wheel base ``wheel_base_m`` [m] (the unit of ``kappa``'s prior)."""
+        if not (math.isfinite(wheel_base_m) and wheel_base_m > 0):
+            raise FilterOptionError(f"wheel_base_m must be positive, got {wheel_base_m}")
+        threshold = gate_threshold(scales.plausible_probability, 3)
         widest = math.sqrt(threshold) * max(scales.prior_std)
-        if widest >= MAX_SCALE_ERROR:
+        widest_ratio = math.sqrt(threshold) * scales.ratio_prior_std
+        if widest >= MAX_SCALE_ERROR or widest_ratio >= MAX_RATIO_ERROR:
             raise FilterOptionError(
-                f"the scale-error prior {scales.prior_std} at plausible_probability "
-                f"{scales.plausible_probability} allows |k| up to {widest:.3g}, not below the "
-                f"physical bound {MAX_SCALE_ERROR}; give a smaller prior_std")
-        pv, pw = scales.prior_std
-        qv, qw = scales.walk_per_sqrt_s
-        return cls((pv * pv, pw * pw), (qv * qv, qw * qw), threshold)
+                f"the scale-error priors {scales.prior_std} and ratio prior "
+                f"{scales.ratio_prior_std} at plausible_probability "
+                f"{scales.plausible_probability} allow |k| up to {widest:.3g} and a ratio error "
+                f"up to {widest_ratio:.3g}, not below the physical bounds {MAX_SCALE_ERROR} and "
+                f"{MAX_RATIO_ERROR}; give smaller priors")
+        p = scales.prior_stds(wheel_base_m)
+        q = scales.walk_rates(wheel_base_m)
+        return cls(tuple(v * v for v in p), tuple(v * v for v in q), threshold,
+                   MAX_RATIO_ERROR / wheel_base_m)
 
 
-def scale_statistic(k_v: float, k_w: float, bound: ScaleBound, elapsed_s: float) -> float:
+def scale_statistic(k_v: float, k_w: float, kappa: float, bound: ScaleBound,
+                    elapsed_s: float) -> float:
     """``d^2 = sum_i k_i^2 / (p_i^2 + q_i^2 t)``: the scale errors against their prior spread.
 
     Parameters
     ----------
     k_v, k_w : float
         Estimated relative scale errors.
+    kappa : float
+        Estimated curvature error [rad/m].
     bound : ScaleBound
         Prior and walk variances.
     elapsed_s : float
@@ -167,18 +191,18 @@ def scale_statistic(k_v: float, k_w: float, bound: ScaleBound, elapsed_s: float)
     Returns
     -------
     float
-        At most chi-square with 2 degrees of freedom under the filter's model
+        At most chi-square with 3 degrees of freedom under the filter's model
         (module notes); compare with ``bound.threshold``.
 
     Examples
     --------
-    >>> b = ScaleBound.from_scales(ScaleErrors())
-    >>> round(scale_statistic(0.01, -0.02, b, 0.0), 6)
-    5.0
+    >>> b = ScaleBound.from_scales(ScaleErrors(), wheel_base_m=0.25)
+    >>> round(scale_statistic(0.01, -0.02, 0.08, b, 0.0), 6)
+    9.0
     """
-    (pv, pw), (qv, qw) = bound.prior_var, bound.walk_var_per_s
+    (pv, pw, pk), (qv, qw, qk) = bound.prior_var, bound.walk_var_per_s
     t = max(elapsed_s, 0.0)
-    return k_v * k_v / (pv + qv * t) + k_w * k_w / (pw + qw * t)
+    return k_v * k_v / (pv + qv * t) + k_w * k_w / (pw + qw * t) + kappa * kappa / (pk + qk * t)
 
 
 def reset_scales(x: np.ndarray, P: np.ndarray, bound: ScaleBound) -> tuple[np.ndarray, np.ndarray]:
@@ -196,7 +220,7 @@ def reset_scales(x: np.ndarray, P: np.ndarray, bound: ScaleBound) -> tuple[np.nd
     Returns
     -------
     x, P : ndarray
-        New arrays: ``k = 0``, ``P_cc = diag(p^2)``, cross-covariances of ``c``
+        New arrays: ``c = 0``, ``P_cc = diag(p^2)``, cross-covariances of ``c``
         zero; the rest unchanged.
     """
     x = x.copy()

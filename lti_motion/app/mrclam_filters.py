@@ -95,7 +95,8 @@ MotionNoise = Literal["long_run", "legacy"]
 NO_SLIP = SlipNoise(v_frac=0.0, w_frac=0.0, w_per_v_rad_m=0.0, v_floor_m_s=0.0,
                     w_floor_rad_s=0.0)
 #: ``"long_run"``: scale-error states held at zero (module notes).
-HELD_SCALES = ScaleErrors(prior_std=(1e-9, 1e-9), walk_per_sqrt_s=(0.0, 0.0))
+HELD_SCALES = ScaleErrors(prior_std=(1e-9, 1e-9), walk_per_sqrt_s=(0.0, 0.0),
+                          ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0)
 
 
 @dataclass(frozen=True)

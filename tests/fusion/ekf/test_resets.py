@@ -16,6 +16,7 @@ from benchmarks.bench_bounds import BIAS_M_S, LANDMARKS, START, biased_drive
 from fusion.ekf.functions import SCALES
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import (
+    MAX_RATIO_ERROR,
     MAX_SCALE_ERROR,
     DivergenceWatch,
     ScaleBound,
@@ -50,11 +51,21 @@ def _is_psd(P):
 
 # -- the pure functions -----------------------------------------------------------------------
 def test_the_bound_is_the_chi_square_quantile_of_the_prior_spread():
-    b = ScaleBound.from_scales(ScaleErrors(prior_std=(0.01, 0.02), walk_per_sqrt_s=(1e-3, 0.0)))
-    assert b.threshold == pytest.approx(-2.0 * math.log(1e-6))       # chi2(2) tail is exp(-x/2)
-    assert scale_statistic(0.01, 0.02, b, 0.0) == pytest.approx(2.0)
-    # the walk widens the spread of k_v with time: 100 s add (1e-3)^2 * 100 = 1e-4
-    assert scale_statistic(0.01, 0.0, b, 100.0) == pytest.approx(0.5)
+    b = ScaleBound.from_scales(ScaleErrors(prior_std=(0.01, 0.02), walk_per_sqrt_s=(1e-3, 0.0),
+                                           ratio_prior_std=0.005, ratio_walk_per_sqrt_s=2e-4),
+                               wheel_base_m=0.25)
+    # chi2(3) tail: erfc(sqrt(x/2)) + sqrt(2x/pi) exp(-x/2)
+    x = b.threshold
+    tail = math.erfc(math.sqrt(x / 2)) + math.sqrt(2 * x / math.pi) * math.exp(-x / 2)
+    assert tail == pytest.approx(1e-6, rel=1e-6)
+    # kappa's prior is the ratio's over the wheel base: 0.005 / 0.25 = 0.02 rad/m
+    assert b.prior_var[2] == pytest.approx(0.02 ** 2)
+    assert b.max_kappa_rad_per_m == pytest.approx(0.1 / 0.25)
+    assert scale_statistic(0.01, 0.02, 0.02, b, 0.0) == pytest.approx(3.0)
+    # the walk widens the spread with time: 100 s add (1e-3)^2 * 100 = 1e-4 to k_v's variance
+    # and (2e-4 / 0.25)^2 * 100 = 6.4e-5 to kappa's
+    assert scale_statistic(0.01, 0.0, 0.0, b, 100.0) == pytest.approx(0.5)
+    assert scale_statistic(0.0, 0.0, 0.02, b, 100.0) == pytest.approx(4e-4 / (4e-4 + 6.4e-5))
 
 
 @pytest.mark.parametrize("bad", [None, 0.0, 1.0, 1.5, math.nan])
@@ -63,23 +74,27 @@ def test_scale_errors_refuse_an_impossible_plausibility_probability(bad):
         ScaleErrors(plausible_probability=bad)
 
 
-def test_a_prior_too_wide_for_the_physical_bound_is_refused(small_model):
-    with pytest.raises(FilterOptionError, match="physical bound"):
-        ModelEKF(small_model, scales=ScaleErrors(prior_std=(0.1, 0.01)))
+@pytest.mark.parametrize("scales", [ScaleErrors(prior_std=(0.1, 0.01)),
+                                    ScaleErrors(ratio_prior_std=0.02)])
+def test_a_prior_too_wide_for_the_physical_bound_is_refused(small_model, scales):
+    """5.5 sigma of a 10% prior reach |k| = 0.5; of a 2% ratio prior a 10% ratio."""
+    with pytest.raises(FilterOptionError, match="physical bounds"):
+        ModelEKF(small_model, scales=scales)
 
 
 def test_reset_puts_the_scales_back_at_their_prior_and_keeps_P_psd(rng):
-    n = 11
+    n = 12
     a = rng.standard_normal((n, n))
     P = a @ a.T + 1e-3 * np.eye(n)
     x = rng.standard_normal(n)
-    b = ScaleBound.from_scales(ScaleErrors(prior_std=(0.01, 0.02)))
+    b = ScaleBound.from_scales(ScaleErrors(prior_std=(0.01, 0.02)), wheel_base_m=0.25)
     x2, P2 = reset_scales(x, P, b)
-    assert np.all(x2[SCALES] == 0) and np.all(np.delete(x2, [3, 4]) == np.delete(x, [3, 4]))
-    assert np.allclose(P2[SCALES, SCALES], np.diag([1e-4, 4e-4]))
-    assert np.all(P2[SCALES, :3] == 0) and np.all(P2[5:, SCALES] == 0)
-    rest = np.delete(np.delete(P, [3, 4], 0), [3, 4], 1)
-    assert np.array_equal(np.delete(np.delete(P2, [3, 4], 0), [3, 4], 1), rest)
+    c = [3, 4, 5]
+    assert np.all(x2[SCALES] == 0) and np.all(np.delete(x2, c) == np.delete(x, c))
+    assert np.allclose(P2[SCALES, SCALES], np.diag([1e-4, 4e-4, 0.04 ** 2]))
+    assert np.all(P2[SCALES, :3] == 0) and np.all(P2[6:, SCALES] == 0)
+    rest = np.delete(np.delete(P, c, 0), c, 1)
+    assert np.array_equal(np.delete(np.delete(P2, c, 0), c, 1), rest)
     assert _is_psd(P2)
     W = widen_pose(P2, position_m=0.5, heading_rad=0.1)
     assert np.allclose(np.diag(W - P2)[:3], [0.25, 0.25, 0.01]) and _is_psd(W)
@@ -114,7 +129,7 @@ def test_an_implausible_scale_is_reset_counted_and_logged(small_model, caplog):
     ekf = ModelEKF(small_model, landmarks=LANDMARKS, initial_pose=START)
     ekf.predict(np.zeros(2))
     x = ekf.x.copy()
-    x[SCALES] = (-0.9, 0.0)              # what a bias at rest drove the filter to
+    x[SCALES] = (-0.9, 0.0, 0.0)         # what a bias at rest drove the filter to
     ekf.x = x
     with caplog.at_level("WARNING", logger="fusion.ekf.model_ekf"):
         rec = ekf.update_speeds(np.zeros(2))
@@ -123,7 +138,7 @@ def test_an_implausible_scale_is_reset_counted_and_logged(small_model, caplog):
     assert reset.cause == "scale_implausible" and reset.scale_errors[0] == pytest.approx(-0.9)
     assert reset.statistic > reset.threshold
     assert np.all(ekf.scale_errors == 0) and _is_psd(ekf.P)
-    assert np.allclose(ekf.P[SCALES, SCALES], np.diag([1e-4, 1e-4]))
+    assert np.allclose(ekf.P[SCALES, SCALES], np.diag([1e-4, 1e-4, (0.01 / 0.25) ** 2]))
     assert "filter reset" in caplog.text
 
 
@@ -132,11 +147,12 @@ def test_a_wide_prior_is_clipped_to_the_physical_bound(small_model):
     ekf = ModelEKF(small_model, scales=scales)
     ekf.predict(np.zeros(2))
     x = ekf.x.copy()
-    x[SCALES] = (0.6, 0.0)
+    x[SCALES] = (0.6, 0.0, -0.5)         # kappa -0.5 rad/m: a ratio 12.5% off at b = 0.25 m
     ekf.x = x
     ekf._scales_since_s = -1e12          # a spread so wide the test cannot fire: the clip acts
     ekf.update_speeds(np.zeros(2))
     assert ekf.scale_errors[0] == MAX_SCALE_ERROR and ekf.n_resets == 0
+    assert ekf.scale_errors[2] == pytest.approx(-MAX_RATIO_ERROR / 0.25)
 
 
 # -- the reproduction on the simulator ----------------------------------------------------------
@@ -146,7 +162,7 @@ def _filter(model, log, speeds, sightings):
     by_frame, none = sightings.by_index(), RangeBearing.empty()
     poses = np.empty((len(log.t_s), 3))
     poses[0] = ekf.pose
-    bound = ScaleBound.from_scales(ScaleErrors())
+    bound = ekf.scale_bound
     d2 = np.zeros(len(log.t_s))
     for k in range(1, len(log.t_s)):
         ekf.predict(log.cmd_m_s[k])
@@ -175,7 +191,8 @@ def test_an_encoder_bias_at_rest_with_dense_landmarks_does_not_run_the_filter_aw
     ekf, poses, d2 = _filter(route_model, log, speeds, sightings)
     odometry = integrate_poses(speeds, log.dt_s, initial_pose=START)
     # the scale states stay within their plausibility bound at every frame
-    assert d2.max() <= ScaleBound.from_scales(ScaleErrors()).threshold
+    assert d2.max() <= ScaleBound.from_scales(ScaleErrors(),
+                                              wheel_base_m=route_model.wheel_base_m).threshold
     assert ekf.n_resets >= 1
     # and the landmarks keep the pose: far better than the biased dead reckoning
     assert _ate(log, poses) < 0.4 * _ate(log, odometry)
