@@ -629,8 +629,9 @@ class ResidualMonitor:
         list of AlarmEvent
             A ``"scale_changed"`` alarm (test ``"scale_glr"``, the new scale in
             :attr:`AlarmEvent.scale`), or ``"wheel_drift"`` when the scale test's
-            curvature shadow raised it (the new intrinsics in ``scale.intrinsics``); none within ``refractory_s`` of a
-            sensor alarm (a stuck or spiking encoder explains the odometry error).
+            curvature shadow raised it (the new intrinsics in ``scale.intrinsics``);
+            none within ``refractory_s`` of a sensor alarm (a stuck or spiking
+            encoder explains the odometry error).
         """
         if self.scale is None:
             raise FilterOptionError("update_landmarks needs a ScaleMonitor: pass scale=...")
