@@ -388,6 +388,13 @@ class ScaleMonitor:
         """Standard deviation of :attr:`curvature_rad_per_m`, (n_robots,)."""
         return np.sqrt(self._P[:self.n_robots, _KAPPA, _KAPPA])
 
+    def intrinsics_estimate(self, robot: int = 0) -> OdometryIntrinsics:
+        """The intrinsics robot ``robot``'s main filter says it has now:
+        :attr:`intrinsics` corrected by its ``(k_v, k_w, kappa)``
+        (:meth:`OdometryIntrinsics.corrected`)."""
+        x = self._x[robot]
+        return self.intrinsics.corrected(float(x[_KV]), float(x[_KW]), float(x[_KAPPA]))
+
     @property
     def pose(self) -> np.ndarray:
         """Main filters' poses ``(x [m], y [m], theta [rad])``, (n_robots, 3)."""
