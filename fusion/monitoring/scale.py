@@ -8,10 +8,12 @@ it as an along-track error of the encoder odometry that grows with distance.
 
 **Filters.** :class:`ScaleMonitor` runs, per robot, an extended Kalman filter
 of landmark-aided odometry with the scale errors in the state,
-``x = (x, y, theta, k_v, k_w)``: the ground travel and turn are ``(1 + k_v)``
-and ``(1 + k_w)`` times the encoders' (:mod:`fusion.monitoring.scale_odometry`; the scale
-states of :class:`fusion.ekf.ModelEKF`). Batched over robots, it costs a few
-small matrix products a period, far less than the full model filter.
+``x = (x, y, theta, k_v, k_w, kappa)``: the ground travel and turn are ``(1 + k_v)``
+and ``(1 + k_w)`` times the encoders', and the heading turns ``kappa`` [rad/m] more
+per metre driven (one wheel's scale against the other's, :mod:`lti_motion.intrinsics`;
+:mod:`fusion.monitoring.scale_odometry`; the scale states of :class:`fusion.ekf.ModelEKF`).
+Batched over robots, it costs a few small matrix products a period, far less
+than the full model filter.
 
 **Test: window-limited mixture likelihood ratios.** Beside each *main*
 filter run ``n_shadows`` *shadows*. Shadow ``j`` restarts from the main filter
@@ -44,14 +46,37 @@ for the CUSUM in :mod:`fusion.monitoring.dynamics`): 1,800 starts an hour and
 1 an hour because the simulated robot is not the filter's linear-Gaussian
 model (measured: ``docs/monitor.md``).
 
+**Scale or curvature.** Each restart starts two shadows: a *scale* shadow,
+``(k_v, k_w)`` widened to ``restart_std`` (a floor), and a *curvature* shadow,
+``kappa`` widened to ``restart_curvature_std_rad_per_m`` (one wheel's diameter:
+hair wound on it, a soft tyre), each with its own eq. 1 and its own threshold
+from eq. 2 (budgets ``F`` and ``F_kappa``; both 0.1 an hour by default). Both
+are mixture likelihood ratios of the same data against the same null, so their
+difference is the log Bayes factor between the two alternatives. Rule: at a
+landmark update, of the shadows whose ``L`` exceeds their threshold ``h``, the one
+with the largest ``L - h`` raises the alarm, and its family names the change::
+
+    change = argmax over shadows s of (L_s - h_family(s)),  alarm if > 0      (eq. 3)
+
+(a ``"curvature"`` alarm is ``"wheel_drift"`` in :class:`~fusion.monitoring.ResidualMonitor`).
+On the route the two separate well: a floor changes travel and turns in place,
+which ``kappa`` cannot explain (it acts per metre driven), and a wheel curves
+the straights, which ``k_v, k_w`` cannot (``docs/monitor.md``). A 0.5% larger
+wheel also changes ``k_v`` and ``k_w`` by 0.25%, far below ``restart_std``; the
+curvature shadow keeps the main filter's ``k_v, k_w`` with their covariance.
+
 **Onset and new scale.** The alarm carries the alarming shadow's ``t0`` as
 the onset and its ``1 + k_v`` and ``1 + k_w``: the ground travel and turn per
 encoder travel and turn estimated from the data since ``t0`` alone (the new
 encoder scale is ``m_per_tick`` times it). The main filter then adopts that
 shadow's state, so the monitor follows the new floor and can see the next
-change. A floor change shows first in turns (``k_w``, bearings move fast)
-and in travel (``k_v``) a few seconds of driving later; an alarm raised by a
-turn carries a ``k_v`` whose standard deviation is still near ``restart_std``.
+change. The alarm carries the shadow's ``kappa`` and the intrinsics its
+``(k_v, k_w, kappa)`` say the robot has now
+(:meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected` of
+:attr:`ScaleMonitor.intrinsics`). A floor change shows first in turns
+(``k_w``, bearings move fast) and in travel (``k_v``) a few seconds of driving
+later; an alarm raised by a turn carries a ``k_v`` whose standard deviation is
+still near ``restart_std``.
 
 References
 ----------
