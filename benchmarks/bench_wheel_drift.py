@@ -88,7 +88,7 @@ def drift_runs(m_per_tick: float, *, n: int = N_FAULT_RUNS, seed0: int = 600,
     found, _ = alarms(m_per_tick, route_drives(m_per_tick, range(seed0, seed0 + n), faults))
     delays, wrong, before, errors = np.full(n, np.inf), 0, 0, []
     for i, (events, onset) in enumerate(zip(found, onsets, strict=True)):
-        before += sum(a.t_s < onset and a.change == "curvature" for a in events)
+        before += sum(int(a.t_s < onset and a.change == "curvature") for a in events)
         first = next((a for a in events if a.t_s >= onset), None)
         if first is None:
             continue
@@ -109,8 +109,8 @@ def nominal_alarms(m_per_tick: float, *, hours: float = NOMINAL_H, seed0: int = 
         drives = route_drives(m_per_tick, range(seed, seed + batch))
         seed += batch
         events = [a for robot in alarms(m_per_tick, drives)[0] for a in robot]
-        curvature += sum(a.change == "curvature" for a in events)
-        scale += sum(a.change == "scale" for a in events)
+        curvature += sum(int(a.change == "curvature") for a in events)
+        scale += sum(int(a.change == "scale") for a in events)
         seconds += float(drives.driving_s.sum())
     return curvature, scale, seconds / 3600.0
 
@@ -122,7 +122,7 @@ def bench_wheel_drift() -> list[Figure]:
     n = len(res.delays_s)
     med, p90 = delay_quantile(res.delays_s, 0.5), delay_quantile(res.delays_s, 0.9)
     curvature, scale, hours = nominal_alarms(m_per_tick)
-    count, total_h = curvature + res.false_before, hours + res.hours_before
+    count, total_h = int(curvature + res.false_before), float(hours + res.hours_before)
     err = float(np.median(res.curvature_errors)) if res.curvature_errors.size else float("nan")
     print("| fault | runs | detected (wheel_drift) | wrong kind (scale_changed) | median delay "
           "| p90 delay | curvature error at the alarm (median) |\n"
