@@ -36,13 +36,13 @@ CALIBRATED = ScaleOptions(curvature_prior_std_rad_per_m=0.003)
 
 
 def _straight_drive(*, curvature_after=0.0, ratio_after=1.0, change_k=400, steps=1600,
-                    rng=None, residual=False):
+                    rng=None, residual=False, options=CALIBRATED):
     """0.25 m/s along x, both encoders 7.5 ticks a period; after ``change_k`` the ground
     travel is ``ratio_after`` times the encoders' and the heading turns
     ``curvature_after`` [rad/m] per metre (paper eq. 11 for the true pose). Sightings
     every 8 periods, with 2% / 1 degree noise from ``rng``."""
     scale = ScaleMonitor(M_PER_TICK, WHEEL_BASE_M, LANDMARKS, initial_pose=(0.0, 0.0, 0.0),
-                         options=CALIBRATED)
+                         options=options)
     mon = ResidualMonitor(MonitorOptions(dt_s=0.015), scale=scale) if residual else None
     pose, found = np.zeros(3), []
     noise = LandmarkNoise()
@@ -84,6 +84,14 @@ def test_a_curvature_change_on_a_straight_line_is_a_curvature_alarm(kappa, rng):
     assert mon.curvature_rad_per_m[0] == pytest.approx(kappa, abs=0.005)
     est = mon.intrinsics_estimate(0)
     assert ref.scale_errors_to(est)[2] == pytest.approx(mon.curvature_rad_per_m[0])
+
+
+def test_with_the_default_prior_an_early_change_is_absorbed_not_alarmed(rng):
+    """The main filter's kappa starts at 0.01 rad/m: 1.5 m into the line it still learns,
+    and it follows a change there instead (docs/intrinsics.md, limits)."""
+    mon, found = _straight_drive(curvature_after=0.02, rng=rng, options=ScaleOptions())
+    assert found == []
+    assert mon.curvature_rad_per_m[0] == pytest.approx(0.02, abs=0.005)
 
 
 def test_a_scale_change_stays_a_scale_alarm(rng):
