@@ -149,7 +149,7 @@ class AlarmEvent:
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
         ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics),
-        ``"scale_glr"`` (scale), or the reset's cause ``"scale_implausible"``
+        ``"scale_glr"`` (scale and wheel drift), or the reset's cause ``"scale_implausible"``
         or ``"diverged"``.
     statistic, threshold : float
         The evidence: the test statistic and the threshold it crossed.
