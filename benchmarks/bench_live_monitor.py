@@ -51,7 +51,8 @@ from lti_motion.model import MotionModel
 DURATION_S = 60.0
 NOMINAL_H = 10.0
 BATCH = 60
-KINDS = ("glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed", "scale_changed")
+KINDS = ("glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed", "scale_changed",
+         "wheel_drift")
 
 
 def drives(model: MotionModel, seeds: Sequence[int], faults: Sequence[Fault] = ()) -> list:

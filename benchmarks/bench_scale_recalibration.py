@@ -89,7 +89,8 @@ def scale_recalibration_runs(model: MotionModel, *, n: int = 20, seed0: int = 30
     for k in range(drives.deltas.shape[1]):
         t = (k + 1) * p.period_s
         for a in mon.update(t, drives.deltas[:, k], drives.sightings[k]):
-            policies[a.robot].on_alarm(AlarmEvent(t, "scale_changed", "scale_glr", a.statistic,
+            kind = "wheel_drift" if a.change == "curvature" else "scale_changed"
+            policies[a.robot].on_alarm(AlarmEvent(t, kind, "scale_glr", a.statistic,
                                                   a.threshold, a.onset_s, scale=a))
         for i in (i for i, rc in enumerate(policies) if rc.scale_waiting):
             policies[i].update_scale(t, mon.scale_ratio[i], mon.scale_ratio_std[i],

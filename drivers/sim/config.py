@@ -382,7 +382,7 @@ class RobotParams:
 
 FaultKind = Literal[
     "floor", "payload", "motor", "delay", "encoder_spikes", "stuck_encoder", "stall",
-    "lost_frames",
+    "lost_frames", "wheel_diameter",
 ]
 
 
@@ -399,7 +399,11 @@ class Fault:
         transport delay), ``"encoder_spikes"`` (``rate_hz`` of spikes,
         ``magnitude_ticks``, ``wheel``), ``"stuck_encoder"`` (``wheel``: its
         count freezes), ``"stall"`` (``wheel``: blocked by an obstacle),
-        ``"lost_frames"`` (``probability`` of losing each frame).
+        ``"lost_frames"`` (``probability`` of losing each frame),
+        ``"wheel_diameter"`` (``diameter_change``: the ``wheel``'s true diameter
+        scaled by ``1 + diameter_change``, e.g. 0.005 for hair wound on it; its
+        encoder still counts its rotation, so the robot curves on equal counts,
+        at ``-diameter_change / b`` [rad/m] for the left wheel).
     t_s : float
         Onset [s] from the start of the simulation.
     duration_s : float
@@ -408,6 +412,8 @@ class Fault:
         Robots of a batch it applies to; ``None`` means all.
     floor, payload_kg, weakening, extra_periods, rate_hz, magnitude_ticks, probability
         Parameters of the kinds above.
+    diameter_change : float
+        Relative change of the wheel's diameter (``"wheel_diameter"``), within +-0.2.
     wheel : {"left", "right", "both"}
         The wheel a wheel fault hits.
     """
@@ -423,6 +429,7 @@ class Fault:
     rate_hz: float = 2.0
     magnitude_ticks: float = 150.0
     probability: float = 0.5
+    diameter_change: float = 0.005
     wheel: Literal["left", "right", "both"] = "both"
     extra: dict = field(default_factory=dict)
 
@@ -446,6 +453,9 @@ class Fault:
         if self.kind == "lost_frames" and not 0 <= self.probability <= 1:
             raise SimulatorError(
                 f"lost-frame probability must be in [0, 1], got {self.probability}")
+        if self.kind == "wheel_diameter" and not abs(self.diameter_change) <= 0.2:
+            raise SimulatorError(f"wheel diameter_change must be within -0.2 .. 0.2, got "
+                                 f"{self.diameter_change}")
 
     @property
     def wheels(self) -> tuple[int, ...]:

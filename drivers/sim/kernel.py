@@ -13,7 +13,10 @@ Model, per wheel ``i`` (left 0, right 1), all at the wheel rim:
   ``t_k + (d + extra + jitter) T``, never before an earlier command;
 - speed loop (every controller step): measured speed ``m`` is the wheel's
   rotation times its *nominal* radius (the firmware does not know the true
-  one) through a first-order filter; ``V = kff sp + kp (sp - m) + I - kd dm/dt``,
+  one, nor a change of it during the drive: a ``wheel_diameter`` fault, hair
+  wound on the wheel, scales the true diameter by the period's factor; the rim
+  speed is continuous at the change, the rotation per rim travel is not)
+  through a first-order filter; ``V = kff sp + kp (sp - m) + I - kd dm/dt``,
   clipped to the supply, with conditional integration (anti-windup: the
   integrator holds while the output saturates in the direction of the error);
 - DC motor, quasi-static armature: ``i = clip((V - g k u) / R, +-i_max)``,
@@ -83,8 +86,9 @@ P_CASTER = 37   # caster offset ahead of the axle [m]
 N_PARAMS = 38
 
 # --- per-period inputs (fault schedule) ----------------------------------------
-PP_FLOOR, PP_PAYLOAD, PP_GAIN0, PP_DELAY, PP_STUCK0, PP_STALL0 = 0, 1, 2, 4, 5, 7
-N_PERIOD = 9    # floor override, payload, gain L/R, extra delay, stuck L/R, stall L/R
+PP_FLOOR, PP_PAYLOAD, PP_GAIN0, PP_DELAY, PP_STUCK0, PP_STALL0, PP_DIAM0 = 0, 1, 2, 4, 5, 7, 9
+N_PERIOD = 11   # floor override, payload, gain L/R, extra delay, stuck L/R, stall L/R,
+                # diameter factor L/R (1 = the wheel's own diameter; a wheel_diameter fault)
 
 # --- per-period noise (standard draws) ------------------------------------------
 NZ_JITTER, NZ_ROUGH0, NZ_IR0 = 0, 1, 3
@@ -263,7 +267,7 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                 for wh in range(2):
                     # the firmware converts rotation to speed with the nominal diameter
                     meas_old = st[MEAS0 + wh]
-                    nominal = st[U0 + wh] / (1.0 + p[P_DERR0 + wh])
+                    nominal = st[U0 + wh] / ((1.0 + p[P_DERR0 + wh]) * pp[PP_DIAM0 + wh])
                     meas = meas_old + alpha * (nominal - meas_old)
                     st[MEAS0 + wh] = meas
                     sp = st[SP0 + wh]
@@ -317,8 +321,8 @@ def run_periods(state, queue, qinfo, params, floors, regions, walls, cmd, per_pe
                         torque += side * half_b * (f_trac - f_roll)
                         # encoder: rotation counted in the commanded direction
                         direction = -1.0 if st[SP0 + wh] < 0.0 else 1.0
-                        dtick = (abs(st[U0 + wh]) * h / (circ * (1.0 + p[P_DERR0 + wh]))
-                                 * p[P_TPR] * direction)
+                        diam = (1.0 + p[P_DERR0 + wh]) * pp[PP_DIAM0 + wh]
+                        dtick = abs(st[U0 + wh]) * h / (circ * diam) * p[P_TPR] * direction
                         st[TICK0 + wh] += dtick
                         if pp[PP_STUCK0 + wh] > 0.5:
                             st[OFF0 + wh] += dtick

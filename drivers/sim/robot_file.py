@@ -112,6 +112,7 @@ FAULT_FIELDS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "floor": ("floor",), "payload": ("payload_kg",), "motor": ("weakening", "wheel"),
     "delay": ("extra_periods",), "encoder_spikes": ("rate_hz", "magnitude_ticks", "wheel"),
     "stuck_encoder": ("wheel",), "stall": ("wheel",), "lost_frames": ("probability",),
+    "wheel_diameter": ("diameter_change", "wheel"),
 })
 
 #: How each fault parameter is checked, and its unit.
@@ -123,6 +124,7 @@ _FAULT_CHECKS = MappingProxyType({
     "rate_hz": Field("rate_hz", "nonnegative", "Hz"),
     "magnitude_ticks": Field("magnitude_ticks", "nonnegative", "ticks"),
     "probability": Field("probability", "probability", ""),
+    "diameter_change": Field("diameter_change", "error", "fraction of the diameter"),
 })
 
 _REGION_KEYS = ("xmin_m", "xmax_m", "ymin_m", "ymax_m", "floor")

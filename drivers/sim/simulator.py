@@ -349,6 +349,7 @@ class Simulator:
         per[:, :, K.PP_FLOOR] = -1.0
         per[:, :, K.PP_PAYLOAD] = np.array([p.payload_kg for p in self.params])[:, None]
         per[:, :, K.PP_GAIN0:K.PP_GAIN0 + 2] = 1.0
+        per[:, :, K.PP_DIAM0:K.PP_DIAM0 + 2] = 1.0
         spikes = np.zeros((self.n, n, 2))
         valid = np.ones((self.n, n), bool)
         t = (k0 + np.arange(n)) * self.dt_s
@@ -372,6 +373,8 @@ class Simulator:
                     per[..., K.PP_STUCK0 + wh][sel] = 1.0
                 elif f.kind == "stall":
                     per[..., K.PP_STALL0 + wh][sel] = 1.0
+                elif f.kind == "wheel_diameter":
+                    per[..., K.PP_DIAM0 + wh][sel] = 1.0 + f.diameter_change
                 elif f.kind == "encoder_spikes":
                     hit = events[..., wh] < f.rate_hz * self.dt_s
                     draw = events[..., 2 + wh]      # sign and size in one uniform draw

@@ -9,7 +9,8 @@
   interval) that dates a dynamics alarm;
 - :mod:`fusion.monitoring.wheel_check`: a flat encoder count called a stalled wheel
   or a stuck encoder from the motor currents;
-- :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test;
+- :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test
+  (a floor: ``scale_changed``; one wheel's diameter: ``wheel_drift``);
 - :mod:`fusion.monitoring.recalibration`, :mod:`fusion.monitoring.rescale`: the
   policy that answers alarms;
 - :mod:`fusion.monitoring.phase_one`: the dynamics null and the encoder gate fitted

@@ -173,7 +173,8 @@ class MonitoredFilter:
         if landmarks is not None:
             self.scale = ScaleMonitor(model.m_per_tick, model.wheel_base_m, landmarks,
                                       initial_pose=initial_pose, pose_std=pose_std,
-                                      landmark_noise=landmark_noise)
+                                      landmark_noise=landmark_noise,
+                                      intrinsics=model.encoder_intrinsics)
         self.monitor = ResidualMonitor(options, m_per_tick=model.m_per_tick, on_alarm=on_alarm,
                                        dynamics=self.dynamics, scale=self.scale)
         self._fuse = landmarks is not None and bool(fuse_landmarks)

@@ -47,6 +47,19 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   better. The encoder-speed fit [%] of a rescaled model is the old one's
   (both measured and predicted speeds scale), so the record holds the scale
   and wheel base before and after instead.
+- ``"wheel_drift"``: write the new odometry intrinsics into the model. The
+  scale test's curvature alarm carries them (``AlarmEvent.scale.intrinsics``,
+  :meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected` of the monitor's
+  intrinsics by the shadow's ``(k_v, k_w, kappa)``) with the curvature's
+  standard deviation. Rule: adopted at once when that standard deviation is at
+  most ``max_curvature_std_rad_per_m`` (default 0.004 rad/m, a 0.09% diameter
+  ratio on a Create 2, a fifth of the 0.5% change the alarm is tuned to): a copy
+  of the model with ``intrinsics`` the new ones, its ``m_per_tick`` and wheel base
+  their mean scale and wheel base, its outputs rescaled to predict the same
+  counts (:func:`fusion.monitoring.rescale.rescaled_model`). Otherwise it waits
+  for the monitor's running estimate (:meth:`Recalibrator.update_intrinsics` with
+  :meth:`ScaleMonitor.intrinsics_estimate`) up to ``scale_settle_s``, then keeps
+  the old intrinsics (``"kept_old"``: a rotation cannot tell the wheels apart).
 - sensor alarms (``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``) and the
   filter's own resets (``"filter_reset"``): no recalibration; recorded as ``"ignored"``.
 
@@ -78,6 +91,7 @@ from fusion.exceptions import FilterOptionError, MeasurementShapeError, TimeOrde
 from fusion.monitoring.rescale import output_scaling, rescaled_model
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.exceptions import CalibrationError
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.model import MotionModel, fit_arx
 
 __all__ = ["RecalibrationAction", "RecalibrationRecord", "Recalibrator"]
@@ -111,6 +125,8 @@ class RecalibrationRecord:
     m_per_tick, wheel_base_m : tuple of 2 float or None
         For a scale decision: the encoder scale [m/tick] and wheel base [m]
         before and after.
+    intrinsics : tuple of 2 OdometryIntrinsics or None
+        For a wheel-drift decision: the model's encoder intrinsics before and after.
     """
 
     t_s: float
@@ -123,6 +139,7 @@ class RecalibrationRecord:
     saved_to: str | None = None
     m_per_tick: tuple[float, float] | None = None
     wheel_base_m: tuple[float, float] | None = None
+    intrinsics: tuple[OdometryIntrinsics, OdometryIntrinsics] | None = None
 
 
 class Recalibrator:
@@ -167,6 +184,9 @@ class Recalibrator:
         ``(m_per_tick [m/tick], wheel_base_m [m])`` the scale monitor's ratios
         refer to (the values its :class:`~fusion.monitoring.ScaleMonitor`
         was built with); default the model's at construction.
+    max_curvature_std_rad_per_m : float, optional
+        Largest standard deviation [rad/m] of a wheel-drift alarm's curvature whose
+        intrinsics are adopted (module notes).
 
     Attributes
     ----------
@@ -202,16 +222,19 @@ class Recalibrator:
                  retry_samples: int | None = None,
                  dc_gain: Literal["wheel_servo", "free"] | None = None,
                  max_scale_std: float = 0.004, scale_settle_s: float = 30.0,
-                 scale_reference: tuple[float, float] | None = None) -> None:
+                 scale_reference: tuple[float, float] | None = None,
+                 max_curvature_std_rad_per_m: float = 0.004) -> None:
         if not (0.0 < validation_fraction < 1.0 and buffer_s > 0 and min_samples > 0):
             raise FilterOptionError(
                 f"need 0 < validation_fraction < 1, buffer_s > 0, min_samples > 0; got "
                 f"{validation_fraction}, {buffer_s}, {min_samples}")
         if dc_gain not in (None, "wheel_servo", "free"):
             raise FilterOptionError(f"dc_gain must be 'wheel_servo' or 'free', got {dc_gain!r}")
-        if not (0.0 < max_scale_std < 1.0 and scale_settle_s >= 0.0):
-            raise FilterOptionError(f"need 0 < max_scale_std < 1 and scale_settle_s >= 0; got "
-                                    f"{max_scale_std} and {scale_settle_s}")
+        if not (0.0 < max_scale_std < 1.0 and scale_settle_s >= 0.0
+                and 0.0 < max_curvature_std_rad_per_m < 1.0):
+            raise FilterOptionError(f"need 0 < max_scale_std < 1, scale_settle_s >= 0 and "
+                                    f"0 < max_curvature_std_rad_per_m < 1; got {max_scale_std}, "
+                                    f"{scale_settle_s} and {max_curvature_std_rad_per_m}")
         reference = scale_reference or (model.m_per_tick, model.wheel_base_m)
         if reference[0] is None or not all(math.isfinite(v) and v > 0 for v in reference):
             raise FilterOptionError(f"scale_reference (m_per_tick, wheel_base_m) must be "
@@ -240,6 +263,8 @@ class Recalibrator:
         self.scale_settle_s = float(scale_settle_s)
         self.scale_reference = (float(reference[0]), float(reference[1]))
         self._scale_pending: AlarmEvent | None = None
+        self.max_curvature_std_rad_per_m = float(max_curvature_std_rad_per_m)
+        self._drift_pending: AlarmEvent | None = None
         self.history: list[RecalibrationRecord] = []
 
     def add(self, t_s: float, cmd_m_s: np.ndarray, speeds: np.ndarray) -> None:
@@ -268,6 +293,9 @@ class Recalibrator:
                 and t_s - self._scale_pending.t_s >= self.scale_settle_s):
             self._record(self._rotation(float(t_s), "no precise landmark scale within "
                                                     f"{self.scale_settle_s:g} s"))
+        if (self._drift_pending is not None
+                and t_s - self._drift_pending.t_s >= self.scale_settle_s):
+            self._record(self._drift_unsettled(float(t_s)))
 
     @property
     def waiting(self) -> bool:
@@ -293,6 +321,8 @@ class Recalibrator:
             record = self._refit(event, t_s)
         elif event.kind == "scale_changed":
             record = self._scale_alarm(event)
+        elif event.kind == "wheel_drift":
+            record = self._drift_alarm(event)
         elif event.kind == "filter_reset":
             record = RecalibrationRecord(event.t_s, event, "ignored",
                                          reason="the filter reset itself; the model is kept")
@@ -384,6 +414,81 @@ class Recalibrator:
             t_s, event, "adopted", reason=f"landmark scale {ratio:.4f} +- {ratio_std:.4f}"
             + yaw_note, saved_to=saved, m_per_tick=(float(old.m_per_tick), m_new),
             wheel_base_m=(old.wheel_base_m, b_new))
+
+    # -- wheel drift -------------------------------------------------------------------------
+    @property
+    def drift_waiting(self) -> bool:
+        """Whether a wheel-drift alarm waits for a precise curvature (:meth:`update_intrinsics`)."""
+        return self._drift_pending is not None
+
+    def update_intrinsics(self, t_s: float, intrinsics: OdometryIntrinsics,
+                          curvature_std_rad_per_m: float) -> RecalibrationRecord | None:
+        """Offer the scale monitor's running intrinsics to a waiting wheel-drift alarm.
+
+        Parameters
+        ----------
+        t_s : float
+            Time of the estimate [s].
+        intrinsics : OdometryIntrinsics
+            :meth:`ScaleMonitor.intrinsics_estimate`.
+        curvature_std_rad_per_m : float
+            Its curvature's standard deviation (:attr:`ScaleMonitor.curvature_std_rad_per_m`).
+
+        Returns
+        -------
+        RecalibrationRecord or None
+            The decision if this estimate ended the wait (``"adopted"`` or
+            ``"kept_old"``); None if nothing waits or it goes on.
+        """
+        if self._drift_pending is None:
+            return None
+        if curvature_std_rad_per_m <= self.max_curvature_std_rad_per_m:
+            return self._record(self._adopt_intrinsics(float(t_s), self._drift_pending,
+                                                       intrinsics, curvature_std_rad_per_m))
+        if t_s - self._drift_pending.t_s >= self.scale_settle_s:
+            return self._record(self._drift_unsettled(float(t_s)))
+        return None
+
+    def _drift_alarm(self, event: AlarmEvent) -> RecalibrationRecord:
+        a = event.scale
+        if a is None or a.intrinsics is None:
+            return RecalibrationRecord(event.t_s, event, "kept_old",
+                                       reason="the alarm carries no intrinsics estimate")
+        if a.curvature_std_rad_per_m <= self.max_curvature_std_rad_per_m:
+            return self._adopt_intrinsics(event.t_s, event, a.intrinsics,
+                                          a.curvature_std_rad_per_m)
+        self._drift_pending = event            # a later alarm replaces one still waiting
+        return RecalibrationRecord(
+            event.t_s, event, "waiting",
+            reason=f"curvature {a.curvature_rad_per_m:.4f} +- {a.curvature_std_rad_per_m:.4f} "
+                   f"rad/m (need std <= {self.max_curvature_std_rad_per_m:g}): waiting up to "
+                   f"{self.scale_settle_s:g} s for the landmark estimate")
+
+    def _drift_unsettled(self, t_s: float) -> RecalibrationRecord:
+        event, self._drift_pending = self._drift_pending, None
+        return RecalibrationRecord(t_s, event, "kept_old",
+                                   reason=f"no precise curvature within {self.scale_settle_s:g} "
+                                          "s: drive past landmarks and recalibrate the "
+                                          "intrinsics (docs/intrinsics.md)")
+
+    def _adopt_intrinsics(self, t_s: float, event: AlarmEvent, new: OdometryIntrinsics,
+                          curvature_std: float) -> RecalibrationRecord:
+        """The model with ``new`` intrinsics, its symmetric scale and wheel base their means,
+        its outputs rescaled (:mod:`fusion.monitoring.rescale` eq. 1-2)."""
+        old = self.model
+        before = old.encoder_intrinsics
+        s = output_scaling(old, m_per_tick=new.m_per_tick, wheel_base_m=new.wheel_base_m)
+        self.model = rescaled_model(old, m_per_tick=new.m_per_tick,
+                                    wheel_base_m=new.wheel_base_m).updated(intrinsics=new)
+        self._buf = deque(((t, u, y * s) for t, u, y in self._buf), maxlen=self._buf.maxlen)
+        self._drift_pending = None
+        saved = None if self.save_path is None else str(self.model.save(self.save_path))
+        return RecalibrationRecord(
+            t_s, event, "adopted", reason=f"diameter ratio (left / right) "
+            f"{before.diameter_ratio:.5f} -> {new.diameter_ratio:.5f}, curvature std "
+            f"{curvature_std:.4f} rad/m", saved_to=saved,
+            m_per_tick=(float(old.m_per_tick), new.m_per_tick),
+            wheel_base_m=(old.wheel_base_m, new.wheel_base_m), intrinsics=(before, new))
 
     def _segments(self, onset_s: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """Contiguous runs of buffered ``(u, y)`` since ``onset_s`` (split at time gaps)."""

@@ -121,7 +121,7 @@ __all__ = [
 _log = logging.getLogger(__name__)
 
 AlarmKind = Literal["glitch_burst", "stuck_encoder", "stalled_wheel", "dynamics_changed",
-                    "scale_changed", "filter_reset"]
+                    "scale_changed", "filter_reset", "wheel_drift"]
 StreamKind = Literal["encoders", "landmark"]
 
 
@@ -139,15 +139,17 @@ class AlarmEvent:
         Time of the sample that raised it [s].
     kind : str
         What changed: ``"glitch_burst"``, ``"stuck_encoder"``, ``"stalled_wheel"``,
-        ``"dynamics_changed"``, ``"scale_changed"`` or ``"filter_reset"``
-        (``"stalled_wheel"``: a stuck check whose wheel's motor current says the
+        ``"dynamics_changed"``, ``"scale_changed"``, ``"wheel_drift"`` or ``"filter_reset"``
+        (``"wheel_drift"``: the scale test's curvature shadows, one wheel's scale
+        changed against the other's, the new intrinsics in ``scale.intrinsics``;
+        ``"stalled_wheel"``: a stuck check whose wheel's motor current says the
         wheel is blocked, :mod:`fusion.monitoring.wheel_check`; ``"filter_reset"``:
         the EKF reset itself, :mod:`fusion.ekf.resets`, raised by
         :class:`~fusion.monitoring.MonitoredFilter`).
     test : str
         The test that fired: ``"burst"``, ``"stuck"``, ``"nis_window"``,
         ``"cusum+"``, ``"cusum-"``, ``"integrated"`` (dynamics),
-        ``"scale_glr"`` (scale), or the reset's cause ``"scale_implausible"``
+        ``"scale_glr"`` (scale and wheel drift), or the reset's cause ``"scale_implausible"``
         or ``"diverged"``.
     statistic, threshold : float
         The evidence: the test statistic and the threshold it crossed.
@@ -626,16 +628,18 @@ class ResidualMonitor:
         -------
         list of AlarmEvent
             A ``"scale_changed"`` alarm (test ``"scale_glr"``, the new scale in
-            :attr:`AlarmEvent.scale`); none within ``refractory_s`` of a
-            sensor alarm (a stuck or spiking encoder explains the odometry error).
+            :attr:`AlarmEvent.scale`), or ``"wheel_drift"`` when the scale test's
+            curvature shadow raised it (the new intrinsics in ``scale.intrinsics``);
+            none within ``refractory_s`` of a sensor alarm (a stuck or spiking
+            encoder explains the odometry error).
         """
         if self.scale is None:
             raise FilterOptionError("update_landmarks needs a ScaleMonitor: pass scale=...")
         t = self._check_time(t_s)
         hits = self.scale.update(t, np.asarray(tick_deltas, dtype=float).reshape(1, 2),
                                  None if sightings is None else [sightings])
-        raised = [AlarmEvent(t, "scale_changed", "scale_glr", a.statistic, a.threshold,
-                             a.onset_s, scale=a)
+        raised = [AlarmEvent(t, "wheel_drift" if a.change == "curvature" else "scale_changed",
+                             "scale_glr", a.statistic, a.threshold, a.onset_s, scale=a)
                   for a in hits if not self._sensor_alarm_recent(t)]
         return self._emit(raised)
 

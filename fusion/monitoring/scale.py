@@ -8,10 +8,12 @@ it as an along-track error of the encoder odometry that grows with distance.
 
 **Filters.** :class:`ScaleMonitor` runs, per robot, an extended Kalman filter
 of landmark-aided odometry with the scale errors in the state,
-``x = (x, y, theta, k_v, k_w)``: the ground travel and turn are ``(1 + k_v)``
-and ``(1 + k_w)`` times the encoders' (:mod:`fusion.monitoring.scale_odometry`; the scale
-states of :class:`fusion.ekf.ModelEKF`). Batched over robots, it costs a few
-small matrix products a period, far less than the full model filter.
+``x = (x, y, theta, k_v, k_w, kappa)``: the ground travel and turn are ``(1 + k_v)``
+and ``(1 + k_w)`` times the encoders', and the heading turns ``kappa`` [rad/m] more
+per metre driven (one wheel's scale against the other's, :mod:`lti_motion.intrinsics`;
+:mod:`fusion.monitoring.scale_odometry`; the scale states of :class:`fusion.ekf.ModelEKF`).
+Batched over robots, it costs a few small matrix products a period, far less
+than the full model filter.
 
 **Test: window-limited mixture likelihood ratios.** Beside each *main*
 filter run ``n_shadows`` *shadows*. Shadow ``j`` restarts from the main filter
@@ -44,14 +46,37 @@ for the CUSUM in :mod:`fusion.monitoring.dynamics`): 1,800 starts an hour and
 1 an hour because the simulated robot is not the filter's linear-Gaussian
 model (measured: ``docs/monitor.md``).
 
+**Scale or curvature.** Each restart starts two shadows: a *scale* shadow,
+``(k_v, k_w)`` widened to ``restart_std`` (a floor), and a *curvature* shadow,
+``kappa`` widened to ``restart_curvature_std_rad_per_m`` (one wheel's diameter:
+hair wound on it, a soft tyre), each with its own eq. 1 and its own threshold
+from eq. 2 (budgets ``F`` and ``F_kappa``; both 0.1 an hour by default). Both
+are mixture likelihood ratios of the same data against the same null, so their
+difference is the log Bayes factor between the two alternatives. Rule: at a
+landmark update, of the shadows whose ``L`` exceeds their threshold ``h``, the one
+with the largest ``L - h`` raises the alarm, and its family names the change::
+
+    change = argmax over shadows s of (L_s - h_family(s)),  alarm if > 0      (eq. 3)
+
+(a ``"curvature"`` alarm is ``"wheel_drift"`` in :class:`~fusion.monitoring.ResidualMonitor`).
+On the route the two separate well: a floor changes travel and turns in place,
+which ``kappa`` cannot explain (it acts per metre driven), and a wheel curves
+the straights, which ``k_v, k_w`` cannot (``docs/monitor.md``). A 0.5% larger
+wheel also changes ``k_v`` and ``k_w`` by 0.25%, far below ``restart_std``; the
+curvature shadow keeps the main filter's ``k_v, k_w`` with their covariance.
+
 **Onset and new scale.** The alarm carries the alarming shadow's ``t0`` as
 the onset and its ``1 + k_v`` and ``1 + k_w``: the ground travel and turn per
 encoder travel and turn estimated from the data since ``t0`` alone (the new
 encoder scale is ``m_per_tick`` times it). The main filter then adopts that
 shadow's state, so the monitor follows the new floor and can see the next
-change. A floor change shows first in turns (``k_w``, bearings move fast)
-and in travel (``k_v``) a few seconds of driving later; an alarm raised by a
-turn carries a ``k_v`` whose standard deviation is still near ``restart_std``.
+change. The alarm carries the shadow's ``kappa`` and the intrinsics its
+``(k_v, k_w, kappa)`` say the robot has now
+(:meth:`lti_motion.intrinsics.OdometryIntrinsics.corrected` of
+:attr:`ScaleMonitor.intrinsics`). A floor change shows first in turns
+(``k_w``, bearings move fast) and in travel (``k_v``) a few seconds of driving
+later; an alarm raised by a turn carries a ``k_v`` whose standard deviation is
+still near ``restart_std``.
 
 References
 ----------
@@ -71,17 +96,20 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 from scipy.stats import chi2
 
 from fusion.exceptions import FilterOptionError, FusionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
+from fusion.monitoring.scale_odometry import KAPPA as _KAPPA
 from fusion.monitoring.scale_odometry import KV as _KV
 from fusion.monitoring.scale_odometry import KW as _KW
-from fusion.monitoring.scale_odometry import landmark_update, odometry_predict
+from fusion.monitoring.scale_odometry import N_STATE, landmark_update, odometry_predict
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing
+from lti_motion.intrinsics import OdometryIntrinsics
 
 __all__ = ["ScaleAlarm", "ScaleMonitor", "ScaleOptions"]
 
@@ -113,6 +141,18 @@ class ScaleOptions:
         Prior and random walk of ``(k_v, k_w)`` in the main filters.
     missing_speed_m_s, missing_turn_rad_s : float
         Speeds a period with missing counts may have had (its travel is unknown).
+    curvature_prior_std_rad_per_m : float
+        Prior standard deviation of the curvature error ``kappa`` [rad/m] in the main
+        filters (0.01: a 0.24% diameter ratio on a Create 2).
+    curvature_walk_rad_per_m_sqrt_s : float
+        Random-walk rate of ``kappa`` [rad/m/sqrt(s)] (4e-4: ``ScaleErrors``' 1e-4
+        over a 0.235 m wheel base).
+    restart_curvature_std_rad_per_m : float
+        Prior standard deviation of ``kappa`` in a restarted *curvature* shadow
+        [rad/m]: the size of one wheel's change the wheel-drift test is tuned to
+        (0.04: 0.9% of a Create 2's wheel). 0 leaves the curvature shadows out.
+    curvature_false_alarms_per_hour : float
+        Budget ``F_kappa`` of the curvature shadows (eq. 2 with it).
     """
 
     dt_s: float = 0.015
@@ -125,6 +165,10 @@ class ScaleOptions:
     scales: ScaleErrors = field(default_factory=ScaleErrors)
     missing_speed_m_s: float = 0.5
     missing_turn_rad_s: float = 4.0
+    curvature_prior_std_rad_per_m: float = 0.01
+    curvature_walk_rad_per_m_sqrt_s: float = 4e-4
+    restart_curvature_std_rad_per_m: float = 0.04
+    curvature_false_alarms_per_hour: float = 0.1
 
     def __post_init__(self) -> None:
         checks = {"dt_s": self.dt_s > 0, "false_alarms_per_hour": self.false_alarms_per_hour > 0,
@@ -133,7 +177,12 @@ class ScaleOptions:
                   "restart_every_s": self.restart_every_s > 0, "n_shadows": self.n_shadows >= 1,
                   "gate_probability": 0.0 < self.gate_probability < 1.0,
                   "missing_speed_m_s": self.missing_speed_m_s > 0,
-                  "missing_turn_rad_s": self.missing_turn_rad_s > 0}
+                  "missing_turn_rad_s": self.missing_turn_rad_s > 0,
+                  "curvature_prior_std_rad_per_m": 0 < self.curvature_prior_std_rad_per_m < 1,
+                  "curvature_walk_rad_per_m_sqrt_s": self.curvature_walk_rad_per_m_sqrt_s >= 0,
+                  "restart_curvature_std_rad_per_m":
+                      0 <= self.restart_curvature_std_rad_per_m < 1,
+                  "curvature_false_alarms_per_hour": self.curvature_false_alarms_per_hour > 0}
         bad = [name for name, ok in checks.items() if not ok]
         if bad:
             raise FilterOptionError(f"ScaleOptions out of range: {', '.join(bad)} "
@@ -149,6 +198,22 @@ class ScaleOptions:
         9.8
         """
         return math.log(3600.0 / (self.restart_every_s * self.false_alarms_per_hour))
+
+    @property
+    def curvature_threshold(self) -> float:
+        """Threshold of the curvature shadows, ``ln(3600 / (restart_every_s F_kappa))`` (eq. 2).
+
+        Examples
+        --------
+        >>> round(ScaleOptions().curvature_threshold, 2)
+        9.8
+        """
+        return math.log(3600.0 / (self.restart_every_s * self.curvature_false_alarms_per_hour))
+
+    @property
+    def with_curvature(self) -> bool:
+        """Whether the curvature shadows run (``restart_curvature_std_rad_per_m > 0``)."""
+        return self.restart_curvature_std_rad_per_m > 0
 
 
 @dataclass(frozen=True)
@@ -173,6 +238,16 @@ class ScaleAlarm:
     yaw_ratio, yaw_ratio_std : float
         The same for the yaw rate, ``1 + k_w`` (the effective wheel base is
         ``wheel_base_m / yaw_ratio``).
+    change : {"scale", "curvature"}
+        Which alternative raised it (module notes, "Scale or curvature"):
+        ``"scale"`` (travel and turn, a floor) or ``"curvature"`` (one wheel's
+        scale against the other's: the wheel-drift alarm).
+    curvature_rad_per_m, curvature_std_rad_per_m : float
+        The shadow's curvature error ``kappa`` [rad/m] (the curvature a straight run of
+        equal counts drives) and its standard deviation.
+    intrinsics : OdometryIntrinsics or None
+        The intrinsics the shadow's ``(k_v, k_w, kappa)`` say the robot has now:
+        :meth:`OdometryIntrinsics.corrected` of the monitor's :attr:`ScaleMonitor.intrinsics`.
     """
 
     robot: int
@@ -184,6 +259,10 @@ class ScaleAlarm:
     scale_ratio_std: float
     yaw_ratio: float
     yaw_ratio_std: float
+    change: Literal["scale", "curvature"] = "scale"
+    curvature_rad_per_m: float = 0.0
+    curvature_std_rad_per_m: float = math.nan
+    intrinsics: OdometryIntrinsics | None = None
 
 
 class ScaleMonitor:
@@ -206,11 +285,19 @@ class ScaleMonitor:
         own (default 2% of range, 1 degree).
     options : ScaleOptions, optional
         Test design.
+    intrinsics : OdometryIntrinsics, optional
+        Each wheel's scale and the wheel base the counts are converted with, in
+        place of ``m_per_tick`` and ``wheel_base_m`` (both wheels at ``m_per_tick``
+        by default); the alarms' ratios and curvature refer to them.
 
     Attributes
     ----------
     threshold : float
-        ``h`` (eq. 2).
+        ``h`` (eq. 2) of the scale shadows.
+    curvature_threshold : float
+        ``h`` of the curvature shadows (eq. 2 with ``F_kappa``).
+    intrinsics : OdometryIntrinsics
+        The counts' mapping in use.
     statistic : ndarray, shape (n_robots,)
         Current log-likelihood ratios ``L`` (eq. 1).
     counts : dict of str to int
@@ -247,7 +334,8 @@ class ScaleMonitor:
                  initial_pose: np.ndarray | Sequence[float],
                  pose_std: Sequence[float] = (0.01, 0.01, 0.01),
                  landmark_noise: LandmarkNoise | None = None,
-                 options: ScaleOptions | None = None) -> None:
+                 options: ScaleOptions | None = None,
+                 intrinsics: OdometryIntrinsics | None = None) -> None:
         if not (m_per_tick > 0 and wheel_base_m > 0):
             raise FilterOptionError(f"m_per_tick and wheel_base_m must be positive, got "
                                     f"{m_per_tick} and {wheel_base_m}")
@@ -262,21 +350,30 @@ class ScaleMonitor:
             raise FilterOptionError(f"initial_pose must be finite and pose_std positive, got "
                                     f"{pose0.tolist()} and {std.tolist()}")
         self.options = opt = options or ScaleOptions()
-        self.m_per_tick, self.wheel_base_m = float(m_per_tick), float(wheel_base_m)
+        self.intrinsics = intrinsics or OdometryIntrinsics.symmetric(
+            m_per_tick=float(m_per_tick), wheel_base_m=float(wheel_base_m))
+        self.m_per_tick, self.wheel_base_m = self.intrinsics.m_per_tick, \
+            self.intrinsics.wheel_base_m
         self.landmarks = landmarks
         self.landmark_noise = landmark_noise or LandmarkNoise()
         self.threshold = opt.threshold
+        self.curvature_threshold = opt.curvature_threshold
         self._gate = float(chi2.ppf(opt.gate_probability, 2))
         n = self.n_robots = len(pose0)
-        rows = (1 + opt.n_shadows) * n
-        # rows 0..n-1: main filters; then n rows per shadow j = 0..n_shadows-1
-        self._x = np.zeros((rows, 5))
-        self._x[:, :3] = np.tile(pose0, (1 + opt.n_shadows, 1))
-        p0 = np.diag([*(std ** 2), *(np.asarray(opt.scales.prior_std) ** 2)])
-        self._P = np.tile(p0, (rows, 1, 1))
-        self._q_c = np.asarray(opt.scales.walk_per_sqrt_s) ** 2 * opt.dt_s
-        self._llr = np.zeros((opt.n_shadows, n))             # eq. 1 per shadow
-        self._onset = np.full((opt.n_shadows, n), math.nan)
+        # shadows: n_shadows scale ones, then (with_curvature) n_shadows curvature ones
+        w = self._n_alt = opt.n_shadows * (2 if opt.with_curvature else 1)
+        self._h = np.repeat([opt.threshold, opt.curvature_threshold],
+                            opt.n_shadows)[:w, None]
+        # rows 0..n-1: main filters; then n rows per shadow j = 0..w-1
+        self._x = np.zeros(((1 + w) * n, N_STATE))
+        self._x[:, :3] = np.tile(pose0, (1 + w, 1))
+        p0 = np.diag([*(std ** 2), *(np.asarray(opt.scales.prior_std) ** 2),
+                      opt.curvature_prior_std_rad_per_m ** 2])
+        self._P = np.tile(p0, ((1 + w) * n, 1, 1))
+        self._q_c = np.array([*opt.scales.walk_per_sqrt_s,
+                              opt.curvature_walk_rad_per_m_sqrt_s]) ** 2 * opt.dt_s
+        self._llr = np.zeros((w, n))                         # eq. 1 per shadow
+        self._onset = np.full((w, n), math.nan)
         self._slot = -1                                      # last restart slot
         self._t_last = -math.inf
         self.counts = {"updates": 0, "gated": 0, "missing": 0, "unknown_landmark": 0}
@@ -307,6 +404,23 @@ class ScaleMonitor:
         return np.sqrt(self._P[:self.n_robots, _KW, _KW])
 
     @property
+    def curvature_rad_per_m(self) -> np.ndarray:
+        """Main filters' curvature error ``kappa`` [rad/m], (n_robots,)."""
+        return self._x[:self.n_robots, _KAPPA].copy()
+
+    @property
+    def curvature_std_rad_per_m(self) -> np.ndarray:
+        """Standard deviation of :attr:`curvature_rad_per_m`, (n_robots,)."""
+        return np.sqrt(self._P[:self.n_robots, _KAPPA, _KAPPA])
+
+    def intrinsics_estimate(self, robot: int = 0) -> OdometryIntrinsics:
+        """The intrinsics robot ``robot``'s main filter says it has now:
+        :attr:`intrinsics` corrected by its ``(k_v, k_w, kappa)``
+        (:meth:`OdometryIntrinsics.corrected`)."""
+        x = self._x[robot]
+        return self.intrinsics.corrected(float(x[_KV]), float(x[_KW]), float(x[_KAPPA]))
+
+    @property
     def pose(self) -> np.ndarray:
         """Main filters' poses ``(x [m], y [m], theta [rad])``, (n_robots, 3)."""
         return self._x[:self.n_robots, :3].copy()
@@ -316,26 +430,31 @@ class ScaleMonitor:
         """One period of encoder travel for the main filters and the shadows."""
         opt = self.options
         self._x, self._P = odometry_predict(
-            self._x, self._P, np.tile(tick_deltas, (1 + opt.n_shadows, 1)),
-            m_per_tick=self.m_per_tick, wheel_base_m=self.wheel_base_m, dt_s=opt.dt_s,
-            slip=opt.slip, walk_var=self._q_c,
+            self._x, self._P, np.tile(tick_deltas, (1 + self._n_alt, 1)),
+            intrinsics=self.intrinsics, dt_s=opt.dt_s, slip=opt.slip, walk_var=self._q_c,
             missing_std=(opt.missing_speed_m_s, opt.missing_turn_rad_s))
 
     def _restart(self, shadow: int, robots: np.ndarray, t: float) -> None:
-        """Shadow ``shadow`` of ``robots`` restarts from the main filters, scales widened."""
-        rows = (1 + shadow) * self.n_robots + robots
-        self._x[rows] = self._x[robots]
-        P = self._P[robots].copy()
-        sv, sw = self.options.restart_std
-        free = [_KV, _KW] if sw > 0 else [_KV]
-        P[:, free, :] = 0.0
-        P[:, :, free] = 0.0
-        P[:, _KV, _KV] = sv * sv
-        if sw > 0:
-            P[:, _KW, _KW] = sw * sw
-        self._P[rows] = P
-        self._llr[shadow, robots] = 0.0
-        self._onset[shadow, robots] = t
+        """Shadow slot ``shadow`` of ``robots`` restarts from the main filters: its scale
+        shadow with ``(k_v, k_w)`` widened, its curvature shadow with ``kappa`` widened."""
+        opt = self.options
+        sv, sw = opt.restart_std
+        families = [{_KV: sv, _KW: sw} if sw > 0 else {_KV: sv}]
+        if opt.with_curvature:
+            families.append({_KAPPA: opt.restart_curvature_std_rad_per_m})
+        for f, widened in enumerate(families):
+            j = f * opt.n_shadows + shadow
+            rows = (1 + j) * self.n_robots + robots
+            self._x[rows] = self._x[robots]
+            P = self._P[robots].copy()
+            free = list(widened)
+            P[:, free, :] = 0.0
+            P[:, :, free] = 0.0
+            for k, sd in widened.items():
+                P[:, k, k] = sd * sd
+            self._P[rows] = P
+            self._llr[j, robots] = 0.0
+            self._onset[j, robots] = t
 
     # -- input -----------------------------------------------------------------------------------
     def update(self, t_s: float, tick_deltas: np.ndarray,
@@ -417,7 +536,7 @@ class ScaleMonitor:
               covs: list[np.ndarray | None], sensor: np.ndarray) -> list[ScaleAlarm]:
         """Main and shadow updates, eq. 1, alarms; ``covs`` the sightings' own covariances,
         ``sensor`` the robots' sensor mounts ``(x_m, y_m, yaw_rad)``, (m, 3)."""
-        n, m, w = self.n_robots, len(robots), self.options.n_shadows
+        n, m, w = self.n_robots, len(robots), self._n_alt
         rows = (np.arange(1 + w)[:, None] * n + robots[None, :]).ravel()
         cov = None
         if any(c is not None for c in covs):             # NaN: the sensor's noise
@@ -433,19 +552,31 @@ class ScaleMonitor:
         # a sighting a shadow gates (an outlier for both) is no evidence
         self._llr[:, robots] += np.where(ok[1:], ll[1:] - ll[0], 0.0)          # eq. 1
         alarms = []
-        best = self._llr[:, robots].argmax(axis=0)
+        excess = self._llr[:, robots] - self._h          # scale or curvature: eq. 3
+        best = excess.argmax(axis=0)
         for j, i in enumerate(robots):
             s = best[j]
-            if self._llr[s, i] <= self.threshold:
+            if excess[s, j] <= 0.0:
                 continue
-            row = (1 + s) * n + i
-            alarms.append(ScaleAlarm(int(i), t, float(self._llr[s, i]), self.threshold,
-                                     float(self._onset[s, i]), 1.0 + float(self._x[row, _KV]),
-                                     math.sqrt(float(self._P[row, _KV, _KV])),
-                                     1.0 + float(self._x[row, _KW]),
-                                     math.sqrt(float(self._P[row, _KW, _KW]))))
+            alarms.append(self._alarm(int(i), int(s), t))
             # the main filter adopts the new scale and goes on from the shadow
+            row = (1 + s) * n + i
             self._x[i], self._P[i] = self._x[row], self._P[row]
-            for shadow in range(w):
+            for shadow in range(self.options.n_shadows):
                 self._restart(shadow, np.array([i]), t)
         return alarms
+
+    def _alarm(self, robot: int, shadow: int, t: float) -> ScaleAlarm:
+        """The alarm of shadow ``shadow`` of ``robot`` (before the main filter adopts it)."""
+        x, P = self._x[(1 + shadow) * self.n_robots + robot], \
+            self._P[(1 + shadow) * self.n_robots + robot]
+        curvature = shadow >= self.options.n_shadows
+        return ScaleAlarm(robot, t, float(self._llr[shadow, robot]), float(self._h[shadow, 0]),
+                          float(self._onset[shadow, robot]), 1.0 + float(x[_KV]),
+                          math.sqrt(float(P[_KV, _KV])), 1.0 + float(x[_KW]),
+                          math.sqrt(float(P[_KW, _KW])),
+                          change="curvature" if curvature else "scale",
+                          curvature_rad_per_m=float(x[_KAPPA]),
+                          curvature_std_rad_per_m=math.sqrt(float(P[_KAPPA, _KAPPA])),
+                          intrinsics=self.intrinsics.corrected(float(x[_KV]), float(x[_KW]),
+                                                               float(x[_KAPPA])))

@@ -4,24 +4,30 @@ The filter of :mod:`fusion.monitoring.scale`: per row ``i`` of a batch (robots,
 and alternative hypotheses of the same robot) an extended Kalman filter with
 state::
 
-    x = (x, y, theta, k_v, k_w)
+    x = (x, y, theta, k_v, k_w, kappa)
 
-the pose (m, m, rad; heading continuous) and the relative scale errors of the
+the pose (m, m, rad; heading continuous), the relative scale errors of the
 ground travel and turn against the encoders' (odometry auto-calibration,
-Larsen et al. 1998; the scale states of :mod:`fusion.ekf.functions`). One
-period with count changes ``(d_l, d_r)`` [ticks]::
+Larsen et al. 1998; the scale states of :mod:`fusion.ekf.functions`) and the
+curvature ``kappa`` [rad/m] a straight run of equal counts drives (one wheel's
+scale against the other's: :mod:`lti_motion.intrinsics`, "Scale errors"). One
+period with count changes ``(d_l, d_r)`` [ticks], converted by the odometry
+intrinsics in use (``J`` of :meth:`~lti_motion.intrinsics.OdometryIntrinsics.jacobian`)::
 
-    ds = m_per_tick (d_l + d_r) / 2,   dtheta = m_per_tick (d_r - d_l) / b
-    g = ((1 + k_v) ds, (1 + k_w) dtheta) + eta                             (eq. 1)
+    (ds, dtheta) = J (d_l, d_r)
+    g = ((1 + k_v) ds, (1 + k_w) dtheta + kappa ds) + eta                   (eq. 1)
     pose' = pose_step(pose, g)                                             (paper eq. 11)
     k' = k + w,  w ~ N(0, diag(q_c))
 
-``eta`` is the slip noise (:class:`~fusion.ekf.functions.SlipNoise`, per
-period). With ``F_p``, ``F_s`` the Jacobians of the pose step with respect to
-the pose and to ``g`` (:func:`lti_motion.kinematics.pose_step_jacobians`)::
+(eq. 1 is the intrinsics module's ``(ds_g, dtheta_g)`` with the second-order
+``kappa b' b dtheta / 4`` term of the travel dropped: 0.3 mm per radian turned
+at a 0.5% wheel ratio.) ``eta`` is the slip noise
+(:class:`~fusion.ekf.functions.SlipNoise`, per period). With ``F_p``, ``F_s`` the
+Jacobians of the pose step with respect to the pose and to ``g``
+(:func:`lti_motion.kinematics.pose_step_jacobians`) and ``F_s = (f_v, f_w)`` by column::
 
-    F = [[F_p, F_s diag(ds, dtheta)],     Q = [[F_s diag(sigma^2) F_s^T, 0],
-         [0,   I                   ]]          [0,                       diag(q_c)]]
+    F = [[F_p, f_v ds, f_w dtheta, f_w ds],     Q = [[F_s diag(sigma^2) F_s^T, 0],
+         [0,   I                          ]]          [0,                       diag(q_c)]]
 
 Landmark sightings ``(r, b)`` update the pose with the range-bearing model
 from the sensor's mount on the robot (:func:`fusion.range_bearing.range_bearing_terms`,
@@ -46,41 +52,47 @@ import numpy as np
 
 from fusion.noise import LandmarkNoise, SlipNoise
 from fusion.range_bearing import range_bearing_terms
-from lti_motion.kinematics import body_from_wheel, pose_step, pose_step_jacobians, wrap_angle
+from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
 
 __all__ = [
+    "KAPPA",
     "KV",
     "KW",
+    "N_STATE",
     "landmark_update",
     "odometry_predict",
     "range_bearing_batch",
 ]
 
-#: State indices of the scale errors ``k_v`` (travel) and ``k_w`` (turn).
-KV, KW = 3, 4
+#: State indices of the scale errors ``k_v`` (travel), ``k_w`` (turn) and the
+#: curvature error ``kappa`` [rad/m]; the state's length.
+KV, KW, KAPPA, N_STATE = 3, 4, 5, 6
 
 
 def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
-                     m_per_tick: float, wheel_base_m: float, dt_s: float, slip: SlipNoise,
+                     intrinsics: OdometryIntrinsics, dt_s: float, slip: SlipNoise,
                      walk_var: np.ndarray, missing_std: tuple[float, float]
                      ) -> tuple[np.ndarray, np.ndarray]:
     """One period of encoder travel for every row (module eq. 1, paper eq. 11).
 
     Parameters
     ----------
-    x : ndarray, shape (n, 5)
+    x : ndarray, shape (n, 6)
         States.
-    P : ndarray, shape (n, 5, 5)
+    P : ndarray, shape (n, 6, 6)
         Covariances.
     tick_deltas : ndarray, shape (n, 2)
         Count changes of (left, right) [ticks]; a row with NaN is a period of
         unknown travel: no motion, with speed noise ``missing_std``.
-    m_per_tick, wheel_base_m, dt_s : float
-        Encoder scale [m/tick], wheel base [m], period [s].
+    intrinsics : OdometryIntrinsics
+        Each wheel's scale [m/tick] and the wheel base [m] the counts are converted with.
+    dt_s : float
+        Period [s].
     slip : SlipNoise
         Ground-versus-encoder speed noise.
-    walk_var : ndarray, shape (2,)
-        Random-walk variances of ``(k_v, k_w)`` per period.
+    walk_var : ndarray, shape (3,)
+        Random-walk variances of ``(k_v, k_w, kappa)`` per period.
     missing_std : tuple of 2 float
         Speed and turn-rate standard deviations of a missing period [m/s, rad/s].
 
@@ -91,8 +103,8 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     """
     missing = ~np.all(np.isfinite(tick_deltas), axis=1)
     d = np.where(missing[:, None], 0.0, tick_deltas)
-    ds, dth = m_per_tick * body_from_wheel(d, wheel_base_m=wheel_base_m).T      # [m], [rad]
-    gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth
+    ds, dth = intrinsics.body_motion(d).T                         # [m], [rad]
+    gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth + x[:, KAPPA] * ds   # eq. 1
     f_pose, f_speed = pose_step_jacobians(x[:, :3], gs, gth, 1.0)
     x_new = x.copy()
     x_new[:, :3] = pose_step(x[:, :3], gs, gth, 1.0)
@@ -100,7 +112,8 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     F[:, :3, :3] = f_pose
     F[:, :3, KV] = f_speed[:, :, 0] * ds[:, None]                 # d pose / d k_v
     F[:, :3, KW] = f_speed[:, :, 1] * dth[:, None]
-    F[:, KV, KV] = F[:, KW, KW] = 1.0
+    F[:, :3, KAPPA] = f_speed[:, :, 1] * ds[:, None]
+    F[:, KV, KV] = F[:, KW, KW] = F[:, KAPPA, KAPPA] = 1.0
     sv, sw = slip.stds(ds / dt_s, dth / dt_s)                     # [m/s], [rad/s]
     sv = np.where(missing, missing_std[0], sv) * dt_s
     sw = np.where(missing, missing_std[1], sw) * dt_s
@@ -109,6 +122,7 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     P_new[:, :3, :3] += f_noise @ f_noise.transpose(0, 2, 1)
     P_new[:, KV, KV] += walk_var[0]
     P_new[:, KW, KW] += walk_var[1]
+    P_new[:, KAPPA, KAPPA] += walk_var[2]
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
 
 
@@ -130,7 +144,7 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray, *,
     -------
     pred : ndarray, shape (n, 2)
         ``(r [m], b [rad])``, ``b`` wrapped.
-    H : ndarray, shape (n, 2, 5)
+    H : ndarray, shape (n, 2, 6)
         Pose columns: :mod:`fusion.range_bearing` eq. 2 (for a centred
         sensor ``[[-dx/r, -dy/r, 0], [dy/r^2, -dx/r^2, -1]]``, Thrun et al.
         2005, table 7.2), zeros for the scales. Ranges are floored at
@@ -138,12 +152,12 @@ def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray, *,
 
     Examples
     --------
-    >>> pred, H = range_bearing_batch(np.zeros((1, 5)), np.array([[2.0, 0.0]]))
+    >>> pred, H = range_bearing_batch(np.zeros((1, 6)), np.array([[2.0, 0.0]]))
     >>> (pred.round(12) + 0.0).tolist(), (H[0, :, :3].round(12) + 0.0).tolist()
     ([[2.0, 0.0]], [[-1.0, 0.0, 0.0], [0.0, -0.5, -1.0]])
     """
     pred, h_pose, _ = range_bearing_terms(x[:, :3], landmark_xy, sensor=sensor)
-    H = np.zeros((len(x), 2, 5))
+    H = np.zeros((len(x), 2, N_STATE))
     H[:, :, :3] = h_pose
     return pred, H
 
@@ -156,7 +170,7 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
 
     Parameters
     ----------
-    x, P : ndarray, shapes (n, 5) and (n, 5, 5)
+    x, P : ndarray, shapes (n, 6) and (n, 6, 6)
         States and covariances.
     landmark_xy : ndarray, shape (n, 2)
         The sighted landmark of each row [m].
@@ -197,7 +211,7 @@ def landmark_update(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarray,
     nis = np.einsum("ni,nij,nj->n", nu, Si, nu)
     ok = nis <= gate
     K = PHt @ Si
-    IKH = np.eye(5) - K @ H
+    IKH = np.eye(N_STATE) - K @ H
     P_post = IKH @ P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)  # eq. 5.2.3-18
     x_new, P_new = x.copy(), P.copy()
     x_new[ok] = x[ok] + np.einsum("nij,nj->ni", K[ok], nu[ok])

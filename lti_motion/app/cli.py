@@ -456,9 +456,9 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--duration", type=float, default=30.0,
                     help="robot seconds to drive or listen (default 30)")
     mo.add_argument("--fault", choices=["stuck-encoder", "stall", "spikes", "payload", "motor",
-                                        "delay", "carpet"],
+                                        "delay", "carpet", "wheel-drift"],
                     help="--robot only: inject this simulator fault (stall: the left wheel "
-                         "blocked for 2 s)")
+                         "blocked for 2 s; wheel-drift: the left wheel's diameter +0.5%%)")
     mo.add_argument("--nominal-drives", type=int, default=20,
                     help="--robot: nominal drives of the same length first, for the dynamics "
                          "null and the encoder gate (default 20; 0: dynamics tests off)")

@@ -83,6 +83,9 @@ FAULTS: Mapping[str, tuple[str, Mapping[str, object], str | None]] = MappingProx
     "motor": ("motor", MappingProxyType({"weakening": 0.2}), "dynamics_changed"),
     "delay": ("delay", MappingProxyType({"extra_periods": 3.0}), "dynamics_changed"),
     "carpet": ("floor", MappingProxyType({"floor": "carpet"}), "scale_changed"),
+    "wheel-drift": ("wheel_diameter", MappingProxyType({"wheel": "left",
+                                                       "diameter_change": 0.005}),
+                    "wheel_drift"),
 })
 
 _WHEEL = MappingProxyType({0: "left wheel", 1: "right wheel"})
@@ -146,7 +149,8 @@ def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
     states (:mod:`fusion.monitoring.change_time`).
 
     A scale alarm adds its new scale (ground travel and turn per encoder travel
-    and turn, with standard deviations); ``detail`` is appended (the dynamics
+    and turn, with standard deviations), a wheel-drift alarm its curvature and the
+    new left-over-right wheel scale ratio; ``detail`` is appended (the dynamics
     sub-test and lag).
     """
     where = ""
@@ -159,6 +163,10 @@ def format_alarm(event: AlarmEvent, *, detail: str = "") -> str:
         a = event.scale
         where = (f"travel x{a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f}, turn "
                  f"x{a.yaw_ratio:.4f} +- {a.yaw_ratio_std:.4f}")
+        if a.change == "curvature" and a.intrinsics is not None:
+            where = (f"curvature {a.curvature_rad_per_m:+.4f} +- "
+                     f"{a.curvature_std_rad_per_m:.4f} rad/m, wheels left/right "
+                     f"x{a.intrinsics.diameter_ratio:.4f}")
     tail = " ".join(part for part in (where, detail) if part)
     onset = f"onset {event.onset_s:.3f} s"
     d = event.dynamics

@@ -28,6 +28,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.residual import MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor, ScaleOptions
 from fusion.monitoring.scale_odometry import (
+    KAPPA,
     KV,
     KW,
     landmark_update,
@@ -43,6 +44,7 @@ from fusion.range_bearing import (
 )
 from fusion.sensor_pose import SensorPose
 from lti_motion.app.route import ROUTE_LANDMARKS
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import pose_step
 
 WHEEL_BASE_M = get_preset("create2").wheel_base_m
@@ -62,7 +64,7 @@ def m_per_tick(route_model):
     ((0.2, 0.1, 7.0), (0.2, 0.3)),             # heading beyond 2 pi, landmark close
 ])
 def test_range_bearing_batch_agrees_with_the_scalar_functions(pose, landmark):
-    x = np.array([[*pose, 0.01, -0.02]])
+    x = np.array([[*pose, 0.01, -0.02, 0.03]])
     pred, H = range_bearing_batch(x, np.array([landmark]))
     np.testing.assert_allclose(pred[0], range_bearing(np.array(pose), np.array(landmark)),
                                atol=1e-12)
@@ -74,7 +76,7 @@ def test_range_bearing_batch_agrees_with_the_scalar_functions(pose, landmark):
 def test_range_bearing_batch_takes_one_sensor_mount_per_row(rng):
     """Rows of robots with different sensors: each row is the one model for its mount
     (fusion.range_bearing eq. 1-2), the pose Jacobian a numerical derivative's."""
-    x = np.column_stack([rng.uniform(-2, 2, (6, 2)), rng.uniform(-3, 3, 6), np.zeros((6, 2))])
+    x = np.column_stack([rng.uniform(-2, 2, (6, 2)), rng.uniform(-3, 3, 6), np.zeros((6, 3))])
     lxy = rng.uniform(-5, 5, (6, 2))
     mounts = np.column_stack([rng.uniform(-0.3, 0.3, (6, 2)), rng.uniform(-1, 1, 6)])
     pred, H = range_bearing_batch(x, lxy, sensor=mounts)
@@ -85,44 +87,47 @@ def test_range_bearing_batch_takes_one_sensor_mount_per_row(rng):
         num = np.stack([(range_bearing_batch(x[i:i + 1] + e, lxy[i:i + 1], sensor=mounts[i:i + 1])
                          [0][0] - range_bearing_batch(x[i:i + 1] - e, lxy[i:i + 1],
                                                       sensor=mounts[i:i + 1])[0][0]) / 2e-6
-                        for e in 1e-6 * np.eye(5)], axis=1)
+                        for e in 1e-6 * np.eye(6)], axis=1)
         np.testing.assert_allclose(H[i], num, rtol=1e-6, atol=1e-8)
 
 
-def _mean_step(x, deltas, m_per_tick):
-    ds = m_per_tick * 0.5 * (deltas[0] + deltas[1])
-    dth = m_per_tick * (deltas[1] - deltas[0]) / WHEEL_BASE_M
-    pose = pose_step(x[:3], (1.0 + x[KV]) * ds, (1.0 + x[KW]) * dth, 1.0)
+def _mean_step(x, deltas, intrinsics):
+    """Module eq. 1 written out per wheel: ``(ds, dtheta) = J (d_l, d_r)``."""
+    ds = 0.5 * (intrinsics.m_per_tick_left * deltas[0] + intrinsics.m_per_tick_right * deltas[1])
+    dth = (intrinsics.m_per_tick_right * deltas[1]
+           - intrinsics.m_per_tick_left * deltas[0]) / intrinsics.wheel_base_m
+    pose = pose_step(x[:3], (1.0 + x[KV]) * ds, (1.0 + x[KW]) * dth + x[KAPPA] * ds, 1.0)
     return np.concatenate([pose, x[3:]])
 
 
 @pytest.mark.parametrize("deltas", [(8.0, 8.0), (-6.0, 6.0), (3.0, 11.0), (0.0, 0.0)])
 def test_odometry_predict_mean_and_covariance_match_a_numerical_linearisation(deltas):
     """Without noise, ``P' = J P J^T`` with ``J`` the central-difference Jacobian of the
-    mean step (eq. 1): straight, turning in place, an arc and at rest."""
-    m_per_tick = 4.4e-4
-    x = np.array([[0.3, -0.2, 0.7, -0.03, 0.02]])
+    mean step (eq. 1): straight, turning in place, an arc and at rest; unequal wheels."""
+    intrinsics = OdometryIntrinsics(4.42e-4, 4.38e-4, WHEEL_BASE_M)
+    x = np.array([[0.3, -0.2, 0.7, -0.03, 0.02, 0.015]])
     d = np.array([deltas])
-    A = np.random.default_rng(3).standard_normal((5, 5)) * 0.01
-    P = (A @ A.T + 1e-6 * np.eye(5))[None]
+    A = np.random.default_rng(3).standard_normal((6, 6)) * 0.01
+    P = (A @ A.T + 1e-6 * np.eye(6))[None]
     quiet = SlipNoise(v_frac=0.0, w_frac=0.0, w_per_v_rad_m=0.0, v_floor_m_s=0.0,
                       w_floor_rad_s=0.0)
-    x1, P1 = odometry_predict(x, P, d, m_per_tick=m_per_tick, wheel_base_m=WHEEL_BASE_M,
-                              dt_s=0.015, slip=quiet, walk_var=np.zeros(2),
-                              missing_std=(0.5, 4.0))
-    np.testing.assert_allclose(x1[0], _mean_step(x[0], d[0], m_per_tick), atol=1e-15)
+    x1, P1 = odometry_predict(x, P, d, intrinsics=intrinsics, dt_s=0.015, slip=quiet,
+                              walk_var=np.zeros(3), missing_std=(0.5, 4.0))
+    np.testing.assert_allclose(x1[0], _mean_step(x[0], d[0], intrinsics), atol=1e-15)
     eps = 1e-6
-    J = np.stack([(_mean_step(x[0] + eps * e, d[0], m_per_tick)
-                   - _mean_step(x[0] - eps * e, d[0], m_per_tick)) / (2 * eps)
-                  for e in np.eye(5)], axis=1)
+    J = np.stack([(_mean_step(x[0] + eps * e, d[0], intrinsics)
+                   - _mean_step(x[0] - eps * e, d[0], intrinsics)) / (2 * eps)
+                  for e in np.eye(6)], axis=1)
     np.testing.assert_allclose(P1[0], J @ P[0] @ J.T, rtol=1e-6, atol=1e-14)
 
 
 def test_missing_counts_move_nothing_and_grow_the_pose_covariance():
-    x, P = np.zeros((1, 5)), np.tile(np.eye(5) * 1e-6, (1, 1, 1))
-    x1, P1 = odometry_predict(x, P, np.array([[np.nan, 5.0]]), m_per_tick=4.4e-4,
-                              wheel_base_m=WHEEL_BASE_M, dt_s=0.015, slip=SlipNoise(),
-                              walk_var=np.zeros(2), missing_std=(0.5, 4.0))
+    x, P = np.zeros((1, 6)), np.tile(np.eye(6) * 1e-6, (1, 1, 1))
+    x1, P1 = odometry_predict(x, P, np.array([[np.nan, 5.0]]),
+                              intrinsics=OdometryIntrinsics.symmetric(
+                                  m_per_tick=4.4e-4, wheel_base_m=WHEEL_BASE_M),
+                              dt_s=0.015, slip=SlipNoise(), walk_var=np.zeros(3),
+                              missing_std=(0.5, 4.0))
     assert np.all(x1 == 0.0)
     assert P1[0, 0, 0] == pytest.approx(1e-6 + (0.5 * 0.015) ** 2)
     assert P1[0, 2, 2] == pytest.approx(1e-6 + (4.0 * 0.015) ** 2)
@@ -130,9 +135,9 @@ def test_missing_counts_move_nothing_and_grow_the_pose_covariance():
 
 def test_landmark_update_likelihood_gate_and_covariance(rng):
     n = 6
-    x = np.column_stack([rng.uniform(0, 3, (n, 2)), rng.uniform(-3, 3, n), np.zeros((n, 2))])
-    A = rng.standard_normal((n, 5, 5)) * 0.02
-    P = A @ A.transpose(0, 2, 1) + 1e-6 * np.eye(5)
+    x = np.column_stack([rng.uniform(0, 3, (n, 2)), rng.uniform(-3, 3, n), np.zeros((n, 3))])
+    A = rng.standard_normal((n, 6, 6)) * 0.02
+    P = A @ A.transpose(0, 2, 1) + 1e-6 * np.eye(6)
     lxy = np.tile([-1.0, 3.7], (n, 1))
     noise = LandmarkNoise()
     pred, H = range_bearing_batch(x, lxy)
@@ -276,8 +281,8 @@ def test_a_sightings_own_covariance_replaces_the_sensor_noise(rng):
     """Rows with a covariance use it, rows of NaN (no covariance) the sensor's noise at the
     predicted range; the monitor passes a RangeBearing's covariances on."""
     n = 4
-    x = np.column_stack([rng.uniform(0, 3, (n, 2)), rng.uniform(-3, 3, n), np.zeros((n, 2))])
-    P = np.tile(np.eye(5) * 1e-3, (n, 1, 1))
+    x = np.column_stack([rng.uniform(0, 3, (n, 2)), rng.uniform(-3, 3, n), np.zeros((n, 3))])
+    P = np.tile(np.eye(6) * 1e-3, (n, 1, 1))
     lxy = np.tile([-1.0, 3.7], (n, 1))
     noise = LandmarkNoise()
     pred, _ = range_bearing_batch(x, lxy)
