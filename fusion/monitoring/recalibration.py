@@ -55,8 +55,8 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   most ``max_curvature_std_rad_per_m`` (default 0.004 rad/m, a 0.09% diameter
   ratio on a Create 2, a fifth of the 0.5% change the alarm is tuned to): a copy
   of the model with ``intrinsics`` the new ones, its ``m_per_tick`` and wheel base
-  their mean scale and wheel base, its outputs rescaled to predict the same
-  counts (:func:`fusion.monitoring.rescale.rescaled_model`). Otherwise it waits
+  their mean scale and wheel base, its outputs transformed to predict the same
+  counts (:meth:`lti_motion.model.MotionModel.with_intrinsics`). Otherwise it waits
   for the monitor's running estimate (:meth:`Recalibrator.update_intrinsics` with
   :meth:`ScaleMonitor.intrinsics_estimate`) up to ``scale_settle_s``, then keeps
   the old intrinsics (``"kept_old"``: a rotation cannot tell the wheels apart).
@@ -473,14 +473,13 @@ class Recalibrator:
 
     def _adopt_intrinsics(self, t_s: float, event: AlarmEvent, new: OdometryIntrinsics,
                           curvature_std: float) -> RecalibrationRecord:
-        """The model with ``new`` intrinsics, its symmetric scale and wheel base their means,
-        its outputs rescaled (:mod:`fusion.monitoring.rescale` eq. 1-2)."""
+        """The model with ``new`` intrinsics, its outputs transformed so that it predicts the
+        same counts (:meth:`lti_motion.model.MotionModel.with_intrinsics`, ``T = J' J^-1``)."""
         old = self.model
         before = old.encoder_intrinsics
-        s = output_scaling(old, m_per_tick=new.m_per_tick, wheel_base_m=new.wheel_base_m)
-        self.model = rescaled_model(old, m_per_tick=new.m_per_tick,
-                                    wheel_base_m=new.wheel_base_m).updated(intrinsics=new)
-        self._buf = deque(((t, u, y * s) for t, u, y in self._buf), maxlen=self._buf.maxlen)
+        T = new.jacobian() @ np.linalg.inv(before.jacobian())
+        self.model = old.with_intrinsics(new)
+        self._buf = deque(((t, u, T @ y) for t, u, y in self._buf), maxlen=self._buf.maxlen)
         self._drift_pending = None
         saved = None if self.save_path is None else str(self.model.save(self.save_path))
         return RecalibrationRecord(

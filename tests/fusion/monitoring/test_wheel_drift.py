@@ -183,9 +183,13 @@ def test_the_policy_writes_a_precise_alarms_intrinsics_into_the_model(tmp_path):
     assert rc.model.m_per_tick == pytest.approx(new.m_per_tick)
     assert rc.model.wheel_base_m == pytest.approx(new.wheel_base_m)
     assert new.diameter_ratio == pytest.approx(1.005, abs=1e-4)
-    # the rescaled model predicts the same counts (fusion.monitoring.rescale eq. 2)
+    # the new model predicts the same counts (MotionModel.with_intrinsics: C' = T C,
+    # T = J' J^-1; the one-step predictor A - K C unchanged)
     old = _model()
-    np.testing.assert_allclose(rc.model.A - rc.model.K @ rc.model.C, old.A - old.K @ old.C)
+    T = new.jacobian() @ np.linalg.inv(old.encoder_intrinsics.jacobian())
+    np.testing.assert_allclose(rc.model.C, T @ old.C, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rc.model.A - rc.model.K @ rc.model.C, old.A - old.K @ old.C,
+                               atol=1e-12)
     assert MotionModel.load(r.saved_to).intrinsics == new
 
 
