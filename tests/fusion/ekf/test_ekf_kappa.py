@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from synthetic_ekf_model import DT, M_PER_TICK, B, fitted_model, held_commands
 
 from fusion.ekf import functions as ef
 from fusion.ekf.intrinsics_estimate import corrected_jacobian, intrinsics_estimate
@@ -18,47 +19,21 @@ from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing, range_bearing
-from lti_motion.arx import estimate_arx
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
 from lti_motion.model import MotionModel
 
-DT, B = 0.015, 0.235
-M_PER_TICK = 2e-5
-R_TRUE = np.diag([1e-4, 6e-3])
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 #: A left wheel 1% larger than the right: ground curvature of equal counts [rad/m]
 KAPPA_TRUE = -0.01 / B
 
 
-def _held_commands(rng, n, *, mean=0.2, std=0.08):
-    out, k = np.empty((n, 2)), 0
-    while k < n:
-        hold = int(rng.integers(20, 67))
-        out[k:k + hold] = np.clip(mean + std * rng.standard_normal(2), 0.02, 0.45)
-        k += hold
-    return out
-
-
-def _arx_data(rng, n):
-    a1, a2 = np.diag([0.9, 0.85]), np.diag([-0.2, -0.15])
-    g = np.array([[0.5, 0.5], [-1.0 / B, 1.0 / B]])
-    b0 = g * np.array([[0.3], [0.3]])
-    u = _held_commands(rng, n)
-    y = np.zeros((n, 2))
-    e = rng.multivariate_normal(np.zeros(2), R_TRUE, n)
-    for k in range(2, n):
-        y[k] = a1 @ y[k - 1] + a2 @ y[k - 2] + b0 @ u[k - 1] + e[k]
-    return u, y
 
 
 @pytest.fixture(scope="module")
 def model():
-    u, y = _arx_data(np.random.default_rng(1), 6000)
-    fit = estimate_arx([(u, y)], na=2, nb=1, delay=1)
-    return MotionModel.from_arx(fit, dt_s=DT, wheel_base_m=B, m_per_tick=M_PER_TICK,
-                                q_scale=1.3, calibrated_at="2026-01-01T00:00:00+00:00")
+    return fitted_model()
 
 
 def _state(fm, rng, *, kappa=0.03, w=0.4):
@@ -181,7 +156,7 @@ def test_a_model_moved_to_new_intrinsics_predicts_the_same_counts(model, rng, tm
     moved = model.with_intrinsics(new)
     assert moved.intrinsics == new and moved.m_per_tick == new.m_per_tick
     assert moved.wheel_base_m == new.wheel_base_m
-    u = _held_commands(rng, 400)
+    u = held_commands(rng, 400)
     y_old, y_new = model.simulate(u), moved.simulate(u)
     # the counts the old model predicts, converted by the new intrinsics
     counts = y_old @ np.linalg.inv(model.encoder_intrinsics.jacobian()).T
@@ -204,7 +179,7 @@ def _drive(model, rng, n, *, kappa):
     """Commands, raw 16-bit counts and true poses of a drive whose ground curves at kappa."""
     m = model
     k_inv = np.linalg.inv(ef.FilterModel(model).ticks_to_speeds)
-    u = _held_commands(rng, n)
+    u = held_commands(rng, n)
     z = np.zeros(m.n_states)
     pose = np.array([2.5, 2.5, 0.0])
     counts = np.zeros(2)
