@@ -111,8 +111,11 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"no model file {args.into_model}")
         model = MotionModel.load(args.into_model)
         k = cal.intrinsics
-        written.append(model.updated(intrinsics=k, m_per_tick=k.m_per_tick).save(
-            out / "model_intrinsics.json"))
+        # the model's outputs move with the counts' new meaning, so that it predicts the
+        # same counts (MotionModel.with_intrinsics); a model without a scale has none to move
+        moved = (model.with_intrinsics(k) if model.encoder_intrinsics is not None
+                 else model.updated(intrinsics=k, m_per_tick=k.m_per_tick))
+        written.append(moved.save(out / "model_intrinsics.json"))
     for line in _summary(cal):
         print(line)
     print(f"wrote {', '.join(str(p) for p in written)}")

@@ -82,6 +82,9 @@ def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, caps
     assert loaded.intrinsics.diameter_ratio == pytest.approx(1.01, rel=2e-3)
     assert loaded.m_per_tick == pytest.approx(loaded.intrinsics.m_per_tick)
     assert np.array_equal(loaded.A, model.A)
+    # the outputs moved with the counts' meaning: the same counts are predicted
+    T = loaded.intrinsics.jacobian() @ np.linalg.inv(model.encoder_intrinsics.jacobian())
+    np.testing.assert_allclose(loaded.C, T @ model.C, rtol=1e-12, atol=1e-15)
     capsys.readouterr()
     assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
                  "--into-model", str(tmp_path / "none.json"), "--out", str(tmp_path / "p")]) == 2
