@@ -200,7 +200,9 @@ class Roomba:
         faster-than-real-time virtual Roomba. Scales every robot-time window.
     latency_tolerance_s : float
         Largest arrival latency [robot s] the stream clock does not take for a
-        lost frame (covers FTDI bursts, G17).
+        lost frame (covers FTDI bursts, G17); ``math.inf``: frames are counted,
+        lateness is never taken for loss (a lossless link such as a
+        pseudo-terminal to :class:`~drivers.roomba.virtual.VirtualRoomba`).
     mode_report_offset : int
         Subtracted from packet 35 before use: 1 for Roombas that report the
         mode off by one (G8). Values still outside 0..3 are counted and ignored.

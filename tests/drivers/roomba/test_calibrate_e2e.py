@@ -3,6 +3,8 @@ pyserial driver against the virtual Roomba, compared with calibrating the simula
 directly (drivers issue: "a calibrated model whose fit matches calibrating on the
 simulator directly, within 1 point")."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -36,9 +38,14 @@ def both():
                        before_stage=lambda s: s != "rotation" and direct_sim.place(Room.OPEN_FLOOR))
     vr = VirtualRoomba("create2", seed=1, speed=SPEED, room=Room.cluttered(),
                        initial_pose=Room.CALIBRATION_SPOT)
-    # the stall window is the driver's wall-time floor (0.3 s): at 20x, 5 periods are 3.75 ms
+    # the stall window is the driver's wall-time floor (0.3 s): at 20x, 5 periods are 3.75 ms.
+    # A pty loses nothing, and the emulator's thread, held off by a loaded host, sends frames
+    # late and slips its schedule (overruns), which a robot's clock never does: the driver
+    # counts frames (latency_tolerance_s=inf). With 0.6 s, 295 periods were taken for lost on
+    # a quiet machine and 726 on a loaded one, and the fit fell 1.2 and 2.4 points below
+    # the direct calibration's (5,124 and 76 points with another test run beside it).
     with vr, Roomba(vr.device_path, clock_rate=SPEED, open_timeout_s=3.0,
-                    latency_tolerance_s=0.03 * SPEED) as robot:
+                    latency_tolerance_s=math.inf, write_timeout_s=2.0) as robot:
         over_pty = calibrate(robot, wheel_base_m=0.235, plan=PLAN, floor="hard",
                              before_stage=lambda s: s != "rotation" and vr.place(Room.OPEN_FLOOR))
         counters = robot.counters
