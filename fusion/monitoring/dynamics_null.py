@@ -64,6 +64,7 @@ from fusion.monitoring.dynamics_start import (
     StartNull,
     drive_start_anchors,
     fit_start_null,
+    inverse_quadratic,
     start_evidence,
 )
 from lti_motion.exceptions import MissingEncoderScaleError
@@ -371,10 +372,8 @@ def _error_and_cov(null: DynamicsNull, r: np.ndarray, s: np.ndarray, p: np.ndarr
 
 
 def _statistics(e: np.ndarray, cov: np.ndarray, s: np.ndarray) -> WindowStatistics:
-    sol = np.linalg.solve(cov, np.stack([e, s], axis=-1))      # Sigma^-1 [e, s]
-    return WindowStatistics(np.einsum("...i,...i->...", e, sol[..., 0]),
-                            -np.einsum("...i,...i->...", s, sol[..., 0]),
-                            np.einsum("...i,...i->...", s, sol[..., 1]))
+    return WindowStatistics(inverse_quadratic(cov, e, e), -inverse_quadratic(cov, s, e),
+                            inverse_quadratic(cov, s, s))
 
 
 def window_statistics(null: DynamicsNull, windows: WindowResiduals) -> WindowStatistics:
@@ -449,11 +448,21 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
         lower = np.array([[math.exp(x[0]), 0.0], [x[1], math.exp(x[2])]])
         return lower @ lower.T, np.exp(2.0 * x[3:3 + n_terms]), np.exp(2.0 * x[3 + n_terms:])
 
-    def nll(x: np.ndarray, beta: np.ndarray) -> float:
-        cov = _covariance(*unpack(x), phi, s, p)
-        e = r - phi @ beta
-        q = np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
-        return 0.5 * float(np.sum(q + np.linalg.slogdet(cov)[1]))
+    # Sigma's three entries are linear in the variances: their coefficients once, here
+    pairs = np.stack([phi[:, 0] * phi[:, 0], phi[:, 0] * phi[:, 1], phi[:, 1] * phi[:, 1]],
+                     axis=1)                                         # (n, 3, 10)
+    s_up, s_dn = (np.square(a) for a in _up_down(s, p))
+
+    def nll(x: np.ndarray, e: np.ndarray) -> float:
+        """Gaussian negative log-likelihood of the errors ``e``, up to a constant."""
+        base, term_var, wheel_var = unpack(x)
+        c = pairs @ term_var
+        wheels = wheel_var[0] * s_up + wheel_var[1] * s_dn
+        s00, s01 = base[0, 0] + c[:, 0] + wheels[:, 0], base[0, 1] + c[:, 1]
+        s11 = base[1, 1] + c[:, 2] + wheels[:, 1]
+        det = s00 * s11 - s01 * s01
+        q = (s11 * e[:, 0] ** 2 - 2.0 * s01 * e[:, 0] * e[:, 1] + s00 * e[:, 1] ** 2) / det
+        return 0.5 * float(np.sum(q + np.log(np.abs(det))))
 
     beta = np.linalg.lstsq(phi.reshape(-1, n_terms), r.reshape(-1), rcond=None)[0]
     x = np.concatenate([[0.0, 0.0, 0.0], np.full(n_terms + 2, math.log(0.1))])
@@ -461,12 +470,14 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
     bounds = [(-6.0, 3.0), (-5.0, 5.0), (-6.0, 3.0)] + [(-20.0, 3.0)] * (len(x) - 3)
     opts = {"maxiter": 30000, "xtol": 1e-4, "ftol": 1e-6}
     for _ in range(2):     # variance by maximum likelihood, then the mean by weighted LS
-        x = minimize(nll, x, args=(beta,), method="Powell", bounds=bounds, options=opts).x
+        x = minimize(nll, x, args=(r - phi @ beta,), method="Powell", bounds=bounds,
+                     options=opts).x
         w_half = np.linalg.cholesky(np.linalg.inv(_covariance(*unpack(x), phi, s, p)))
         wt = np.swapaxes(w_half, -1, -2)
         beta = np.linalg.lstsq((wt @ phi).reshape(-1, n_terms),
                                (wt @ r[..., None]).reshape(-1), rcond=None)[0]
-    x = minimize(nll, x, args=(beta,), method="Powell", bounds=bounds, options=opts).x
+    x = minimize(nll, x, args=(r - phi @ beta,), method="Powell", bounds=bounds,
+                 options=opts).x
     base, term_var, wheel_var = unpack(x)
     b = _statistics(r - phi @ beta, _covariance(base, term_var, wheel_var, phi, s, p),
                     s).lag_information
