@@ -44,6 +44,7 @@ Pattern Analysis and Machine Intelligence 22(11), 1330-1334, 2000.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import KW_ONLY, dataclass, field
 from typing import TYPE_CHECKING
@@ -461,21 +462,31 @@ class SyntheticCamera:
         # Canvas pixel u_s covers image pixels around (u_s - (s - 1) / 2) / s (area averaging).
         k_s = self.intrinsics.camera_matrix * np.array([[s], [s], [1.0]])
         k_s[:2, 2] += (s - 1) / 2.0
-        canvas = _background(h, w)
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, marker_map.dictionary))
         cells = dictionary.markerSize + 2 + 2 * QUIET_ZONE_CELLS
         printed_m = marker_map.marker_size_m * cells / (dictionary.markerSize + 2)
         far_first = sorted(marker_map.markers,
                            key=lambda m: -float(np.linalg.norm(m.position_xyz_m - world_t_cam)))
+        quads = []                          # canvas corners of the markers in view, far first
         for m in far_first:
             corners_cam = _to_camera(m.corners_world_m(printed_m), world_r_cam, world_t_cam)
             if not _facing(m, world_t_cam) or np.any(corners_cam[:, 2] < self.near_m):
                 continue
             uvw = corners_cam @ k_s.T
-            _paste_marker(canvas, uvw[:, :2] / uvw[:, 2:3], dictionary, m.marker_id, cells,
-                          self.black_grey, self.white_grey)
-        img = cv2.resize(canvas, (self.intrinsics.width_px, self.intrinsics.height_px),
-                         interpolation=cv2.INTER_AREA)
+            quads.append((uvw[:, :2] / uvw[:, 2:3], m.marker_id))
+        # Only the block of whole s x s cells the markers touch is drawn at canvas
+        # resolution; elsewhere the image is the background's area average, the same pixels.
+        img = _background_image(h, w, s).copy()
+        block = _marker_block([c for c, _ in quads], w, h, s)
+        if block is not None:
+            x0, y0, x1, y1 = block
+            canvas = _background(h, w, rows=slice(y0, y1), cols=x1 - x0)
+            offset = np.array([x0, y0], dtype=float)
+            for corners, marker_id in quads:
+                _paste_marker(canvas, corners - offset, dictionary, marker_id, cells,
+                              self.black_grey, self.white_grey)
+            img[y0 // s:y1 // s, x0 // s:x1 // s] = cv2.resize(
+                canvas, ((x1 - x0) // s, (y1 - y0) // s), interpolation=cv2.INTER_AREA)
         if self.intrinsics.has_distortion:
             img = _distort(img, self.intrinsics)
         if self.blur_sigma_px > 0:
@@ -497,10 +508,36 @@ def _facing(marker: MarkerLandmark, world_t_cam: np.ndarray) -> bool:
     return bool(c * to_cam[0] + s * to_cam[1] > 0.0)
 
 
-def _background(h: int, w: int) -> np.ndarray:
-    """Grey canvas, a gentle vertical gradient (lighter walls above, darker floor below)."""
-    column = np.linspace(150.0, 100.0, h, dtype=np.float32)[:, None]
-    return np.repeat(column, w, axis=1)
+def _background(h: int, w: int, *, rows: slice = slice(None), cols: int | None = None
+                ) -> np.ndarray:
+    """Grey canvas of ``h`` x ``w``, a gentle vertical gradient (lighter walls above, darker
+    floor below); ``rows`` of it, ``cols`` wide (default ``w``)."""
+    column = np.linspace(150.0, 100.0, h, dtype=np.float32)[rows, None]
+    return np.repeat(column, w if cols is None else cols, axis=1)
+
+
+@functools.lru_cache(maxsize=8)
+def _background_image(h: int, w: int, s: int) -> np.ndarray:
+    """The background canvas area-averaged to the image (``h / s`` x ``w / s``), read-only."""
+    img = cv2.resize(_background(h, w), (w // s, h // s), interpolation=cv2.INTER_AREA)
+    img.setflags(write=False)
+    return img
+
+
+def _marker_block(corners: list[np.ndarray], w: int, h: int, s: int
+                  ) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)`` [canvas px], multiples of ``s``: the whole s x s cells holding
+    every pixel :func:`_paste_marker` may touch for these corners; None if none."""
+    if not corners:
+        return None
+    pts = np.vstack(corners)
+    x0, y0 = np.floor(pts.min(axis=0)).astype(int) - 1
+    x1, y1 = np.ceil(pts.max(axis=0)).astype(int) + 2
+    x0, y0 = max(int(x0), 0) // s * s, max(int(y0), 0) // s * s
+    x1, y1 = min(-(-int(x1) // s) * s, w), min(-(-int(y1) // s) * s, h)
+    if x0 >= x1 or y0 >= y1:
+        return None
+    return x0, y0, x1, y1
 
 
 def _paste_marker(canvas: np.ndarray, corners_px: np.ndarray, dictionary: cv2.aruco.Dictionary,
