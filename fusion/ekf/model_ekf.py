@@ -166,6 +166,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         a row, of at least two landmarks, after which the filter is judged
         diverged: its scale states are reset and its pose covariance widened
         (:mod:`fusion.ekf.resets`); ``None`` never judges.
+    counter_bits : int
+        Width of the encoder counters [bits], 8..64 (16: the Open Interface's);
+        counts are differenced as the shortest signed step on their
+        ``2**counter_bits`` ring (63, 64: they never wrap).
 
     Attributes
     ----------
@@ -229,6 +233,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         max_periods: int = 500,
         max_jump_ticks: float = 10.0,
         diverged_after: int | None = 20,
+        counter_bits: int = 16,
     ) -> None:
         fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
                          encoder_std=encoder_std, m_per_tick=m_per_tick)
@@ -245,6 +250,13 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if not max_jump_ticks > 0:
             raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
         self.max_jump_ticks = float(max_jump_ticks)
+        if not (isinstance(counter_bits, int) and 8 <= counter_bits <= 64):
+            raise FilterOptionError(f"counter_bits must be an int in 8..64 (16 for a Roomba), "
+                                    f"got {counter_bits!r}")
+        self.counter_bits = counter_bits
+        # shortest signed step on the counters' ring: (d + half) % modulus - half
+        self._half = 0 if counter_bits >= 63 else 1 << (counter_bits - 1)
+        self._modulus = 0 if counter_bits >= 63 else 1 << counter_bits
         self._bound = ScaleBound.from_scales(
             fm.scales, wheel_base_m=model.wheel_base_m if fm.intrinsics is None
             else fm.intrinsics.wheel_base_m)
@@ -495,7 +507,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         y = self._span_speeds()                     # summed over `periods` periods
         verdict = "young"
         if periods >= self.reanchor_periods:
-            verdict = span_verdict(tick_deltas(pair, axis=0)[0],
+            verdict = span_verdict(tick_deltas(pair, axis=0, counter_bits=self.counter_bits)[0],
                                    np.linalg.solve(self.fm.ticks_to_speeds, speeds),
                                    jump, self._span_jump, periods=periods,
                                    max_jump_ticks=self.max_jump_ticks)
@@ -516,19 +528,22 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._t2s is None:
             return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
         (l0, r0), (l1, r1) = self._tick_pair.tolist()
-        dl = (l1 - l0 + 32768) % 65536 - 32768
-        dr = (r1 - r0 + 32768) % 65536 - 32768
+        dl, dr = self._step(l1 - l0), self._step(r1 - r0)
         (a, b), (c, d) = self._t2s
         return np.array((a * dl + b * dr, c * dl + d * dr))
+
+    def _step(self, d: int) -> int:
+        """A count difference as the shortest signed step on the counters' ring [ticks]
+        (:func:`lti_motion.odometry.tick_deltas`, scalar: it runs at every reading)."""
+        return d if not self._modulus else (d + self._half) % self._modulus - self._half
 
     def _frame_jump(self, ticks: np.ndarray) -> float:
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
         increment differs from the last frame's (a wheel's speed changes by about a tick per
         period). Scalar arithmetic: it runs at every reading."""
         left, right = int(ticks[0]), int(ticks[1])
-        # 16-bit rollover-safe increments, as lti_motion.odometry.tick_deltas
-        dl = abs((left - self._last_frame[0] + 32768) % 65536 - 32768)
-        dr = abs((right - self._last_frame[1] + 32768) % 65536 - 32768)
+        dl = abs(self._step(left - self._last_frame[0]))
+        dr = abs(self._step(right - self._last_frame[1]))
         jump = 0.0
         if self._have_last_delta:
             jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))

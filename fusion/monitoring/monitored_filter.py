@@ -118,6 +118,9 @@ class MonitoredFilter:
         Filter time at the anchoring frame [s].
     on_alarm : callable, optional
         Called with each :class:`~fusion.monitoring.AlarmEvent` as it is raised.
+    counter_bits : int
+        Width of the encoder counters [bits] (16: the Open Interface's;
+        :class:`~fusion.ekf.ModelEKF`).
 
     Attributes
     ----------
@@ -160,7 +163,8 @@ class MonitoredFilter:
                  initial_pose: Sequence[float] = (0.0, 0.0, 0.0),
                  pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
                  initial_ticks: np.ndarray | Sequence[int] | None = None, t0_s: float = 0.0,
-                 on_alarm: Callable[[AlarmEvent], None] | None = None) -> None:
+                 on_alarm: Callable[[AlarmEvent], None] | None = None,
+                 counter_bits: int = 16) -> None:
         if model.m_per_tick is None:
             raise MissingEncoderScaleError.needed_by("the monitor")
         self.model = model
@@ -180,7 +184,7 @@ class MonitoredFilter:
         self._fuse = landmarks is not None and bool(fuse_landmarks)
         self._ekf_args = {"initial_pose": initial_pose, "pose_std": pose_std, "t0_s": t0_s,
                           "history": 0, "landmarks": landmarks if self._fuse else None,
-                          "landmark_noise": landmark_noise}
+                          "landmark_noise": landmark_noise, "counter_bits": counter_bits}
         self.ekf: ModelEKF | None = None
         self._last_ticks: np.ndarray | None = None
         if initial_ticks is not None:
@@ -242,7 +246,8 @@ class MonitoredFilter:
         if not valid:
             return self._result(np.zeros(2), None, [])
         now = np.asarray(ticks, np.int64)
-        deltas = tick_deltas(np.stack([self._last_ticks, now]), axis=0)[0].astype(float)
+        deltas = tick_deltas(np.stack([self._last_ticks, now]), axis=0,
+                             counter_bits=ekf.counter_bits)[0].astype(float)
         t = ekf.t_s
         # the stuck check compares the counts with the model's prediction, before the update
         alarms = mon.update_counts(t, deltas, wheel_from_body(

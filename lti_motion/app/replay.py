@@ -76,7 +76,8 @@ def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.nd
     if k is None:
         raise MissingEncoderScaleError.needed_by("encoder odometry")
     rows = np.flatnonzero(src.valid)
-    d = k.wheel_travel_m(tick_deltas(src.ticks[rows], axis=0))       # wheel travel [m]
+    d = k.wheel_travel_m(tick_deltas(src.ticks[rows], axis=0,        # wheel travel [m]
+                                     counter_bits=src.counter_bits))
     # displacement and turn over each interval, integrated with unit steps (paper eq. 11)
     moves = body_from_wheel(d, wheel_base_m=k.wheel_base_m)
     at_valid = integrate_poses(moves, 1.0, initial_pose=pose0)
@@ -102,7 +103,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
                    initial_ticks=src.ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
-                   landmark_noise=src.landmark_noise, history=0)
+                   landmark_noise=src.landmark_noise, history=0, counter_bits=src.counter_bits)
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
     poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]

@@ -74,7 +74,10 @@ class ReplaySource:
     dt_s : float
         Sensor period [s].
     ticks : ndarray of int64, shape (n, 2), or None
-        Raw 16-bit encoder counts; ``None`` for a data set without encoders.
+        Raw encoder counts; ``None`` for a data set without encoders.
+    counter_bits : int
+        Width of the counters [bits] (16: the Open Interface's; the log's
+        :attr:`~lti_motion.frames.FrameLog.counter_bits`).
     truth : ndarray, shape (n, 3), or None
         Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
@@ -96,6 +99,7 @@ class ReplaySource:
     sightings: RangeBearing = field(default_factory=RangeBearing.empty)
     landmarks: LandmarkMap | None = None
     landmark_noise: LandmarkNoise | None = None
+    counter_bits: int = 16
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -222,7 +226,8 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
                         dt_s=log.dt_s,
                         ticks=np.where(counted[:, None], log.ticks[keep], 0).astype(np.int64),
                         truth=None if log.true_pose is None else log.true_pose[keep],
-                        sightings=sightings, landmarks=landmarks)
+                        sightings=sightings, landmarks=landmarks,
+                        counter_bits=log.counter_bits)
 
 
 def _key(value: object) -> Hashable:

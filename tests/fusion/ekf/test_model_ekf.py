@@ -585,3 +585,37 @@ def test_a_models_offset_reaches_the_speed_state_and_the_pose(model, rng):
     np.testing.assert_allclose(np.array(speeds)[1:], want, atol=1e-12)
     np.testing.assert_allclose(speeds[0], [0.01, -0.02], atol=1e-15)
     np.testing.assert_allclose(ekf.pose, shifted.predict_poses(u)[-1], atol=1e-9)
+
+
+# -- counter width ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("bits", [12, 24, 32, 64])
+def test_counters_of_any_width_wrap_where_they_wrap(model, rng, bits):
+    """The same drive with counts offset to just below the ring's top (so they wrap on the
+    way) gives the same estimate as with the plain counts, for any counter width; a 16-bit
+    filter reading 12-bit counts takes their wrap for a jump of 4,096 ticks and rejects it
+    (wider counters read as 16-bit would pass: 2**16 divides their ring)."""
+    u, ticks = _ticks_for(model, rng, 300)
+    ticks = np.asarray(ticks, np.int64)
+    top = (1 << 62) if bits >= 63 else 1 << bits
+    wrapped = (ticks + top - 40) % top if bits < 63 else ticks + top - 40
+
+    def run(counts, counter_bits):
+        ekf = ModelEKF(model, initial_ticks=counts[0], counter_bits=counter_bits)
+        accepted = []
+        for k in range(len(u)):
+            ekf.predict(u[k])
+            accepted.append(ekf.update_encoders(counts[k + 1]).accepted)
+        return ekf.x.copy(), np.array(accepted)
+
+    x_plain, ok_plain = run(ticks, bits)
+    x_wrapped, ok_wrapped = run(wrapped, bits)
+    assert ok_plain.all() and ok_wrapped.all()
+    np.testing.assert_allclose(x_wrapped, x_plain, rtol=0, atol=1e-12)
+    if bits == 12:
+        _, ok16 = run(wrapped, 16)
+        assert not ok16.all()
+
+
+def test_counter_width_out_of_range_is_refused(model):
+    with pytest.raises(FilterOptionError, match=r"counter_bits must be an int in 8\.\.64"):
+        ModelEKF(model, counter_bits=7)
