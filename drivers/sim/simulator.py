@@ -81,12 +81,13 @@ def _params_row(p: RobotParams, floor_default: int) -> np.ndarray:
     return row
 
 
-def _wrap(ticks: np.ndarray, params: Sequence[RobotParams]) -> np.ndarray:
-    """Counts of shape (N, n, 2) on each robot's ``2**counter_bits`` ring (63, 64: unwrapped,
-    a signed 64-bit count that no drive overflows)."""
-    bits = np.array([p.counter_bits for p in params], np.int64)[:, None, None]
-    modulus = np.left_shift(np.int64(1), np.minimum(bits, 62))
-    return np.where(bits <= 62, ticks % modulus, ticks)
+def _wrap(ticks: np.ndarray, modulus: np.ndarray, ring: np.ndarray | None) -> np.ndarray:
+    """Counts of shape (N, n, 2) on each robot's ``2**counter_bits`` ring: ``modulus``, shape
+    (N, 1, 1), is ``2**min(bits, 62)``, ``ring`` where ``bits <= 62`` (None: everywhere;
+    63, 64: unwrapped, a signed 64-bit count that no drive overflows)."""
+    if ring is None:
+        return ticks % modulus
+    return np.where(ring, ticks % modulus, ticks)
 
 
 def _own_faults(params: Sequence[RobotParams]) -> list[Fault]:
@@ -242,6 +243,22 @@ class Simulator:
         self._noise = _NoiseBlocks(seeds)
         self._k = 0
         self._last_t = np.full(self.n, -np.inf)
+        # what every call needs and only the parameters decide, built once
+        self._vmax = np.array([p.max_speed_m_s for p in params])[:, None, None]
+        self._vlimit = self._vmax + 1e-9
+        self._lat_mean = np.array([p.latency_s for p in params])[:, None]
+        self._lat_std = np.array([p.latency_jitter_s for p in params])[:, None]
+        bits = np.array([p.counter_bits for p in params], np.int64)[:, None, None]
+        self._modulus = np.left_shift(np.int64(1), np.minimum(bits, 62))
+        self._ring = None if np.all(bits <= 62) else bits <= 62
+        # one period's inputs with no fault active (the kernel only reads them)
+        self._idle = np.zeros((self.n, 1, K.N_PERIOD))
+        self._idle[:, :, K.PP_FLOOR] = -1.0
+        self._idle[:, :, K.PP_PAYLOAD] = np.array([p.payload_kg for p in params])[:, None]
+        self._idle[:, :, K.PP_GAIN0:K.PP_GAIN0 + 2] = 1.0
+        self._idle[:, :, K.PP_DIAM0:K.PP_DIAM0 + 2] = 1.0
+        self._fault_rows = [slice(None) if f.robots is None else np.array(f.robots)
+                            for f in self.faults]
 
     # -- public API -------------------------------------------------------------
 
@@ -274,14 +291,14 @@ class Simulator:
         want = (self.n, 2) if self.batch else (2,)
         if cmd.shape != want:
             raise SimulatorError(f"step() expects commands of shape {want}, got {cmd.shape}")
-        out = self._advance(cmd.reshape(self.n, 1, 2))
+        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over = self._simulate(
+            cmd.reshape(self.n, 1, 2))
         take = (slice(None), 0) if self.batch else (0, 0)
         return SensorFrame(
-            t_s=out.t_s[take], ticks=out.ticks[take], light_bump=out.light_bump[take],
-            bumps=out.bumps[take], cmd_m_s=out.cmd_m_s[take], valid=out.valid[take],
-            true_pose=out.true_pose[take], true_body_m_s=out.true_body_m_s[take],
-            motor_current_a=out.motor_current_a[take],
-            wheel_overcurrent=out.wheel_overcurrent[take],
+            t_s=t_s[take], ticks=ticks[take], light_bump=light[take], bumps=bumps[take],
+            cmd_m_s=cmd[take], valid=valid[take], true_pose=pose[take],
+            true_body_m_s=body[take], motor_current_a=current[take],
+            wheel_overcurrent=over[take],
         )
 
     def run(self, cmd_m_s: np.ndarray) -> FrameLog:
@@ -331,35 +348,41 @@ class Simulator:
     # -- internals --------------------------------------------------------------
 
     def _check_commands(self, cmd: np.ndarray) -> np.ndarray:
-        if not np.all(np.isfinite(cmd)):
-            bad = np.argwhere(~np.isfinite(cmd))[0]
-            raise SimulatorError(f"commands must be finite; first bad value at index {tuple(bad)}")
-        vmax = np.array([p.max_speed_m_s for p in self.params])[:, None, None]
-        if np.any(np.abs(cmd) > vmax + 1e-9):
+        if not (np.abs(cmd) <= self._vlimit).all():     # NaN fails too
+            if not np.all(np.isfinite(cmd)):
+                bad = np.argwhere(~np.isfinite(cmd))[0]
+                raise SimulatorError(
+                    f"commands must be finite; first bad value at index {tuple(bad)}")
             worst = float(np.max(np.abs(cmd)))
             raise SimulatorError(
                 f"wheel-speed command {worst:.4g} m/s exceeds the robot's limit of "
-                f"{float(vmax.min()):.4g} m/s; clip commands before sending"
+                f"{float(self._vmax.min()):.4g} m/s; clip commands before sending"
             )
         return np.round(cmd * 1000.0) / 1000.0      # the OI takes whole mm/s
 
-    def _schedule(self, k0: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Per-period fault inputs, tick offsets of encoder spikes, and the valid mask."""
-        per = np.zeros((self.n, n, K.N_PERIOD))
-        per[:, :, K.PP_FLOOR] = -1.0
-        per[:, :, K.PP_PAYLOAD] = np.array([p.payload_kg for p in self.params])[:, None]
-        per[:, :, K.PP_GAIN0:K.PP_GAIN0 + 2] = 1.0
-        per[:, :, K.PP_DIAM0:K.PP_DIAM0 + 2] = 1.0
-        spikes = np.zeros((self.n, n, 2))
+    def _schedule(self, k0: int, n: int, events: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """Per-period fault inputs, tick offsets of encoder spikes (None: none), and the
+        valid mask, for periods ``k0 .. k0 + n - 1`` with their event draws."""
+        per = self._idle if n == 1 else np.repeat(self._idle, n, axis=1)
+        fresh = n > 1       # per may be written (self._idle never is)
+        spikes = None
         valid = np.ones((self.n, n), bool)
-        t = (k0 + np.arange(n)) * self.dt_s
-        events = self._noise.draw(1, k0, n)
-        for f in self.faults:
-            active = (t >= f.t_s - 1e-9) & (t < f.t_s + f.duration_s - 1e-9)
-            if not active.any():
+        t = None
+        # period times are increasing, so a fault is active over a run of periods
+        t_first, t_last = k0 * self.dt_s, (k0 + n - 1) * self.dt_s
+        for f, rows in zip(self.faults, self._fault_rows, strict=True):
+            start, end = f.t_s - 1e-9, f.t_s + f.duration_s - 1e-9
+            if t_last < start or t_first >= end:
                 continue
-            rows = list(range(self.n)) if f.robots is None else list(f.robots)
-            sel = np.ix_(rows, np.flatnonzero(active))
+            if t is None:
+                t = (k0 + np.arange(n)) * self.dt_s
+            active = np.flatnonzero((t >= start) & (t < end))
+            if active.size == 0:
+                continue
+            sel = (rows, slice(active[0], active[-1] + 1))
+            if not fresh:
+                per, fresh = per.copy(), True
             if f.kind == "floor":
                 per[..., K.PP_FLOOR][sel] = _FLOOR_NAMES.index(f.floor)
             elif f.kind == "payload":
@@ -376,6 +399,8 @@ class Simulator:
                 elif f.kind == "wheel_diameter":
                     per[..., K.PP_DIAM0 + wh][sel] = 1.0 + f.diameter_change
                 elif f.kind == "encoder_spikes":
+                    if spikes is None:
+                        spikes = np.zeros((self.n, n, 2))
                     hit = events[..., wh] < f.rate_hz * self.dt_s
                     draw = events[..., 2 + wh]      # sign and size in one uniform draw
                     size = f.magnitude_ticks * (0.5 + 2.0 * np.abs(draw - 0.5))
@@ -384,28 +409,36 @@ class Simulator:
                 valid[sel] &= ~(events[..., 4] < f.probability)[sel]
         return per, spikes, valid
 
-    def _advance(self, cmd: np.ndarray) -> FrameLog:
+    def _simulate(self, cmd: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The next ``cmd.shape[1]`` periods: t_s, ticks, light, bumps, cmd, valid, pose,
+        body, current, overcurrent, each with a robot and a period axis."""
         cmd = self._check_commands(cmd)
         k0, n = self._k, cmd.shape[1]
-        per, spikes, valid = self._schedule(k0, n)
+        events = self._noise.draw(1, k0, n)
+        per, spikes, valid = self._schedule(k0, n, events)
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
-        latency = self._noise.draw(1, k0, n)[..., 5]
         ticks, light, bumps, pose, body, current, overcurrent = K.empty_outputs(self.n, n)
         K.run_periods(self._state, self._queue, self._qinfo, self._params, self._floors,
                       self._regions, self._walls, np.ascontiguousarray(cmd), per, noise,
                       ticks, light, bumps, pose, body, current, overcurrent)
-        ticks = _wrap(ticks + np.round(spikes).astype(np.int64), self.params)
+        if spikes is not None:
+            ticks = ticks + np.round(spikes).astype(np.int64)
+        ticks = _wrap(ticks, self._modulus, self._ring)
         # host timestamps: end of each period plus a jittered, never negative latency
-        lat_mean = np.array([p.latency_s for p in self.params])[:, None]
-        lat_std = np.array([p.latency_jitter_s for p in self.params])[:, None]
-        t_s = (k0 + 1 + np.arange(n)) * self.dt_s + np.maximum(0.0, lat_mean + lat_std * latency)
+        latency = np.maximum(0.0, self._lat_mean + self._lat_std * events[..., 5])
+        t_s = (k0 + 1 + np.arange(n)) * self.dt_s + latency
         t_s = np.maximum.accumulate(np.maximum(t_s, self._last_t[:, None] + 1e-6), axis=1)
         self._last_t = t_s[:, -1].copy()
         self._k += n
+        return t_s, ticks, light, bumps, cmd, valid, pose, body, current, overcurrent
+
+    def _advance(self, cmd: np.ndarray) -> FrameLog:
+        k0 = self._k
+        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over = self._simulate(cmd)
         return FrameLog(
             t_s=t_s, ticks=ticks, light_bump=light, bumps=bumps, cmd_m_s=cmd, valid=valid,
             dt_s=self.dt_s, true_pose=pose, true_body_m_s=body, motor_current_a=current,
-            wheel_overcurrent=overcurrent,
+            wheel_overcurrent=over,
             meta={"preset": [p.name for p in self.params], "seeds": list(self.seeds),
                   "counter_bits": [p.counter_bits for p in self.params],
                   "floor": self.floor_map.default, "k0": k0},
