@@ -332,7 +332,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
              f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
     run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
-                         on_alarm=on_alarm, on_step=keep)
+                         on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits)
     for text in run.summary():
         print_fn(text)
     alarm_ns = np.array([int(_bag_ns(log, t0 + e.t_s)) for e in run.events], np.int64)

@@ -244,8 +244,8 @@ def monitor_frames(model: MotionModel,
                    on_alarm: Callable[[AlarmEvent], None] | None = None,
                    on_alarm_line: Callable[[str], object] | None = None,
                    on_frame: Callable[[SensorFrame], None] | None = None,
-                   on_step: Callable[[FrameResult, np.ndarray], None] | None = None
-                   ) -> MonitorRun:
+                   on_step: Callable[[FrameResult, np.ndarray], None] | None = None,
+                   counter_bits: int = 16) -> MonitorRun:
     """Run a :class:`~fusion.monitoring.MonitoredFilter` over frames.
 
     Parameters
@@ -280,6 +280,8 @@ def monitor_frames(model: MotionModel,
         Called after each frame with what it gave (a
         :class:`~fusion.monitoring.monitored_filter.FrameResult`) and the EKF's
         pose covariance, shape (3, 3) [m^2, m rad, rad^2] (to write the estimates).
+    counter_bits : int
+        Width of the frames' encoder counters [bits] (16: the Open Interface's).
 
     Returns
     -------
@@ -299,7 +301,8 @@ def monitor_frames(model: MotionModel,
             on_alarm(event)
 
     mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
-                         fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
+                         fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay,
+                         counter_bits=counter_bits)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
                      glitch_gate_nis=mf.monitor.thresholds().gate)
     for item in frames:
@@ -426,7 +429,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     rec = Recorder(dt_s=sim.dt_s, meta={"source": "lti-motion monitor --sim", "preset": preset,
                                         "seed": seed, "floor": floor_name(floor),
                                         "fault": fault,
-                                        "fault_at_s": fault_at_s})
+                                        "fault_at_s": fault_at_s,
+                                        "counter_bits": params.counter_bits})
     print_fn(f"driving the simulated {preset} robot for {duration_s:g} s (seed {seed}, "
              f"{floor_name(floor)} floor)"
              + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
@@ -458,7 +462,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
 
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
-                         on_alarm_line=print_fn)
+                         on_alarm_line=print_fn, counter_bits=params.counter_bits)
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
     if record:
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")

@@ -23,9 +23,11 @@ from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.kinematics import wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
+from lti_motion.odometry import unwrap_ticks
 
 if TYPE_CHECKING:
     from drivers.sim.config import FloorMap, RobotParams
+    from lti_motion.frames import FrameLog
 
 __all__ = ["MONITOR_LANDMARKS", "monitor_route", "nominal_from_logs", "nominal_on_simulator",
            "sightings"]
@@ -103,7 +105,7 @@ def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "crea
     cmds = np.stack([monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
                                    rng=np.random.default_rng(s)) for s in seeds])
     log = sim.run(cmds)
-    drives = [(r.cmd_m_s[1:], r.ticks) for r in (log.robot(i) for i in range(n_drives))]
+    drives = [(r.cmd_m_s[1:], _unwrapped(r)) for r in (log.robot(i) for i in range(n_drives))]
     return fit_nominal(model, drives)
 
 
@@ -114,5 +116,11 @@ def nominal_from_logs(model: MotionModel, paths: Sequence[str]) -> NominalFit:
     drives = []
     for path in paths:
         log = load_log(path)
-        drives.append((log.cmd_m_s[1:], log.ticks))
+        drives.append((log.cmd_m_s[1:], _unwrapped(log)))
     return fit_nominal(model, drives)
+
+
+def _unwrapped(log: FrameLog) -> np.ndarray:
+    """A drive's counts unwrapped from their ``2**counter_bits`` ring: ``fit_nominal``
+    differences them on the 16-bit ring, exact for steps below 2**15 ticks."""
+    return unwrap_ticks(log.ticks, counter_bits=log.counter_bits)
