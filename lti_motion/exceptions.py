@@ -22,6 +22,7 @@ __all__ = [
     "ShapeError",
     "UnidentifiableError",
     "UnstableModelError",
+    "WallRunError",
 ]
 
 
@@ -73,6 +74,11 @@ class CalibrationNonFiniteError(NonFiniteError, CalibrationError):
 class UnidentifiableError(CalibrationError):
     """The motion cannot determine the odometry intrinsics (e.g. no turns, or turns one way
     only with no straight runs); the message says what the drive lacks."""
+
+
+class WallRunError(CalibrationError):
+    """The wall-run manoeuvre cannot be driven as planned: no wall ahead, or runs that came at
+    the wall on both sides (:mod:`lti_motion.wall_run_drive`)."""
 
 
 class PoseReferenceError(CalibrationError):
