@@ -10,6 +10,7 @@ __all__ = [
     "CalibrationError",
     "CalibrationNonFiniteError",
     "CalibrationShapeError",
+    "CurvedIntoWallError",
     "LogFileError",
     "MissingEncoderScaleError",
     "ModelFileError",
@@ -79,6 +80,11 @@ class UnidentifiableError(CalibrationError):
 class WallRunError(CalibrationError):
     """The wall-run manoeuvre cannot be driven as planned: no wall ahead, or runs that came at
     the wall on both sides (:mod:`lti_motion.wall_run_drive`)."""
+
+
+class CurvedIntoWallError(WallRunError):
+    """The wall run's straight runs came at the wall on both sides: the intrinsics in use
+    turn the robot wrongly (calibrate the encoder scale first)."""
 
 
 class PoseReferenceError(CalibrationError):

@@ -24,7 +24,7 @@ import numpy as np
 
 from lti_motion.calibration import Robot
 from lti_motion.calibration import drive as drive_commands
-from lti_motion.exceptions import NoSignalError, WallRunError
+from lti_motion.exceptions import CurvedIntoWallError, NoSignalError, WallRunError
 from lti_motion.frames import FrameLog
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import wheel_from_body
@@ -223,8 +223,9 @@ def drive_wall_run(robot: Robot, intrinsics: OdometryIntrinsics, *, run_m: float
     Raises
     ------
     WallRunError
-        A batch simulator, bad sizes, no wall within ``max_approach_m``, or runs that came
-        at the wall on both sides.
+        A batch simulator, bad sizes, or no wall within ``max_approach_m``.
+    CurvedIntoWallError
+        Runs that came at the wall on both sides (a ``WallRunError``).
     NoSignalError
         Light bumps that all read 0 while the robot scans the wall a few cm away (a stream
         without them).
@@ -270,9 +271,9 @@ def drive_wall_run(robot: Robot, intrinsics: OdometryIntrinsics, *, run_m: float
         # the robot came at the wall: start over with the wall on the other side
         mark([_run(robot, np.vstack([_move(0.0, side * turn_rad_s, np.pi / 2, **opts), rest]))])
         facing_wall = True
-    raise WallRunError("the robot curved into the wall on both sides: its quarter turns are "
-                       "off; calibrate the encoder scale on this floor first (the rotation "
-                       "manoeuvre) and drive the wall run with those intrinsics")
+    raise CurvedIntoWallError("the robot curved into the wall on both sides: its quarter "
+                              "turns are off; calibrate the encoder scale on this floor first "
+                              "(the rotation manoeuvre) and start the wall run from it")
 
 
 def wall_passes(drive: WallRunDrive, intrinsics: OdometryIntrinsics) -> list[WallPass]:
