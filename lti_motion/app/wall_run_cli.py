@@ -111,7 +111,9 @@ def _summary(cal: WallRunCalibration, drive: WallRunDrive, known: OdometryIntrin
     from lti_motion.wall_run import run_path
     from lti_motion.wall_run_drive import wall_passes
 
-    lines = [f"wall on the robot's {drive.wall_side}; intrinsics in use: {source} "
+    over = (" (its first run curved towards the wall on its left)"
+            if drive.wall_side == "right" else "")
+    lines = [f"wall on the robot's {drive.wall_side}{over}; intrinsics in use: {source} "
              f"(left/right {known.diameter_ratio:.5f})"]
     for i, wp in enumerate(wall_passes(drive, known)):
         travel = run_path(wp.ticks, known)[0][-1]
