@@ -130,3 +130,20 @@ def test_no_light_bump_signals(lefty, tmp_path, capsys, monkeypatch):
                             robot, room=Room.single_wall(), initial_pose=(0, 0.5, -np.pi / 2))))
     _refused(capsys, ["--sim", str(lefty), "--out", str(tmp_path)],
              r"no light-bump signals: .*packets \(46-51\)")
+
+
+def test_port_drives_the_wall_run_on_a_virtual_roomba(lefty, tmp_path, capsys):
+    """The user's path: --port through the serial driver (default link options) at 10x."""
+    from drivers.roomba.virtual import VirtualRoomba
+
+    with VirtualRoomba(load_robot(str(lefty)), seed=2, speed=10.0, floor="tile",
+                       room=Room.single_wall(), initial_pose=(0.0, 0.5, -np.pi / 2)) as vr:
+        code = main(["calibrate", "--port", vr.device_path, "--clock-rate", "10", "--yes",
+                     "--robot", str(lefty), "--wall-run", "--wall-run-m", "1",
+                     "--out", str(tmp_path)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert f"driving the wall run on {vr.device_path}" in text
+    assert "intrinsics in use: the nominal ones of" in text
+    ratio = json.loads((tmp_path / "wall_run.json").read_text())["diameter_ratio"]
+    assert 1.005 < ratio < 1.015                      # the 1% larger left wheel shows
