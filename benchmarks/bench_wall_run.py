@@ -1,6 +1,6 @@
 """Issue 17 item 4: the wheels' diameter ratio without any external reference, from two
 straight runs beside a wall (:mod:`lti_motion.wall_run`, driven by
-:func:`drivers.sim.wall_run.drive_wall_run`).
+:func:`lti_motion.wall_run_drive.drive_wall_run`).
 
 The robot of the intrinsics benchmark (a Create 2 with a 1% larger left wheel and a 10%
 weaker right motor, on tile) starts 0.5 m in front of a straight white wall, facing it
@@ -26,7 +26,8 @@ contact-point travel per tick over the drive's steady straight periods, scoring 
     rotation manoeuvre's.
 
 :func:`table` prints mean, standard deviation and worst of every case (the table of
-``docs/intrinsics.md``).
+``docs/intrinsics.md``); :func:`pty_table` the same drive through the serial driver over a
+pseudo-terminal.
 """
 
 from __future__ import annotations
@@ -44,9 +45,9 @@ from benchmarks.bench_intrinsics import (
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.config import RobotParams, Room
 from drivers.sim.simulator import Simulator
-from drivers.sim.wall_run import drive_wall_run, wall_passes
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.wall_run import WallRunCalibration, calibrate_wall_run
+from lti_motion.wall_run_drive import drive_wall_run, wall_passes
 
 SEEDS = range(20)
 CASE_SEEDS = range(10)
@@ -110,6 +111,45 @@ def table() -> None:
         err = ratio_errors_pct(seeds, **options)[0]
         print(f"{name:28s} mean {err.mean():+.3f}%  sd {err.std():.3f}%  "
               f"worst {np.abs(err).max():.3f}%")
+
+
+def pty_table(seeds: range = range(10), *, speed: float = 10.0) -> None:
+    """Print, per seed, the ratio error of the wall run driven through the serial driver
+    over a pseudo-terminal against the virtual Roomba (``speed`` x real time), next to the
+    same seed driven on the simulator directly (:func:`wall_run_trial`), and both summaries.
+
+    The truth of the pty drive is the emulator's applied commands run again through a
+    simulator of the same seed (bit for bit the streamed values; scoring only).
+    """
+    import math
+
+    from drivers.roomba.driver import Roomba
+    from drivers.roomba.virtual import VirtualRoomba
+
+    params = asymmetric_robot()
+    known = known_intrinsics(params, FLOOR)
+    errors: dict[str, list[float]] = {"pty": [], "direct": []}
+    for seed in seeds:
+        heading = (-np.pi / 2
+                   + np.random.default_rng([seed, 0x3A11]).uniform(-1, 1) * np.deg2rad(3))
+        scene = {"seed": seed, "floor": FLOOR, "initial_pose": (2.5, 0.5, heading),
+                 "room": Room(np.array([[-6.0, 0.0, 6.0, 0.0, 1.0]]))}
+        virtual = VirtualRoomba(params, speed=speed, **scene)
+        with virtual, Roomba(virtual.device_path, clock_rate=speed, open_timeout_s=3.0,
+                             latency_tolerance_s=math.inf, write_timeout_s=2.0) as robot:
+            drive = drive_wall_run(robot, known)
+        cal = calibrate_wall_run(wall_passes(drive, known), known, wall_side=drive.wall_side)
+        replay = Simulator(params, **scene).run(virtual.applied_commands_m_s)
+        truth = straight_line_truth(params, replay, replay.cmd_m_s)
+        errors["pty"].append(100.0 * (cal.diameter_ratio * truth[1] / truth[0] - 1.0))
+        direct, direct_truth = wall_run_trial(params, seed)
+        errors["direct"].append(100.0 * (direct.diameter_ratio / direct_truth - 1.0))
+        print(f"seed {seed}: pty {errors['pty'][-1]:+.3f}% (overruns "
+              f"{virtual.stats.overruns}), direct {errors['direct'][-1]:+.3f}%")
+    for name, values in errors.items():
+        err = np.array(values)
+        print(f"{name:6s} mean {err.mean():+.3f}%  sd {err.std():.3f}%  "
+              f"worst {np.abs(err).max():.3f}% over {len(err)} seeds")
 
 
 @benchmark("wall_run")

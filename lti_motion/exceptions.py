@@ -10,6 +10,7 @@ __all__ = [
     "CalibrationError",
     "CalibrationNonFiniteError",
     "CalibrationShapeError",
+    "CurvedIntoWallError",
     "LogFileError",
     "MissingEncoderScaleError",
     "ModelFileError",
@@ -22,6 +23,7 @@ __all__ = [
     "ShapeError",
     "UnidentifiableError",
     "UnstableModelError",
+    "WallRunError",
 ]
 
 
@@ -73,6 +75,16 @@ class CalibrationNonFiniteError(NonFiniteError, CalibrationError):
 class UnidentifiableError(CalibrationError):
     """The motion cannot determine the odometry intrinsics (e.g. no turns, or turns one way
     only with no straight runs); the message says what the drive lacks."""
+
+
+class WallRunError(CalibrationError):
+    """The wall-run manoeuvre cannot be driven as planned: no wall ahead, or runs that came at
+    the wall on both sides (:mod:`lti_motion.wall_run_drive`)."""
+
+
+class CurvedIntoWallError(WallRunError):
+    """The wall run's straight runs came at the wall on both sides: the intrinsics in use
+    turn the robot wrongly (calibrate the encoder scale first)."""
 
 
 class PoseReferenceError(CalibrationError):

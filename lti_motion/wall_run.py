@@ -61,13 +61,15 @@ from lti_motion.exceptions import (
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.odometry import tick_deltas
 
-__all__ = ["WallPass", "WallRunCalibration", "calibrate_wall_run", "mirror_heading_rad",
-           "run_path"]
+__all__ = ["MIN_RUN_M", "WallPass", "WallRunCalibration", "calibrate_wall_run",
+           "mirror_heading_rad", "run_path"]
 
 _log = logging.getLogger(__name__)
 
 #: Largest light-bump signal of the Open Interface (packets 46-51, 0-4095).
 SIGNAL_MAX = 4095
+#: Shortest straight run :func:`calibrate_wall_run` accepts by default [m].
+MIN_RUN_M = 0.8
 
 
 @dataclass(frozen=True)
@@ -140,6 +142,18 @@ class WallRunCalibration:
         """Left over right scale of the corrected intrinsics."""
         return self.intrinsics.diameter_ratio
 
+    @property
+    def diameter_ratio_std(self) -> float:
+        """Standard deviation of :attr:`diameter_ratio` from :attr:`kappa_std_rad_per_m`.
+
+        With ``u = kappa b / 2``, the ratio is ``r_0 (1 - u) / (1 + u)``
+        (:meth:`~lti_motion.intrinsics.OdometryIntrinsics.corrected`), so to first order
+        ``std r = r b std kappa / (1 - u^2)``.
+        """
+        b = self.intrinsics.wheel_base_m
+        u = 0.5 * self.kappa_rad_per_m * b
+        return float(self.diameter_ratio * b * self.kappa_std_rad_per_m / (1.0 - u * u))
+
 
 def run_path(ticks: np.ndarray, intrinsics: OdometryIntrinsics) -> tuple[np.ndarray, np.ndarray]:
     """Along-track travel ``x`` and lateral drift ``y`` (left positive) [m] the counts give.
@@ -193,7 +207,7 @@ def _pass_rows(wp: WallPass, index: int, intrinsics: OdometryIntrinsics, side: f
 
 def calibrate_wall_run(passes: list[WallPass], intrinsics: OdometryIntrinsics, *,
                        wall_side: Literal["left", "right"] = "left",
-                       min_signal: float = 20.0, min_run_m: float = 0.8,
+                       min_signal: float = 20.0, min_run_m: float = MIN_RUN_M,
                        min_level_gap_m: float = 0.05, max_saturated: float = 0.2
                        ) -> WallRunCalibration:
     """The diameter ratio from straight runs beside a wall (module docstring, eq. 1-2).

@@ -5,12 +5,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
+import numpy as np
+
 from drivers.sim.config import FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration import Calibration, CalibrationPlan, calibrate
 from lti_motion.frames import FrameLog
 
-__all__ = ["calibrate_simulator", "print_progress", "summarize"]
+__all__ = ["calibrate_simulator", "print_progress", "summarize", "wall_run_simulator"]
 
 
 def print_progress(stage: str, done: int, total: int) -> None:
@@ -61,6 +63,29 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
                      plan=plan or CalibrationPlan(seed=seed), floor=floor_name(floor),
                      progress=progress, before_stage=to_open_floor, after_stage=after_stage,
                      recorded=recorded)
+
+
+def wall_run_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
+                       floor: str | FloorMap | None = None) -> Simulator:
+    """A simulated robot set up for the wall run (:mod:`lti_motion.wall_run_drive`) as a
+    user sets up a real one: healthy (its own faults left out), 0.5 m in front of a straight
+    white wall 10 m long (:meth:`~drivers.sim.config.Room.single_wall`), facing it within
+    +-3 degrees (drawn from ``seed``, as in ``benchmarks/bench_wall_run.py``).
+
+    Parameters
+    ----------
+    robot : str or RobotParams
+        Preset name, robot file or parameters.
+    seed : int
+        Simulator seed; also draws the start heading.
+    floor : str or FloorMap, optional
+        Floor to simulate (default the robot's).
+    """
+    params = load_robot(robot) if isinstance(robot, str) else robot
+    heading = -np.pi / 2 + np.random.default_rng([seed, 0x3A11]).uniform(-1, 1) * np.deg2rad(3)
+    return Simulator(params.replace(faults=()), seed=seed,
+                     floor=params.floor if floor is None else floor, room=Room.single_wall(),
+                     initial_pose=(0.0, 0.5, heading))
 
 
 def summarize(cal: Calibration) -> list[str]:

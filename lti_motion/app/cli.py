@@ -10,7 +10,8 @@ calibrate
     encoder scale, FIR and ARX models, save them and their plots; or, with
     ``--log``, fit the ARX model offline on any recorded drive.
     ``--log LOG --reference FILE.tum``, both wheels' scale and the wheel base of a
-    recorded drive against a pose reference (``docs/intrinsics.md``).
+    recorded drive against a pose reference (``docs/intrinsics.md``). With
+    ``--wall-run``, the wheels' diameter ratio from straight runs beside a wall.
 replay
     Run the estimators on a recorded log or an MRCLAM robot; ATE / RPE where
     there is ground truth, TUM trajectories for ``evo``, plots.
@@ -39,6 +40,7 @@ from pathlib import Path
 
 from drivers.sim.config import FLOORS, load_robot
 from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
+from lti_motion.app.wall_run_cli import add_wall_run_arguments
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
@@ -129,6 +131,10 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    if args.wall_run:                               # the diameter ratio beside a wall
+        from lti_motion.app.wall_run_cli import run_wall_run
+
+        return run_wall_run(args)
     if args.bag:
         return _cmd_calibrate_bag(args)
     if args.log and args.reference:                 # odometry intrinsics of a recorded drive
@@ -372,6 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      ".db3 or .mcap file): fit the ARX model on its drive "
                                      "(docs/guide_ros_bags.md)")
     add_intrinsics_arguments(cal)
+    add_wall_run_arguments(cal)
     cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     cal.add_argument("--clock-rate", type=float, default=1.0,
                      help="robot seconds per wall second: 1 for a real robot, the --speed "

@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from lti_motion.intrinsics import OdometryIntrinsics
     from lti_motion.intrinsics_calibration import IntrinsicsCalibration
 
-__all__ = ["add_intrinsics_arguments", "run_intrinsics_calibration"]
+__all__ = ["add_intrinsics_arguments", "run_intrinsics_calibration", "write_into_model"]
 
 
 def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,8 +36,9 @@ def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the reference tracks a sensor off the axle centre: estimate its "
                              "pose on the robot too")
     parser.add_argument("--into-model", metavar="MODEL.json",
-                        help="with --log: also write a copy of this model file carrying the "
-                             "intrinsics (model_intrinsics.json in --out)")
+                        help="with --log --reference or --wall-run: also write a copy of this "
+                             "model file carrying the intrinsics (model_intrinsics.json in "
+                             "--out); --wall-run starts from its intrinsics")
     parser.add_argument("--encoders", choices=("commanded", "quadrature"), default="commanded",
                         help="encoder type: commanded (Roomba / Create 2, default) or quadrature")
 
@@ -59,6 +61,29 @@ def _summary(cal: IntrinsicsCalibration) -> list[str]:
         lines.append(f"sensor pose  x {x:.3f} m, y {y:.3f} m, {np.rad2deg(th):.2f} deg")
     lines += [f"weakly determined: {note}" for note in cal.report.undetermined]
     return lines
+
+
+def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out: Path
+                     ) -> Path:
+    """A copy of the model file carrying ``intrinsics``, as ``out/model_intrinsics.json``.
+
+    The model's outputs move with the counts' new meaning, so that it predicts the same
+    counts (:meth:`lti_motion.model.MotionModel.with_intrinsics`); a model without an
+    encoder scale has none to move and just takes the intrinsics.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no file ``model_path``.
+    """
+    from lti_motion.model import MotionModel
+
+    if not Path(model_path).is_file():
+        raise FileNotFoundError(f"no model file {model_path}")
+    model = MotionModel.load(model_path)
+    moved = (model.with_intrinsics(intrinsics) if model.encoder_intrinsics is not None
+             else model.updated(intrinsics=intrinsics, m_per_tick=intrinsics.m_per_tick))
+    return moved.save(Path(out) / "model_intrinsics.json")
 
 
 def run_intrinsics_calibration(args: argparse.Namespace) -> int:
@@ -105,17 +130,7 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
         "reference": str(args.reference)}, indent=2) + "\n")
     written = [path]
     if args.into_model:
-        from lti_motion.model import MotionModel
-
-        if not Path(args.into_model).is_file():
-            raise FileNotFoundError(f"no model file {args.into_model}")
-        model = MotionModel.load(args.into_model)
-        k = cal.intrinsics
-        # the model's outputs move with the counts' new meaning, so that it predicts the
-        # same counts (MotionModel.with_intrinsics); a model without a scale has none to move
-        moved = (model.with_intrinsics(k) if model.encoder_intrinsics is not None
-                 else model.updated(intrinsics=k, m_per_tick=k.m_per_tick))
-        written.append(moved.save(out / "model_intrinsics.json"))
+        written.append(write_into_model(args.into_model, cal.intrinsics, out))
     for line in _summary(cal):
         print(line)
     print(f"wrote {', '.join(str(p) for p in written)}")

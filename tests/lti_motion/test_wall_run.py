@@ -98,6 +98,21 @@ def test_noisy_signal_error_and_reported_spread(rng):
     assert 1 / 1.6 < ratio < 1.6
 
 
+@pytest.mark.parametrize("start", [NOMINAL, OdometryIntrinsics(0.99 * K, K, 1.02 * B)])
+def test_ratio_std_is_the_propagated_curvature_std(start, rng):
+    """``diameter_ratio_std`` against a central difference of the ratio in ``kappa``."""
+    true = OdometryIntrinsics(1.01 * K, K, B)
+    passes = [synthetic_pass(true, backoff_m=0.06, direction=1, noise_counts=3.0, rng=rng),
+              synthetic_pass(true, backoff_m=0.16, direction=-1, noise_counts=3.0, rng=rng)]
+    cal = calibrate_wall_run(passes, start)
+    h = 1e-6
+    slope = (start.corrected(0, 0, cal.kappa_rad_per_m + h).diameter_ratio
+             - start.corrected(0, 0, cal.kappa_rad_per_m - h).diameter_ratio) / (2 * h)
+    assert cal.diameter_ratio_std == pytest.approx(abs(slope) * cal.kappa_std_rad_per_m,
+                                                   rel=1e-6)
+    assert cal.diameter_ratio_std > 0
+
+
 def test_one_direction_only_is_noted():
     true = OdometryIntrinsics(1.005 * K, 0.995 * K, B)
     passes = [synthetic_pass(true, backoff_m=0.06, direction=1),

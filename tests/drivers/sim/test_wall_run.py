@@ -6,12 +6,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivers.exceptions import SimulatorError
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
-from drivers.sim.wall_run import drive_wall_run, wall_passes
+from lti_motion.exceptions import WallRunError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.wall_run import calibrate_wall_run
+from lti_motion.wall_run_drive import drive_wall_run, wall_passes
 
 PARAMS = get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)
 NOMINAL = OdometryIntrinsics.symmetric(m_per_tick=PARAMS.m_per_tick,
@@ -62,12 +62,12 @@ def test_a_robot_curving_towards_the_wall_goes_over_to_the_other_side():
 
 def test_no_wall_ahead_is_an_error():
     sim = Simulator(PARAMS, seed=0, room=Room.empty(), initial_pose=(0, 0, 0))
-    with pytest.raises(SimulatorError, match=r"no bump within 0\.3 m"):
+    with pytest.raises(WallRunError, match=r"no wall found: no bump within 0\.3 m"):
         drive_wall_run(sim, NOMINAL, max_approach_m=0.3)
 
 
 def test_bad_arguments():
-    with pytest.raises(SimulatorError, match="one robot"):
+    with pytest.raises(WallRunError, match="one robot"):
         drive_wall_run(Simulator(PARAMS, n_robots=2), NOMINAL)
-    with pytest.raises(SimulatorError, match="back-off"):
+    with pytest.raises(WallRunError, match="back-off"):
         drive_wall_run(Simulator(PARAMS), NOMINAL, backoff_m=(0.1, -0.1))
