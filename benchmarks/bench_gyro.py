@@ -12,12 +12,12 @@ defaults: bias prior 0.01 rad/s). The filters read commands, counts and the gyro
 the truth is read afterwards.
 
 Figures, per scenario (``gyro.<scenario>.<what>``), means over the runs:
-``heading_final_rad`` (|error| at the end), ``heading_rms_rad`` (over the drive), ``position_final_m`` (end-point error), ``heading_nees`` (time average of
-the heading's NEES, chi-square(1) for a consistent filter: 1), ``worse_runs`` (runs
-whose final heading error with the gyro exceeds the encoders-only one by more than
-3 mrad), ``bias_error_rad_s`` (final bias estimate minus the simulator's). The baseline
-of each is the encoders-only filter on the same drives; the printed table gives the
-spread.
+``heading_final_rad`` (|error| at the end), ``heading_rms_rad`` (over the drive),
+``position_final_m`` (end-point error), ``heading_nees`` (time average of the
+heading's NEES, chi-square(1) for a consistent filter: 1), ``worse_runs`` (runs whose
+final heading error with the gyro exceeds the encoders-only one by more than 3 mrad),
+``bias_error_rad_s`` (final bias estimate minus the simulator's). The baseline of each
+is the encoders-only filter on the same drives; the printed table gives the spread.
 
 Run ``python -m benchmarks gyro --json out/bench-gyro.json``.
 """
