@@ -7,6 +7,7 @@ from drivers.exceptions import RobotFileError, SimulatorError
 from drivers.sim.config import get_preset, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.frames import FrameLog
+from lti_motion.recording import Recording
 
 DENSITY = 0.005         # rad/s/sqrt(Hz), a MEMS gyro
 BIAS = 0.008            # rad/s
@@ -96,3 +97,12 @@ mass_kg = {base.mass_kg}
 def test_bias_without_a_gyro_is_refused():
     with pytest.raises(SimulatorError, match="needs a gyro"):
         get_preset("create2").replace(gyro_bias_rad_s=0.01)
+
+
+def test_the_recording_carries_the_gyro(gyro_robot):
+    log = Simulator(gyro_robot, seed=15).run(_commands(200, 8))
+    rec = Recording.from_frame_log(log)
+    np.testing.assert_array_equal(rec.yaw_rate.values[:, 0], log.yaw_rate_rad_s)
+    np.testing.assert_allclose(rec.yaw_rate.t_s, log.t_s - 0.5 * log.dt_s)
+    assert Recording.from_frame_log(Simulator("create2", seed=15).run(
+        _commands(20, 8))).yaw_rate is None
