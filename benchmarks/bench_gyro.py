@@ -97,17 +97,18 @@ def scores(truth: np.ndarray, run: dict) -> dict[str, float]:
 
 
 def compare(model: MotionModel, logs: FrameLog, *, bias_rad_s: float,
-            scales: ScaleErrors | None = None) -> dict[str, dict[str, list[float]]]:
+            scales: ScaleErrors | None = None, gyro: GyroNoise | None = None
+            ) -> dict[str, dict[str, list[float]]]:
     """Scores of the encoders-only and the gyro filter on every robot of ``logs``."""
     out: dict[str, dict[str, list[float]]] = {"encoders": {}, "gyro": {}}
     for i in range(logs.n_robots):
         log = logs.robot(i)
-        for name, gyro in (("encoders", None), ("gyro", GyroNoise(
+        for name, option in (("encoders", None), ("gyro", gyro or GyroNoise(
                 noise_density_rad_s_sqrt_hz=DENSITY))):
-            run = filter_run(model, log, gyro=gyro, scales=scales)
+            run = filter_run(model, log, gyro=option, scales=scales)
             for key, value in scores(log.true_pose, run).items():
                 out[name].setdefault(key, []).append(value)
-            if gyro is not None:
+            if option is not None:
                 out[name].setdefault("bias_error_rad_s", []).append(run["bias"] - bias_rad_s)
                 out[name].setdefault("gyro_gated", []).append(run["gyro_gated"])
     return out
