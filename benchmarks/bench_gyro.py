@@ -4,7 +4,8 @@
 after a rest (10 s, or 1 s); the simulated Create 2 with a MEMS-like gyro (noise
 density 0.005 rad/s/sqrt(Hz), i.e. 0.041 rad/s per 15 ms reading) and a constant bias,
 on the hard floor, on carpet (ground turns about 5% short of the encoders), and with
-a 0.5% larger left wheel (``SCENARIOS``). One ARX calibration (the example's, seed 1);
+a 0.5% larger left wheel, and with the scale priors of calibrated intrinsics
+(``SCENARIOS``, ``CALIBRATED``). One ARX calibration (the example's, seed 1);
 drive seeds ``SEED0 .. SEED0 + N_RUNS - 1`` (simulator and route, one batch per
 scenario). Each drive is filtered twice from the same frames: ModelEKF with
 encoder counts only, and with ``update_gyro`` of every frame (``GyroNoise()``
@@ -122,13 +123,18 @@ def _print(tag: str, res: dict[str, dict[str, list[float]]]) -> None:
                   f"({len(values)} runs)", file=sys.stderr)
 
 
-#: (tag, floor, bias [rad/s], rest at the start [s], left wheel diameter change)
+#: Scale priors of a robot whose intrinsics were calibrated on its floor (turn 0.3%,
+#: diameter ratio 0.1%), for both filters of the ``calibrated`` scenario.
+CALIBRATED = ScaleErrors(prior_std=(0.01, 0.003), ratio_prior_std=0.001)
+
+#: (tag, floor, bias [rad/s], rest at the start [s], left wheel diameter change, scale priors)
 SCENARIOS = (
-    ("hard.bias0.rest10", "hard", 0.0, 10.0, 0.0),
-    ("hard.bias8.rest10", "hard", 0.008, 10.0, 0.0),
-    ("hard.bias8.rest1", "hard", 0.008, 1.0, 0.0),
-    ("carpet.bias8.rest10", "carpet", 0.008, 10.0, 0.0),
-    ("wheel05.bias8.rest10", "hard", 0.008, 10.0, 0.005),
+    ("hard.bias0.rest10", "hard", 0.0, 10.0, 0.0, None),
+    ("hard.bias8.rest10", "hard", 0.008, 10.0, 0.0, None),
+    ("hard.bias8.rest1", "hard", 0.008, 1.0, 0.0, None),
+    ("hard.bias8.rest10.calibrated", "hard", 0.008, 10.0, 0.0, CALIBRATED),
+    ("carpet.bias8.rest10", "carpet", 0.008, 10.0, 0.0, None),
+    ("wheel05.bias8.rest10", "hard", 0.008, 10.0, 0.005, None),
 )
 
 
@@ -137,11 +143,11 @@ def gyro() -> list[Figure]:
     example = _example()
     model = example.calibrate_model()
     figures = []
-    for tag, floor, bias, rest_s, diameter in SCENARIOS:
+    for tag, floor, bias, rest_s, diameter, scales in SCENARIOS:
         faults = (Fault("wheel_diameter", t_s=0.0, diameter_change=diameter, wheel="left"),
                   ) if diameter else ()
         res = compare(model, gyro_drives(example, floor=floor, bias_rad_s=bias, rest_s=rest_s,
-                                         faults=faults), bias_rad_s=bias)
+                                         faults=faults), bias_rad_s=bias, scales=scales)
         tag = f"gyro.{tag}"
         _print(tag, res)
         enc, gyr = res["encoders"], res["gyro"]
