@@ -108,7 +108,8 @@ def concat_logs(logs: Sequence[FrameLog]) -> FrameLog:
     return FrameLog(t_s=cat("t_s"), ticks=cat("ticks"), light_bump=cat("light_bump"),
                     bumps=cat("bumps"), cmd_m_s=cat("cmd_m_s"), valid=cat("valid"),
                     dt_s=logs[0].dt_s, true_pose=cat("true_pose"),
-                    true_body_m_s=cat("true_body_m_s"), meta=dict(logs[0].meta))
+                    true_body_m_s=cat("true_body_m_s"), meta=dict(logs[0].meta),
+                    yaw_rate_rad_s=cat("yaw_rate_rad_s"))
 
 
 def drive_route(sim: Simulator, *, duration_s: float, rng: np.random.Generator,

@@ -5,6 +5,7 @@
 - :class:`ScaleErrors`: prior and random walk of the scale errors
   ``(k_v, k_w, kappa)`` of ground against encoder speeds.
 - :class:`LandmarkNoise`: standard deviations of a range-bearing sensor.
+- :class:`GyroNoise`: white noise and random-walk bias of a yaw-rate gyro.
 - :func:`nis`, :func:`inverse_covariance`, :func:`gate_threshold`: the
   normalised innovation squared and its chi-square gate (Bar-Shalom, Li &
   Kirubarajan 2001, section 5.4.2).
@@ -20,6 +21,7 @@ import numpy as np
 from fusion.exceptions import FilterOptionError
 
 __all__ = [
+    "GyroNoise",
     "LandmarkNoise",
     "ScaleErrors",
     "SlipNoise",
@@ -148,6 +150,76 @@ class ScaleErrors:
     def walk_rates(self, wheel_base_m: float) -> tuple[float, float, float]:
         """Random-walk rates of ``(k_v, k_w, kappa)`` [1/sqrt(s), 1/sqrt(s), rad/m/sqrt(s)]."""
         return (*self.walk_per_sqrt_s, self.ratio_walk_per_sqrt_s / wheel_base_m)
+
+
+@dataclass(frozen=True)
+class GyroNoise:
+    """A yaw-rate gyro as the model EKF fuses it: white noise and a random-walk bias.
+
+    The reading of a sensor period is ``y = g_w + b + n`` with ``g_w`` the
+    period's mean ground yaw rate, ``b`` the bias (a state: random walk) and
+    ``n`` white, ``sigma = noise_density / sqrt(dt)`` (the period's mean of
+    white rate noise; Woodman 2007, section 3.2.1).
+
+    Attributes
+    ----------
+    noise_density_rad_s_sqrt_hz : float
+        White-noise density [rad/s/sqrt(Hz)] (angle random walk); MEMS gyros
+        0.002-0.01, default 0.005.
+    bias_prior_std_rad_s : float
+        Start standard deviation of the bias [rad/s]; default 0.01 (a MEMS
+        gyro's turn-on bias is within about 0.01 rad/s).
+    bias_walk_rad_s_per_sqrt_s : float
+        Random-walk rate of the bias [rad/s/sqrt(s)] (rate random walk);
+        default 1e-4, 0.001 rad/s in 100 s.
+    max_bias_rad_s : float
+        The filter clips the bias estimate to ``+-max_bias_rad_s``; default
+        0.05 rad/s (5 prior standard deviations; no MEMS bias is larger).
+    window_s : float
+        The filter integrates the readings over this time [s] and fuses the
+        heading change once per window (:mod:`fusion.ekf.gyro`: the encoders'
+        quantisation is about 0.07 rad/s on one 15 ms period of a Create 2, a
+        fixed 0.0011 rad on the heading change of any window); default 0.5 s.
+
+    Raises
+    ------
+    FilterOptionError
+        For a non-positive density, prior or bound, a negative walk rate, or a
+        bound within 3 prior standard deviations.
+
+    References
+    ----------
+    O. J. Woodman, "An introduction to inertial navigation", University of
+    Cambridge, UCAM-CL-TR-696, 2007, sections 3.2.1-3.2.3.
+
+    Examples
+    --------
+    >>> round(GyroNoise().std_rad_s(0.015), 4)
+    0.0408
+    """
+
+    noise_density_rad_s_sqrt_hz: float = 0.005
+    bias_prior_std_rad_s: float = 0.01
+    bias_walk_rad_s_per_sqrt_s: float = 1e-4
+    max_bias_rad_s: float = 0.05
+    window_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        pos = (self.noise_density_rad_s_sqrt_hz, self.bias_prior_std_rad_s, self.max_bias_rad_s,
+               self.window_s)
+        walk = self.bias_walk_rad_s_per_sqrt_s
+        if not (all(math.isfinite(v) and v > 0 for v in pos) and math.isfinite(walk)
+                and walk >= 0):
+            raise FilterOptionError(f"GyroNoise needs a positive density, bias prior, bias "
+                                    f"bound and window and a non-negative walk rate, got {self}")
+        if self.max_bias_rad_s < 3.0 * self.bias_prior_std_rad_s:
+            raise FilterOptionError(f"GyroNoise.max_bias_rad_s ({self.max_bias_rad_s}) must be at "
+                                    f"least 3 bias prior standard deviations "
+                                    f"({3.0 * self.bias_prior_std_rad_s:.4g})")
+
+    def std_rad_s(self, dt_s: float) -> float:
+        """Standard deviation of one reading averaged over ``dt_s`` [s]: ``density / sqrt(dt)``."""
+        return self.noise_density_rad_s_sqrt_hz / math.sqrt(dt_s)
 
 
 def nis(innovation: np.ndarray, SI: np.ndarray) -> float:

@@ -73,6 +73,10 @@ class SensorFrame:
     wheel_overcurrent : ndarray of bool, shape (2,), or None
         Wheel overcurrent flags (left, right) where the robot reports them
         (Open Interface packet 14, the simulator); ``None`` otherwise.
+    yaw_rate_rad_s : float or None
+        A yaw-rate gyro's reading over the period [rad/s] (a simulated robot
+        with a gyro: bias and noise included, NaN for a robot of a batch
+        without one); ``None`` without a gyro.
     """
 
     t_s: float
@@ -86,6 +90,7 @@ class SensorFrame:
     true_body_m_s: np.ndarray | None = None
     motor_current_a: np.ndarray | None = None
     wheel_overcurrent: np.ndarray | None = None
+    yaw_rate_rad_s: float | np.ndarray | None = None
 
 
 _PER_SAMPLE = MappingProxyType({
@@ -99,6 +104,7 @@ _PER_SAMPLE = MappingProxyType({
     "true_body_m_s": (2,),
     "motor_current_a": (2,),
     "wheel_overcurrent": (2,),
+    "yaw_rate_rad_s": (),
 })
 
 
@@ -134,6 +140,9 @@ class FrameLog:
     motor_current_a, wheel_overcurrent : ndarray or None
         Optional: wheel motor currents [A] and overcurrent flags (bool), shape
         ``(..., n, 2)``, where the robot reports them (:class:`SensorFrame`).
+    yaw_rate_rad_s : ndarray or None
+        Optional: a yaw-rate gyro's reading per period [rad/s], shape ``(..., n)``
+        (:class:`SensorFrame`).
     """
 
     t_s: np.ndarray
@@ -148,6 +157,7 @@ class FrameLog:
     meta: dict = field(default_factory=dict)
     motor_current_a: np.ndarray | None = None
     wheel_overcurrent: np.ndarray | None = None
+    yaw_rate_rad_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         lead = np.shape(self.t_s)
@@ -231,6 +241,8 @@ class FrameLog:
                                  else self.motor_current_a[k]),
                 wheel_overcurrent=(None if self.wheel_overcurrent is None
                                    else self.wheel_overcurrent[k]),
+                yaw_rate_rad_s=(None if self.yaw_rate_rad_s is None
+                                else float(self.yaw_rate_rad_s[k])),
             )
 
     @classmethod
@@ -250,6 +262,7 @@ class FrameLog:
         truth = all(f.true_pose is not None for f in frames)
         current = all(f.motor_current_a is not None for f in frames)
         overcurrent = all(f.wheel_overcurrent is not None for f in frames)
+        gyro = all(f.yaw_rate_rad_s is not None for f in frames)
         return cls(
             t_s=np.array([f.t_s for f in frames], dtype=float),
             ticks=np.array([f.ticks for f in frames], dtype=np.int64),
@@ -265,4 +278,6 @@ class FrameLog:
                              if current else None),
             wheel_overcurrent=(np.array([f.wheel_overcurrent for f in frames], dtype=bool)
                                if overcurrent else None),
+            yaw_rate_rad_s=(np.array([f.yaw_rate_rad_s for f in frames], dtype=float)
+                            if gyro else None),
         )

@@ -50,6 +50,7 @@ LOG_VERSION = 1
 RECORDING_VERSION = 2
 _ARRAYS = ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s", "valid")
 _TRUTH = ("true_pose", "true_body_m_s")
+_OPTIONAL = ("yaw_rate_rad_s",)         # a gyro's reading per frame, when the robot has one
 
 
 
@@ -75,6 +76,8 @@ def save_log(path: str | os.PathLike, log: FrameLog) -> Path:
     arrays = {name: getattr(log, name) for name in _ARRAYS}
     if log.has_truth:
         arrays.update({name: getattr(log, name) for name in _TRUTH})
+    arrays.update({name: getattr(log, name) for name in _OPTIONAL
+                   if getattr(log, name) is not None})
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(path) as fh:
         np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
@@ -118,7 +121,8 @@ def load_log(path: str | os.PathLike) -> FrameLog:
             raise LogFileError(f"{path} lacks the arrays {missing}; it is not a complete "
                                f"{LOG_FORMAT} file")
         arrays = {name: _array(path, npz, name)
-                  for name in (*_ARRAYS, *(n for n in _TRUTH if n in npz.files))}
+                  for name in (*_ARRAYS, *(n for n in (*_TRUTH, *_OPTIONAL)
+                                           if n in npz.files))}
     _check_arrays(path, arrays)
     _check_times(path, arrays["t_s"])
     meta = header.get("meta", {})
@@ -147,7 +151,7 @@ _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, OverflowError, NotImple
 #: The shape of one frame of each array, format version 1 (``docs/log_format.md``).
 _FRAME_SHAPES = MappingProxyType({
     "t_s": (), "ticks": (2,), "light_bump": (6,), "bumps": (2,), "cmd_m_s": (2,), "valid": (),
-    "true_pose": (3,), "true_body_m_s": (2,)})
+    "true_pose": (3,), "true_body_m_s": (2,), "yaw_rate_rad_s": ()})
 _FLAGS = ("bumps", "valid")
 
 

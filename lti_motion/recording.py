@@ -285,7 +285,9 @@ array_like, shape (n, 2)
         Counts wrap at ``2**log.counter_bits`` (16 bits unless the log's
         ``meta["counter_bits"]`` says otherwise; 63, 64: they never wrap), commands
         one per frame, ``valid`` kept, simulator ground truth (pose) kept when
-        present.
+        present, a gyro's yaw rate (``log.yaw_rate_rad_s``) as the ``yaw_rate``
+        stream of the valid frames, stamped half a period before the frame (the
+        reading is the period's mean).
 
         Raises
         ------
@@ -297,6 +299,10 @@ array_like, shape (n, 2)
                              "log.robot(i) first")
         truth = {} if log.true_pose is None else {"true_pose_t_s": log.t_s,
                                                   "true_pose": log.true_pose}
+        if log.yaw_rate_rad_s is not None:     # a gyro: the period's mean, stamped mid-period
+            ok = log.valid & np.isfinite(log.yaw_rate_rad_s)
+            truth.update(yaw_rate_t_s=log.t_s[ok] - 0.5 * log.dt_s,
+                         yaw_rate_rad_s=log.yaw_rate_rad_s[ok])
         bits = log.counter_bits
         rec = cls.from_streams(wheel_t_s=log.t_s, dt_s=log.dt_s, counts=log.ticks,
                                counter_bits=None if bits >= 63 else bits, valid=log.valid,

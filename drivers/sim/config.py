@@ -282,6 +282,14 @@ class RobotParams:
         The floor the robot drives on unless a simulation names another.
     faults : tuple of Fault
         Changes scheduled in every simulation of this robot (times from its start).
+    gyro_noise_density_rad_s_sqrt_hz : float or None
+        A yaw-rate gyro's white-noise density [rad/s/sqrt(Hz)] (MEMS: about 0.005);
+        ``None`` (the default): the robot has no gyro. Its frame reading is the true
+        body yaw rate averaged over the period, plus ``gyro_bias_rad_s``, plus white
+        noise of standard deviation ``density / sqrt(period_s)`` (the period's mean of
+        the white rate noise).
+    gyro_bias_rad_s : float
+        The gyro's constant bias [rad/s] (MEMS: up to about 0.01); needs a gyro.
     """
 
     name: str = "create2"
@@ -327,6 +335,8 @@ class RobotParams:
     settling_time_s: float = 0.25
     floor: str | FloorMap = "hard"
     faults: tuple[Fault, ...] = ()
+    gyro_noise_density_rad_s_sqrt_hz: float | None = None
+    gyro_bias_rad_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.floor, FloorMap):
@@ -351,6 +361,13 @@ class RobotParams:
                                  f"from 8 to 64 (16 for a Roomba), got {self.counter_bits!r}")
         if self.payload_kg < 0:
             raise SimulatorError(f"RobotParams.payload_kg must be >= 0, got {self.payload_kg}")
+        density = self.gyro_noise_density_rad_s_sqrt_hz
+        if density is not None and not (np.isfinite(density) and density >= 0):
+            raise SimulatorError(f"RobotParams.gyro_noise_density_rad_s_sqrt_hz must be >= 0 "
+                                 f"[rad/s/sqrt(Hz)] or None (no gyro), got {density}")
+        if density is None and self.gyro_bias_rad_s != 0.0:
+            raise SimulatorError(f"RobotParams.gyro_bias_rad_s ({self.gyro_bias_rad_s}) needs "
+                                 f"a gyro: give gyro_noise_density_rad_s_sqrt_hz too")
         if len(self.wheel_diameter_errors) != 2 or max(map(abs, self.wheel_diameter_errors)) > 0.2:
             raise SimulatorError(
                 f"wheel_diameter_errors needs (left, right) within +-20%, "

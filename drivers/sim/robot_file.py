@@ -104,6 +104,8 @@ SCHEMA: Mapping[str, tuple[Field, ...]] = MappingProxyType({
                     Field("ir_reference_m", "positive", _M),
                     Field("ir_noise", "nonnegative", "counts")),
     "floor": (Field("default", "text", "floor name"),),
+    "gyro": (Field("gyro_noise_density_rad_s_sqrt_hz", "nonnegative", "rad/s/sqrt(Hz)"),
+             Field("gyro_bias_rad_s", "real", "rad/s")),
 })
 
 #: Keys of a ``[[faults]]`` entry besides ``kind``, ``t_s`` and ``duration_s``, by kind

@@ -115,6 +115,8 @@ class _NoiseBlocks:
         if stream == 0:     # physics: jitter, roughness, IR noise
             blk = rng.standard_normal((_BLOCK, K.N_NOISE))
             blk[:, K.NZ_JITTER] = rng.uniform(-0.5, 0.5, _BLOCK)
+        elif stream == 2:   # the gyro's white noise, drawn only for robots with a gyro
+            blk = rng.standard_normal((_BLOCK, 1))
         else:               # events: spikes, lost frames, timestamp latency
             blk = rng.uniform(0.0, 1.0, (_BLOCK, _N_EVENT))
             blk[:, 5] = rng.standard_normal(_BLOCK)
@@ -259,6 +261,11 @@ class Simulator:
         self._idle[:, :, K.PP_DIAM0:K.PP_DIAM0 + 2] = 1.0
         self._fault_rows = [slice(None) if f.robots is None else np.array(f.robots)
                             for f in self.faults]
+        # the gyro (RobotParams.gyro_*): None when no robot has one (no draws, no output)
+        density = [p.gyro_noise_density_rad_s_sqrt_hz for p in params]
+        self._gyro_std = None if all(d is None for d in density) else np.array(
+            [np.nan if d is None else d / np.sqrt(self.dt_s) for d in density])[:, None]
+        self._gyro_bias = np.array([p.gyro_bias_rad_s for p in params])[:, None]
 
     # -- public API -------------------------------------------------------------
 
@@ -291,7 +298,7 @@ class Simulator:
         want = (self.n, 2) if self.batch else (2,)
         if cmd.shape != want:
             raise SimulatorError(f"step() expects commands of shape {want}, got {cmd.shape}")
-        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over = self._simulate(
+        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over, gyro = self._simulate(
             cmd.reshape(self.n, 1, 2))
         take = (slice(None), 0) if self.batch else (0, 0)
         return SensorFrame(
@@ -299,6 +306,8 @@ class Simulator:
             cmd_m_s=cmd[take], valid=valid[take], true_pose=pose[take],
             true_body_m_s=body[take], motor_current_a=current[take],
             wheel_overcurrent=over[take],
+            yaw_rate_rad_s=None if gyro is None else (gyro[:, 0] if self.batch
+                                                      else float(gyro[0, 0])),
         )
 
     def run(self, cmd_m_s: np.ndarray) -> FrameLog:
@@ -411,9 +420,11 @@ class Simulator:
 
     def _simulate(self, cmd: np.ndarray) -> tuple[np.ndarray, ...]:
         """The next ``cmd.shape[1]`` periods: t_s, ticks, light, bumps, cmd, valid, pose,
-        body, current, overcurrent, each with a robot and a period axis."""
+        body, current, overcurrent, gyro (None without one), each with a robot and a
+        period axis."""
         cmd = self._check_commands(cmd)
         k0, n = self._k, cmd.shape[1]
+        heading0 = self._state[:, 2].copy()        # true heading at the start, for the gyro
         events = self._noise.draw(1, k0, n)
         per, spikes, valid = self._schedule(k0, n, events)
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
@@ -429,16 +440,27 @@ class Simulator:
         t_s = (k0 + 1 + np.arange(n)) * self.dt_s + latency
         t_s = np.maximum.accumulate(np.maximum(t_s, self._last_t[:, None] + 1e-6), axis=1)
         self._last_t = t_s[:, -1].copy()
+        gyro = self._gyro(k0, heading0, pose[..., 2]) if self._gyro_std is not None else None
         self._k += n
-        return t_s, ticks, light, bumps, cmd, valid, pose, body, current, overcurrent
+        return t_s, ticks, light, bumps, cmd, valid, pose, body, current, overcurrent, gyro
+
+    def _gyro(self, k0: int, heading0: np.ndarray, heading: np.ndarray) -> np.ndarray:
+        """Gyro readings of periods ``k0 ..``, shape (N, n): the true heading's change over
+        each period over ``dt`` (the period's mean body yaw rate), plus the bias, plus white
+        noise of standard deviation ``density / sqrt(dt)``; NaN for robots without a gyro."""
+        turn = np.diff(np.concatenate([heading0[:, None], heading], axis=1), axis=1)
+        turn = np.arctan2(np.sin(turn), np.cos(turn))   # wrapped, in case the kernel wraps
+        noise = self._noise.draw(2, k0, heading.shape[1])[..., 0]
+        return turn / self.dt_s + self._gyro_bias + self._gyro_std * noise
 
     def _advance(self, cmd: np.ndarray) -> FrameLog:
         k0 = self._k
-        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over = self._simulate(cmd)
+        t_s, ticks, light, bumps, cmd, valid, pose, body, current, over, gyro = self._simulate(
+            cmd)
         return FrameLog(
             t_s=t_s, ticks=ticks, light_bump=light, bumps=bumps, cmd_m_s=cmd, valid=valid,
             dt_s=self.dt_s, true_pose=pose, true_body_m_s=body, motor_current_a=current,
-            wheel_overcurrent=over,
+            wheel_overcurrent=over, yaw_rate_rad_s=gyro,
             meta={"preset": [p.name for p in self.params], "seeds": list(self.seeds),
                   "counter_bits": [p.counter_bits for p in self.params],
                   "floor": self.floor_map.default, "k0": k0},

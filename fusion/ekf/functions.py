@@ -89,6 +89,13 @@ spike is rejected and the motion recovered at the next frame; a reading
 rejected while it spans several periods (16 by default) renews the reference:
 a stuck encoder's lost ticks are lost for good.
 
+**A gyro** (``FilterModel(gyro=GyroNoise(...))``, :mod:`fusion.ekf.gyro`) adds
+two states after ``c``: its bias ``b`` [rad/s], a random walk (``F = 1``,
+``Q = q_b^2 dt``), and ``theta_c``, a copy of the heading taken at the start of
+the gyro's integration window (a stochastic clone: ``F = 1``, no noise; Roumeliotis
+& Burdick 2002), so that the integrated gyro measures ``theta - theta_c``, the
+heading change, slip included, that the pose carries.
+
 **Linearisation.** With ``F_p``, ``F_s`` the pose step's Jacobians with respect
 to the pose and to the ground speeds at ``g_hat = D_c s_hat``
 (:func:`lti_motion.kinematics.pose_step_jacobians`), ``D_c`` as above and
@@ -164,7 +171,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
-from fusion.noise import ScaleErrors, SlipNoise
+from fusion.noise import GyroNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import (
     range_bearing,
     range_bearing_jacobian,
@@ -179,6 +186,8 @@ from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
 __all__ = [
+    "GYRO_BIAS",
+    "HEADING_CLONE",
     "POSE",
     "SCALES",
     "FilterModel",
@@ -222,6 +231,9 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
 #: Where the pose and the scale errors sit; the model state follows, the speeds close.
 POSE = slice(0, 3)
 SCALES = slice(3, 6)
+#: With a gyro (``FilterModel(gyro=...)``): its bias [rad/s] and the heading at the start
+#: of the gyro's window [rad] (``fusion.ekf.gyro``), between the scale errors and the model.
+GYRO_BIAS, HEADING_CLONE = 6, 7
 _Z0 = 6
 
 
@@ -246,11 +258,18 @@ class FilterModel:
         default the model's :attr:`~lti_motion.model.MotionModel.encoder_intrinsics`
         (each wheel's scale and the wheel base, else both wheels at
         ``model.m_per_tick``). Needed only for :func:`encoder_speeds`.
+    gyro : GyroNoise, optional
+        A yaw-rate gyro to fuse (:mod:`fusion.ekf.gyro`): two states more, its
+        bias and the heading at the start of its window, at :data:`GYRO_BIAS`,
+        :data:`HEADING_CLONE` (the model state then starts at 8); default none
+        (``n = nz + 8``).
 
     Attributes
     ----------
     n, nz : int
-        State size ``nz + 8`` and model-state size.
+        State size ``nz + 8`` (``nz + 10`` with a gyro) and model-state size.
+    z0 : int
+        Where the model state starts (6, or 8 with a gyro).
     intrinsics : OdometryIntrinsics or None
         The counts-to-speeds mapping in use (None without an encoder scale);
         the scale errors are relative to it.
@@ -284,7 +303,9 @@ class FilterModel:
     scales: ScaleErrors = field(default_factory=ScaleErrors)
     encoder_std: tuple[float, float] = (1e-5, 1e-4)
     m_per_tick: float | None = None
+    gyro: GyroNoise | None = None
     n: int = field(init=False)
+    z0: int = field(init=False)
     intrinsics: OdometryIntrinsics | None = field(init=False)
     scale_prior_std: tuple[float, float, float] = field(init=False)
     scale_walk: tuple[float, float, float] = field(init=False)
@@ -304,8 +325,9 @@ class FilterModel:
         setf = object.__setattr__
         m = self.model
         nz = m.n_states
-        n = nz + 8
-        zs, ss = slice(_Z0, _Z0 + nz), slice(_Z0 + nz, n)
+        z0 = _Z0 + (0 if self.gyro is None else 2)
+        n = nz + z0 + 2
+        zs, ss = slice(z0, z0 + nz), slice(z0 + nz, n)
         std = tuple(float(s) for s in self.encoder_std)
         if len(std) != 2 or not all(math.isfinite(s) and s > 0 for s in std):
             raise FilterOptionError(f"encoder_std must be two positive numbers, got {std}")
@@ -320,6 +342,7 @@ class FilterModel:
         base = m.wheel_base_m if intrinsics is None else intrinsics.wheel_base_m
         for name, value in (("m_per_tick", None if intrinsics is None else intrinsics.m_per_tick),
                             ("intrinsics", intrinsics), ("encoder_std", std), ("n", n),
+                            ("z0", z0),
                             ("nz", nz), ("dt_s", m.dt_s),
                             ("scale_prior_std", self.scales.prior_stds(base)),
                             ("scale_walk", self.scales.walk_rates(base))):
@@ -338,10 +361,12 @@ class FilterModel:
         f[SCALES, SCALES] = np.eye(3)
         f[zs, zs] = m.A
         f[ss, zs] = m.C
-        setf(self, "F_template", _readonly(f))
         g2 = np.zeros((n, 4))
         g2[zs, :2] = m.K
         g2[ss, :2] = np.eye(2)
+        if self.gyro is not None:               # bias: random walk; the clone: constant
+            f[GYRO_BIAS, GYRO_BIAS] = f[HEADING_CLONE, HEADING_CLONE] = 1.0
+        setf(self, "F_template", _readonly(f))
         setf(self, "G_template", _readonly(g2))
         w4 = np.zeros((4, 4))
         w4[:2, :2] = m.R
@@ -356,17 +381,19 @@ class FilterModel:
         q = np.zeros((n, n))
         q[zs, zs] = 0.5 * (extra + extra.T)
         q[SCALES, SCALES] = np.diag(np.square(self.scale_walk) * m.dt_s)
+        if self.gyro is not None:
+            q[GYRO_BIAS, GYRO_BIAS] = self.gyro.bias_walk_rad_s_per_sqrt_s ** 2 * m.dt_s
         setf(self, "Q_const", _readonly(q))
 
     @property
     def model_slice(self) -> slice:
         """Where the model state ``z`` sits."""
-        return slice(_Z0, _Z0 + self.nz)
+        return slice(self.z0, self.z0 + self.nz)
 
     @property
     def speed_slice(self) -> slice:
         """Where the speed state ``s = (v, w)`` sits (the last two entries)."""
-        return slice(_Z0 + self.nz, self.n)
+        return slice(self.z0 + self.nz, self.n)
 
 
 def _check_state(x: np.ndarray, fm: FilterModel) -> np.ndarray:
@@ -439,15 +466,17 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     """
     x = _check_state(x, fm)
     cmd_m_s = _check_command(cmd_m_s)
-    nz, n, dt = fm.nz, fm.n, fm.dt_s
+    nz, n, dt, z0 = fm.nz, fm.n, fm.dt_s, fm.z0
     x_new = np.empty(n)
-    tail = fm.ACD @ x[_Z0:_Z0 + nz]
+    tail = fm.ACD @ x[z0:z0 + nz]
     tail += fm.BD @ cmd_m_s                       # (A z + B u, C z + D u)
     tail[nz:] += fm.model.offset_speeds           # + c, the model's affine offset
-    x_new[_Z0:] = tail
+    x_new[z0:] = tail
     v, w = tail[nz:].tolist()
     if accumulate:
-        x_new[_Z0 + nz:] += x[_Z0 + nz:]
+        x_new[z0 + nz:] += x[z0 + nz:]
+    if z0 != _Z0:                                 # gyro bias and heading clone kept
+        x_new[_Z0:z0] = x[_Z0:z0]
     px, py, theta, k_v, k_w, kappa = x[:_Z0].tolist()
     c_v, c_w = 1.0 + k_v, 1.0 + k_w
     vg, wg = c_v * v, c_w * w + kappa * v   # ground speeds g = D_c s (module notes)
@@ -468,7 +497,7 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     F[:3, :_Z0] = ((1.0, 0.0, -chord * sm, a * v, b * w, b * v),  # [F_p, F_s D_s]
                    (0.0, 1.0, chord * cm, c * v, d * w, d * v),
                    (0.0, 0.0, 1.0, 0.0, dt * w, dt * v))
-    F[:3, _Z0:_Z0 + nz] = g2[:3, :2] @ fm.model.C             # F_s D_c C
+    F[:3, z0:z0 + nz] = g2[:3, :2] @ fm.model.C               # F_s D_c C
     F[n - 2, n - 2] = F[n - 1, n - 1] = 1.0 if accumulate else 0.0
     sv, sw = fm.slip.stds(v, w)
     w4 = np.array(fm.W_template)
@@ -733,6 +762,9 @@ def initial_state(fm: FilterModel, pose: np.ndarray, *, z: np.ndarray | None = N
                   ) -> np.ndarray:
     """A start state: the pose, zero scale errors (3), the model state (zeros: at rest), ``C z``.
 
+    With a gyro (``fm.gyro``) a zero bias and the heading clone (the start heading)
+    sit between the scale errors and the model state.
+
     Returns
     -------
     ndarray, shape (n,)
@@ -751,7 +783,9 @@ def initial_state(fm: FilterModel, pose: np.ndarray, *, z: np.ndarray | None = N
                                     f"and {zz.shape}")
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(zz))):
         raise NonFiniteInputError("the start pose and model state must be finite")
-    return np.concatenate([pose, np.zeros(3), zz, fm.model.C @ zz + fm.model.offset_speeds])
+    gyro = () if fm.gyro is None else (0.0, pose[2])
+    return np.concatenate([pose, np.zeros(3), gyro, zz,
+                           fm.model.C @ zz + fm.model.offset_speeds])
 
 
 def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] = (0.01, 0.01,
@@ -794,6 +828,9 @@ def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] 
     p = np.zeros((fm.n, fm.n))
     p[POSE, POSE] = np.diag(std ** 2)
     p[SCALES, SCALES] = np.diag(np.square(fm.scale_prior_std))
+    if fm.gyro is not None:         # the bias prior; the clone is the heading itself
+        p[GYRO_BIAS, GYRO_BIAS] = fm.gyro.bias_prior_std_rad_s ** 2
+        p[HEADING_CLONE, HEADING_CLONE] = p[2, HEADING_CLONE] = p[HEADING_CLONE, 2] = std[2] ** 2
     p[zs, zs] = pz
     p[zs, ss] = pz @ c.T
     p[ss, zs] = c @ pz

@@ -13,6 +13,7 @@ One sensor period ``k`` (frame ``k`` closes period ``k``, whose command
     ekf.update_encoders(ticks_k)       # raw 16-bit counts of frame k
     ekf.update_landmarks(sightings_k)  # the landmarks seen at frame k (a RangeBearing)
     ekf.update_pose(pose, cov)         # optional absolute fix
+    ekf.update_gyro(yaw_rate_k)        # optional gyro (gyro=GyroNoise(...)), fusion.ekf.gyro
 
 Every update returns an :class:`~fusion.ekf.updates.UpdateRecord` (innovation,
 its covariance, NIS, accepted flag, kind, time, reason) and appends it to
@@ -57,6 +58,7 @@ import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fusion.ekf.functions import (
+    GYRO_BIAS,
     SCALES,
     FilterModel,
     encoder_speeds,
@@ -69,6 +71,7 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
+from fusion.ekf.gyro import clone_heading, gyro_cov, gyro_jacobian, gyro_measurement
 from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
@@ -84,7 +87,7 @@ from fusion.ekf.resets import (
 from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRecord
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
-from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
+from fusion.noise import GyroNoise, LandmarkNoise, ScaleErrors, SlipNoise
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -170,6 +173,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         Width of the encoder counters [bits], 8..64 (16: the Open Interface's);
         counts are differenced as the shortest signed step on their
         ``2**counter_bits`` ring (63, 64: they never wrap).
+    gyro : GyroNoise, optional
+        A yaw-rate gyro to fuse with :meth:`update_gyro` (noise, bias prior,
+        walk and bound): adds its bias and the period's yaw slip to the state
+        (:mod:`fusion.ekf.gyro`); default none.
 
     Attributes
     ----------
@@ -234,9 +241,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         max_jump_ticks: float = 10.0,
         diverged_after: int | None = 20,
         counter_bits: int = 16,
+        gyro: GyroNoise | None = None,
     ) -> None:
         fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
-                         encoder_std=encoder_std, m_per_tick=m_per_tick)
+                         encoder_std=encoder_std, m_per_tick=m_per_tick, gyro=gyro)
         super().__init__(dim_x=fm.n, dim_z=2, dim_u=2)
         self._init_updates(gate_probability=gate_probability, landmarks=landmarks,
                            landmark_noise=landmark_noise, unknown_landmarks=unknown_landmarks,
@@ -284,6 +292,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._tick_pair = np.zeros((2, 2), dtype=np.int64)
         self._have_ref = False
         self._periods_since_ref = 0
+        self._n_predicts = 0
+        self._gyro_read_at = -1         # the prediction of the last gyro reading
+        self._gyro_window = (0.0, 0, 0)     # (sum of y dt [rad], predictions at start, count)
         # the previous frame's counts and increment, for the single-frame jump test
         self._last_frame = (0, 0)
         self._last_delta = (0, 0)
@@ -330,6 +341,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """Estimated scale errors ``(k_v, k_w, kappa [rad/m])`` of ground against encoder
         motion, (3,) (:mod:`fusion.ekf.functions`, *Pose noise*)."""
         return self.x[SCALES].copy()
+
+    @property
+    def gyro_bias(self) -> float:
+        """Estimated gyro bias [rad/s] (NaN without a gyro)."""
+        return float(self.x[GYRO_BIAS]) if self.fm.gyro is not None else math.nan
 
     @property
     def scale_bound(self) -> ScaleBound:
@@ -392,6 +408,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.P = self.P_prior = P
         self.t_s += self._dt_s
         self._periods_since_ref += 1
+        self._n_predicts += 1
 
     def predict_update(self, *args: object, **kwargs: object) -> None:
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
@@ -413,7 +430,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             if k_v * k_v * iv + k_w * k_w * iw + kappa * kappa * ik > self._bound.threshold:
                 self._bound_scales(t)
         # a pose fix counts as a landmark of its own (each a new source): it places the robot
-        if kind != "encoders" and self._watch.observe(
+        if kind in ("landmark", "pose") and self._watch.observe(
                 record.accepted, landmark_id if kind == "landmark" else object()):
             range_m = None if kind == "pose" else float(zmeas[0] - innovation[0])
             e, b = discrepancy(innovation, range_m)
@@ -607,3 +624,80 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             raise FilterOptionError("the pose fix covariance must be symmetric positive definite")
         return self._gated("pose", t, zmeas, pose_residual(zmeas, self.x[:3]),
                            pose_jacobian(self.x), R, None)
+
+    def update_gyro(self, yaw_rate_rad_s: float, *, t_s: float | None = None) -> UpdateRecord:
+        """Add a gyro's yaw-rate reading of the period just predicted; fuse each full window.
+
+        The readings are summed over ``gyro.window_s``; the sum times ``dt``
+        measures the heading change since the window began, ``theta -
+        theta_c``, plus the bias times the window (:mod:`fusion.ekf.gyro`):
+        gated with 1 degree of freedom, Joseph form, then the bias clipped to
+        ``+-gyro.max_bias_rad_s`` and a new window started (the heading
+        cloned). Call it once per :meth:`predict`, after :meth:`update_encoders`
+        (or :meth:`update_speeds`) of the same frame.
+
+        Parameters
+        ----------
+        yaw_rate_rad_s : float
+            The reading [rad/s]; NaN or inf (``"non_finite"``) drops the window
+            so far and starts a new one.
+        t_s : float, optional
+            Time for the record (default the filter time).
+
+        Returns
+        -------
+        UpdateRecord
+            ``kind="gyro"``: ``reason`` ``"pending"`` while the window fills,
+            ``"fused"`` or ``"gated"`` when it closes (innovation in rad),
+            ``"gap"`` for a second reading without a :meth:`predict` between
+            (ignored).
+
+        Raises
+        ------
+        FilterOptionError
+            If the filter was built without ``gyro=``.
+        MeasurementShapeError
+            If the reading is not one number.
+        """
+        gyro = self.fm.gyro
+        if gyro is None:
+            raise FilterOptionError("this filter has no gyro; give gyro=GyroNoise(...) to ModelEKF")
+        arr = np.asarray(yaw_rate_rad_s, dtype=float)
+        if arr.size != 1:
+            raise MeasurementShapeError(f"expected one yaw rate [rad/s], got shape {arr.shape}")
+        y = float(arr.reshape(()))
+        t = self.t_s if t_s is None else float(t_s)
+        if self._gyro_read_at == self._n_predicts:
+            return self._skip("gyro", t, "gap", 1)
+        self._gyro_read_at = self._n_predicts
+        if not math.isfinite(y):
+            self._start_gyro_window()
+            return self._skip("gyro", t, "non_finite", 1)
+        # the window starts at the clone: the readings of the periods since, in order
+        if self._n_predicts - self._gyro_window[1] != self._gyro_window[2] + 1:
+            self._start_gyro_window()               # a period without a reading: start anew
+            return self._skip("gyro", t, "gap", 1)
+        turn, _, count = self._gyro_window
+        turn += y * self._dt_s
+        count += 1
+        window = count * self._dt_s
+        if window < gyro.window_s - 0.5 * self._dt_s:
+            self._gyro_window = (turn, self._gyro_window[1], count)
+            return self._skip("gyro", t, "pending", 1)
+        H = gyro_jacobian(self.x, self.fm, window)
+        predicted = gyro_measurement(self.x, self.fm, window)
+        record = self._gated("gyro", t, np.array([turn]), np.array([turn]) - predicted, H,
+                             gyro_cov(self.fm, window), None)
+        if record.accepted and abs(self.x[GYRO_BIAS]) > gyro.max_bias_rad_s:
+            x = self.x.copy()
+            x[GYRO_BIAS] = math.copysign(gyro.max_bias_rad_s, x[GYRO_BIAS])
+            self.x = self.x_post = x
+        self._start_gyro_window()
+        return record
+
+    def _start_gyro_window(self) -> None:
+        """Clone the heading and empty the sum (:func:`fusion.ekf.gyro.clone_heading`)."""
+        self.x, self.P = clone_heading(self.x, self.P)
+        self.x_post, self.P_post = self.x, self.P
+        # (sum of y dt [rad], predictions at the clone, readings summed)
+        self._gyro_window = (0.0, self._n_predicts, 0)

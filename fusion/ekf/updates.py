@@ -59,9 +59,9 @@ __all__ = ["FilterStats", "GatedUpdates", "UpdateKind", "UpdateReason", "UpdateR
 
 _log = logging.getLogger(__name__)
 
-UpdateKind = Literal["encoders", "landmark", "pose"]
+UpdateKind = Literal["encoders", "landmark", "pose", "gyro"]
 UpdateReason = Literal["fused", "forced", "gated", "non_finite", "unknown_landmark", "anchor",
-                       "gap", "degenerate"]
+                       "gap", "degenerate", "pending"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +70,7 @@ class UpdateRecord:
 
     Attributes
     ----------
-    kind : {"encoders", "landmark", "pose"}
+    kind : {"encoders", "landmark", "pose", "gyro"}
         The measurement.
     t_s : float
         Filter time of the update [s].
@@ -93,7 +93,10 @@ class UpdateRecord:
         (first encoder counts: a reference only), ``"gap"`` (counts right
         after others with no ``predict`` between, or more than
         ``max_periods`` periods after the last fused ones: the reference is
-        renewed), or ``"degenerate"`` (robot on the landmark). An encoder
+        renewed; for a gyro: a second reading after one :meth:`predict`, or a
+        period without a reading, which restarts the window), ``"degenerate"``
+        (robot on the landmark), or ``"pending"`` (a gyro reading summed into
+        its window, compared when the window closes). An encoder
         reading after gated, NaN or lost ones spans all the periods since the
         last fused counts (its innovation is the summed speed residual).
     landmark_id : hashable or None
@@ -180,12 +183,12 @@ class GatedUpdates:
             raise FilterOptionError(f"unknown_landmarks must be 'count' or 'raise', got "
                                     f"{unknown_landmarks!r}")
         if gate_probability is None:
-            self._gates = {2: math.inf, 3: math.inf}
+            self._gates = {1: math.inf, 2: math.inf, 3: math.inf}
         elif not isinstance(gate_probability, (int, float)):
             raise FilterOptionError(f"gate probability must be a number in (0, 1) or None, got "
                                     f"{gate_probability!r}")
         else:
-            self._gates = {d: gate_threshold(gate_probability, d) for d in (2, 3)}
+            self._gates = {d: gate_threshold(gate_probability, d) for d in (1, 2, 3)}
         self.gate_probability = gate_probability
         self.landmarks = (landmarks if isinstance(landmarks, LandmarkMap) or landmarks is None
                           else LandmarkMap(landmarks))

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion.ekf.model_ekf import ModelEKF
+from fusion.noise import GyroNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.replay_sources import (
     ESTIMATORS,
@@ -100,10 +101,12 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
          landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray]:
     encoders = src.ticks is not None
     first = int(np.argmax(src.valid)) if encoders else 0
+    gyro = src.yaw_rate_rad_s           # a gyro's readings: fused (fusion.ekf.gyro)
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
                    initial_ticks=src.ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
-                   landmark_noise=src.landmark_noise, history=0, counter_bits=src.counter_bits)
+                   landmark_noise=src.landmark_noise, history=0, counter_bits=src.counter_bits,
+                   gyro=None if gyro is None else GyroNoise())
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
     poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]
@@ -114,16 +117,22 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
             ekf.predict(src.cmd_m_s[k])
         if encoders and src.valid[k] and k > first:
             ekf.update_encoders(src.ticks[k])
+        if gyro is not None:
+            ekf.update_gyro(gyro[k])    # NaN (a lost frame) starts a new window
         ekf.update_landmarks(sightings.get(k, none))
         poses[k], covs[k] = ekf.x[:3], ekf.P[:3, :3]
     stats = ekf.stats
     causes = [r.cause for r in ekf.resets]
-    return poses, {"encoders_gated": stats.count("encoders", "gated"),
-                   "landmarks_fused": stats.count("landmark", "fused"),
-                   "landmarks_gated": stats.count("landmark", "gated"),
-                   "filter_resets": ekf.n_resets,
-                   "resets_scale_implausible": causes.count("scale_implausible"),
-                   "resets_diverged": causes.count("diverged")}, covs
+    counts = {"encoders_gated": stats.count("encoders", "gated"),
+              "landmarks_fused": stats.count("landmark", "fused"),
+              "landmarks_gated": stats.count("landmark", "gated"),
+              "filter_resets": ekf.n_resets,
+              "resets_scale_implausible": causes.count("scale_implausible"),
+              "resets_diverged": causes.count("diverged")}
+    if gyro is not None:
+        counts.update(gyro_windows_fused=stats.count("gyro", "fused"),
+                      gyro_windows_gated=stats.count("gyro", "gated"))
+    return poses, counts, covs
 
 
 def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
@@ -149,7 +158,8 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
     extra : dict of str to dict
         Filter counts (gated readings, landmarks fused, the filter's resets by
         cause: ``filter_resets``, ``resets_scale_implausible``,
-        ``resets_diverged``) per EKF estimator.
+        ``resets_diverged``; with a gyro in the source, its windows
+        ``gyro_windows_fused`` and ``gyro_windows_gated``) per EKF estimator.
 
     Raises
     ------

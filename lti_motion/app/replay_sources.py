@@ -78,6 +78,9 @@ class ReplaySource:
     counter_bits : int
         Width of the counters [bits] (16: the Open Interface's; the log's
         :attr:`~lti_motion.frames.FrameLog.counter_bits`).
+    yaw_rate_rad_s : ndarray, shape (n,), or None
+        A gyro's reading over the period each frame closes [rad/s] (the log's
+        :attr:`~lti_motion.frames.FrameLog.yaw_rate_rad_s`); ``None`` without a gyro.
     truth : ndarray, shape (n, 3), or None
         Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
@@ -100,6 +103,7 @@ class ReplaySource:
     landmarks: LandmarkMap | None = None
     landmark_noise: LandmarkNoise | None = None
     counter_bits: int = 16
+    yaw_rate_rad_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -227,7 +231,9 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
                         ticks=np.where(counted[:, None], log.ticks[keep], 0).astype(np.int64),
                         truth=None if log.true_pose is None else log.true_pose[keep],
                         sightings=sightings, landmarks=landmarks,
-                        counter_bits=log.counter_bits)
+                        counter_bits=log.counter_bits,
+                        yaw_rate_rad_s=(None if log.yaw_rate_rad_s is None else np.where(
+                            log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)))
 
 
 def _key(value: object) -> Hashable:
