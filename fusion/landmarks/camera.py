@@ -29,7 +29,12 @@ wide) is warped by the plane-to-image homography (Zhang 2000, eq. 2,
 background, far markers first. The canvas is averaged down to the sensor
 resolution (area integration over each pixel), distorted when the intrinsics
 have distortion, blurred with a Gaussian and given Gaussian noise, all from
-the caller's generator. Markers behind the camera (any quiet-zone corner
+the caller's generator. The noise is drawn by inversion (Devroye 1986,
+sec. II.2.1): 16-bit uniform integers index a table of the normal quantiles
+at the 65,536 cell midpoints ``(j + 0.5) / 65536``, which is the normal
+distribution truncated at 4.17 standard deviations (tail mass 3e-5) with
+probabilities in steps of 2^-16, at about a third of the cost of
+``Generator.normal`` for a VGA image. Markers behind the camera (any quiet-zone corner
 closer than ``near_m``) or seen from the back are not drawn; markers that
 leave the image are clipped.
 
@@ -40,6 +45,9 @@ Cambridge University Press, 2004, sec. 6.1 (the finite projective camera).
 
 Z. Zhang, "A flexible new technique for camera calibration", IEEE Transactions on
 Pattern Analysis and Machine Intelligence 22(11), 1330-1334, 2000.
+
+L. Devroye, "Non-Uniform Random Variate Generation", Springer, 1986, sec. II.2.1 (the
+inversion method).
 """
 
 from __future__ import annotations
@@ -491,8 +499,24 @@ class SyntheticCamera:
             img = _distort(img, self.intrinsics)
         if self.blur_sigma_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), self.blur_sigma_px)
-        img = img + rng.normal(0.0, self.noise_sigma_grey, img.shape).astype(np.float32)
+        if self.noise_sigma_grey > 0:
+            img = img + _normal_quantiles(self.noise_sigma_grey)[
+                rng.integers(0, _QUANTILES, size=img.shape, dtype=np.uint16)]
         return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+_QUANTILES = 1 << 16
+
+
+@functools.lru_cache(maxsize=8)
+def _normal_quantiles(sigma: float) -> np.ndarray:
+    """``sigma`` times the standard normal quantiles at ``(j + 0.5) / 2^16``, float32,
+    read-only: indexed by uniform 16-bit integers they are normal draws by inversion
+    (module docstring)."""
+    from scipy.special import ndtri  # only when images are rendered
+    table = (sigma * ndtri((np.arange(_QUANTILES) + 0.5) / _QUANTILES)).astype(np.float32)
+    table.setflags(write=False)
+    return table
 
 
 def _to_camera(points_world: np.ndarray, world_r_cam: np.ndarray,

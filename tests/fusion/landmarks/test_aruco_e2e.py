@@ -10,7 +10,7 @@ same detections, the commands and the encoder counts, never the truth.
 Measured (docs/aruco_end_to_end.md): both estimators hold the position to millimetres, far
 inside the 5 cm acceptance, and the smoother (encoder-filtered model speeds, the EKF's slip
 and scale-error noise, a Huber kernel on the detections) is at most the EKF's RMS on every
-run (0.29-0.32 mm against 0.49-0.53 mm, both with the detections' full covariance and the
+run (0.26-0.30 mm against 0.50-0.56 mm, both with the detections' full covariance and the
 camera's mount).
 """
 

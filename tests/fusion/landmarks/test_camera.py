@@ -147,6 +147,35 @@ def test_rendered_edges_sit_on_the_true_projection():
     assert img[row, col] == pytest.approx(expected, abs=1.0)     # 1 grey level ~ 0.005 px
 
 
+def test_image_noise_is_white_gaussian_of_the_given_sigma():
+    """Noise by inversion of a 16-bit quantile table (module docstring). On a blank image
+    the difference to the noiseless render is ``rint(g + n) - rint(g)`` for the background
+    grey ``g``: its distribution matches the same difference with ``Generator.normal`` draws
+    and fractions of ``g`` spread over [0, 1) (the background is a vertical gradient), and
+    neighbours along a row are uncorrelated once the row's own rounding is taken out."""
+    sigma = 2.5
+    quiet = SyntheticCamera(K500, noise_sigma_grey=0.0)
+    noisy = SyntheticCamera(K500, noise_sigma_grey=sigma)
+    blank = MarkerMap([])
+    base = quiet.render(blank, np.zeros(3), np.random.default_rng(0)).astype(float)
+    d = np.concatenate([(noisy.render(blank, np.zeros(3), np.random.default_rng(seed))
+                         - base).ravel() for seed in range(4)])      # 1.2 million pixels
+    rng = np.random.default_rng(99)
+    g = rng.uniform(0.0, 1.0, d.size)
+    ref = np.rint(g + rng.normal(0.0, sigma, d.size)) - np.rint(g)
+    assert abs(d.mean()) < 0.01
+    assert d.std() == pytest.approx(ref.std(), rel=0.005)            # sqrt(sigma^2 + 1/6)
+    values = np.arange(-15, 16)
+    p_d = np.array([np.mean(d == v) for v in values])
+    p_ref = np.array([np.mean(ref == v) for v in values])
+    assert np.max(np.abs(p_d - p_ref)) < 0.002, np.round(p_d - p_ref, 4)
+    assert np.mean(np.abs(d) >= 3 * sigma) == pytest.approx(np.mean(np.abs(ref) >= 3 * sigma),
+                                                            rel=0.1)  # the tails
+    img = d[: base.size].reshape(base.shape)
+    img = img - img.mean(axis=1, keepdims=True)     # rint(g) - g is the same along a row
+    assert abs(np.corrcoef(img[:, :-1].ravel(), img[:, 1:].ravel())[0, 1]) < 0.01
+
+
 def test_back_facing_and_behind_markers_are_not_drawn():
     cam = SyntheticCamera(K500, noise_sigma_grey=0.0)
     empty = cam.render(MarkerMap([]), np.zeros(3), np.random.default_rng(0))
