@@ -274,21 +274,23 @@ def model(example):
     return example.calibrate_model()
 
 
-def _monitor_run(model, log, start_pose):
-    """The model EKF and a fresh monitor over one robot's frames (no Phase I, no landmarks)."""
+def _monitor_run(model, log, start_pose, until_s=math.inf):
+    """The model EKF and a fresh monitor over one robot's frames up to ``until_s`` (no
+    Phase I, no landmarks). The monitor is causal: stopping early changes no earlier alarm."""
     mf = MonitoredFilter(model, initial_pose=start_pose, pose_std=(0.005,) * 3,
                          initial_ticks=log.ticks[0])
-    for k in range(1, len(log.t_s)):
+    for k in range(1, int(np.searchsorted(log.t_s, until_s, side="right"))):
         mf.step(log.ticks[k], log.cmd_m_s[k])
     return mf.monitor
 
 
-def _runs(example, model, faults, *, n, duration_s, seed):
+def _runs(example, model, faults, *, n, duration_s, seed, until_s=math.inf):
     sim = Simulator("create2", n_robots=n, seed=seed, room=Room.box(5.0, 5.0),
                     initial_pose=example.START_POSE, faults=faults)
     logs = example.drive_route(sim, duration_s=duration_s, rng=np.random.default_rng(seed))
     rest_s = 1.0                                  # drive_route's rest before driving
-    return [_monitor_run(model, logs.robot(i), example.START_POSE) for i in range(n)], rest_s
+    return [_monitor_run(model, logs.robot(i), example.START_POSE, until_s)
+            for i in range(n)], rest_s
 
 
 def _first(mon, kind, after_s):
@@ -302,7 +304,9 @@ def _first(mon, kind, after_s):
     (Fault("encoder_spikes", t_s=FAULT_AT_S, duration_s=1.0, rate_hz=20.0), "glitch_burst"),
 ])
 def test_sensor_faults_detected_within_0_2_s(example, model, fault, kind):
-    mons, _ = _runs(example, model, (fault,), n=N_RUNS, duration_s=DURATION_S, seed=300)
+    # monitored up to 1 s after the onset: a later detection fails the 0.3 s bound anyway
+    mons, _ = _runs(example, model, (fault,), n=N_RUNS, duration_s=DURATION_S, seed=300,
+                    until_s=FAULT_AT_S + 1.0)
     delays = np.array([_first(m, kind, FAULT_AT_S) - FAULT_AT_S for m in mons])
     assert np.all(np.isfinite(delays)), delays          # 20 of 20 detected
     assert np.median(delays) <= 0.2 and np.all(delays <= 0.3), delays
