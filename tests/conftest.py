@@ -53,3 +53,29 @@ def load_example():
         return cache[name]
 
     return load
+
+
+@pytest.fixture(scope="session")
+def ekf_example_model(load_example):
+    """``examples/ekf_plugin.py``'s calibrated model, calibrated once per session (the
+    calibration is deterministic and a ``MotionModel`` is frozen)."""
+    return load_example("ekf_plugin").calibrate_model()
+
+
+@pytest.fixture(scope="session")
+def short_arx_model():
+    """``short_arx_model(seed)``: the ARX model of a create2 calibration on the simulator with
+    40 s of excitation (simulator and plan seeded ``seed``), calibrated once per seed and
+    session (deterministic; a ``MotionModel`` is frozen)."""
+    from drivers.sim.calibration import calibrate_simulator
+    from lti_motion.calibration import CalibrationPlan
+
+    cache = {}
+
+    def model(seed: int):
+        if seed not in cache:
+            cache[seed] = calibrate_simulator(
+                "create2", seed=seed, plan=CalibrationPlan(seed=seed, excitation_s=40.0)).arx
+        return cache[seed]
+
+    return model

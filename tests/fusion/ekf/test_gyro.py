@@ -183,8 +183,8 @@ def test_the_bias_estimate_is_clipped(model):
 
 # -- on the simulator ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def sim_model(load_example):
-    return load_example("ekf_plugin").calibrate_model()
+def sim_model(ekf_example_model):
+    return ekf_example_model
 
 
 def _run(model, log, gyro):

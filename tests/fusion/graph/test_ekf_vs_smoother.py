@@ -24,9 +24,9 @@ NOISE = LandmarkNoise(range_std_frac=0.0, range_std_m=0.05, bearing_std_rad=np.r
 
 
 @pytest.fixture(scope="module")
-def runs(load_example):
+def runs(load_example, ekf_example_model):
     ekf_ex = load_example("ekf_plugin")
-    model = ekf_ex.calibrate_model()
+    model = ekf_example_model
     sim = Simulator("create2", n_robots=N_RUNS, seed=300, room=Room.box(5.0, 5.0),
                     initial_pose=ekf_ex.START_POSE)
     logs = ekf_ex.drive_route(sim, duration_s=DURATION_S, rng=np.random.default_rng(17))

@@ -31,8 +31,8 @@ def example(load_example):
 
 
 @pytest.fixture(scope="module")
-def model(example):
-    return example.load_ekf_example().calibrate_model()
+def model(ekf_example_model):
+    return ekf_example_model
 
 
 @pytest.fixture(scope="module")

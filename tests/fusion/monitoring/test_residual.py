@@ -270,8 +270,8 @@ def example(load_example):
 
 
 @pytest.fixture(scope="module")
-def model(example):
-    return example.calibrate_model()
+def model(ekf_example_model):
+    return ekf_example_model
 
 
 def _monitor_run(model, log, start_pose, until_s=math.inf):

@@ -66,12 +66,8 @@ def test_bad_input_is_a_clear_error():
 
 # -- on the simulator ----------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def model():
-    from drivers.sim.calibration import calibrate_simulator
-    from lti_motion.calibration import CalibrationPlan
-
-    return calibrate_simulator("create2", seed=2,
-                               plan=CalibrationPlan(seed=2, excitation_s=40.0)).arx
+def model(short_arx_model):
+    return short_arx_model(2)
 
 
 SEEDS = (11, 12, 13, 14)

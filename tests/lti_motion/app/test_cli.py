@@ -140,12 +140,8 @@ def test_virtual_roomba_prints_its_device_path(capsys):
 
 # -- replay and monitor ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    from drivers.sim.calibration import calibrate_simulator
-    from lti_motion.calibration import CalibrationPlan
-
-    cal = calibrate_simulator("create2", seed=2, plan=CalibrationPlan(seed=2, excitation_s=40.0))
-    return str(cal.arx.save(tmp_path_factory.mktemp("model") / "model_arx.json"))
+def model_file(tmp_path_factory, short_arx_model):
+    return str(short_arx_model(2).save(tmp_path_factory.mktemp("model") / "model_arx.json"))
 
 
 def test_monitor_sim_prints_the_stuck_encoder_alarm_and_records_a_log(model_file, tmp_path,

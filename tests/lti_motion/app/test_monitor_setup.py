@@ -9,12 +9,8 @@ from lti_motion.app import monitor_setup as ms
 
 
 @pytest.fixture(scope="module")
-def model():
-    from drivers.sim.calibration import calibrate_simulator
-    from lti_motion.calibration import CalibrationPlan
-
-    return calibrate_simulator("create2", seed=2,
-                               plan=CalibrationPlan(seed=2, excitation_s=40.0)).arx
+def model(short_arx_model):
+    return short_arx_model(2)
 
 
 def test_gate_sits_between_a_start_from_rest_and_a_spike(model):

@@ -7,7 +7,6 @@ import warnings
 import numpy as np
 import pytest
 
-from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room
 from drivers.sim.simulator import Simulator
 from fusion.landmark_map import LandmarkMap
@@ -20,7 +19,6 @@ from lti_motion.app.replay import (
     run_replay,
     source_from_log,
 )
-from lti_motion.calibration import CalibrationPlan
 from lti_motion.exceptions import ShapeError
 from lti_motion.logfile import load_log, save_log
 from lti_motion.tum import read_tum, tum_rows, write_tum
@@ -29,9 +27,8 @@ LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (3.0, -1.0), 3: (3.0, 3.0), 4: (-1.
 
 
 @pytest.fixture(scope="module")
-def model():
-    plan = CalibrationPlan(seed=4, excitation_s=40.0)
-    return calibrate_simulator("create2", seed=4, plan=plan).arx
+def model(short_arx_model):
+    return short_arx_model(4)
 
 
 def _drive(model, seed, *, duration_s=15.0, faults=()):

@@ -3,20 +3,17 @@
 import numpy as np
 import pytest
 
-from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_log
-from lti_motion.calibration import CalibrationPlan
 from lti_motion.kinematics import wrap_angle
 from lti_motion.logfile import load_log, save_log
 
 
 @pytest.fixture(scope="module")
-def model():
-    plan = CalibrationPlan(seed=4, excitation_s=40.0)
-    return calibrate_simulator("create2", seed=4, plan=plan).arx
+def model(short_arx_model):
+    return short_arx_model(4)
 
 
 def test_a_carpet_drive_with_a_gyro_replays_with_a_better_heading(model, tmp_path):
