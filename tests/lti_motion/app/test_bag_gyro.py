@@ -84,6 +84,10 @@ def test_replay_bag_fuses_the_imu_and_no_gyro_leaves_it_out(carpet, model, tmp_p
         err[name] = _heading_error(result.poses["ekf"], result.source.truth)
         assert ("gyro_windows_fused" in result.metrics["ekf"]) == gyro
     assert err["gyro"] < err["plain"] / 3, err
+    said = "\n".join(lines)
+    assert re.search(r"EKF, model, encoders and gyro: .*; gyro: \d+ windows fused, \d+ gated",
+                     said), said
+    assert "EKF, model and encoders: " in said          # the --no-gyro replay's label
     memory = source_from_frame_log(log, "memory")
     poses, extra = estimate(memory, model, ["ekf"])
     assert abs(err["gyro"] - _heading_error(poses["ekf"], memory.truth)) < 0.01
