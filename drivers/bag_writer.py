@@ -316,6 +316,14 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     Path
         The bag written.
 
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists.
+    ValueError
+        For an unknown ``truth``, a batch log, or a negative or non-finite noise
+        density (nothing is written).
+
     References
     ----------
     REP 145, "Conventions for IMU sensor drivers"; ``sensor_msgs/msg/Imu``.
