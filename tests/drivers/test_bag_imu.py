@@ -97,6 +97,27 @@ def test_a_slower_imu_with_a_gap(tmp_path):
     assert not inside[~span].any() and not inside[gap].any()
 
 
+def test_a_faster_imu_is_averaged_over_each_period(tmp_path):
+    """A 200 Hz Imu of w(t) = 0.5 sin(pi t) under 50 Hz wheels: each frame's yaw rate is the
+    mean of w over its 20 ms period, (0.5 / pi) (cos pi t0 - cos pi t1) / 0.02, within the
+    trapezoid rule's error bound on 5 ms steps, h^2 / 12 max|w''| = 1.028e-5 rad/s (the
+    periods' ends fall on Imu stamps: no interpolation error)."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    wheels_ns = 10**9 + np.arange(100) * 20_000_000
+    imu_ns = 10**9 + np.arange(400) * 5_000_000
+    msgs = [("/joint_states", "sensor_msgs/msg/JointState", int(t),
+             _joint_state(store, t, 0.01 * i)) for i, t in enumerate(wheels_ns)]
+    msgs += [("/imu", "sensor_msgs/msg/Imu", int(t),
+              _imu(store, t, 0.5 * np.sin(np.pi * (t - 10**9) * 1e-9))) for t in imu_ns]
+    log = bag_to_log(read_bag(_raw_bag(tmp_path / "fast.bag", msgs)), wheel_base_m=0.235)
+    t1 = log.t_s + (log.meta["bag_start_ns"] - 10**9) * 1e-9        # from the first stamp
+    t0 = t1 - 0.02
+    expected = 0.5 / np.pi * (np.cos(np.pi * t0) - np.cos(np.pi * t1)) / 0.02
+    got = np.isfinite(log.yaw_rate_rad_s)
+    assert got[1:].all() and not got[0]
+    np.testing.assert_allclose(log.yaw_rate_rad_s[1:], expected[1:], atol=1.03e-5)
+
+
 # -- bad input: the reader's one-line errors -----------------------------------------------
 def _raw_bag(path, messages):
     """A ROS 1 bag written with rosbags alone: ``messages`` is [(topic, msgtype, t_ns, msg)]."""
