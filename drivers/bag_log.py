@@ -24,7 +24,17 @@ each with its own stamps) and go the way of every recording
   through ``wheel_base_m`` (:func:`lti_motion.kinematics.wheel_from_body`);
 - reference poses (``truth``) are interpolated onto the frames (a received frame
   at its own stamp), blank (NaN) outside their span and across gaps longer than
-  ``max_gap_s``.
+  ``max_gap_s``;
+- an IMU's yaw rate (``sensor_msgs/Imu`` ``angular_velocity.z``, any rate) becomes
+  each frame's ``yaw_rate_rad_s``, the mean rate over the period the frame closes,
+  by the rule of :mod:`lti_motion.resample` for a rate stream: integrated with the
+  trapezoid rule over the Imu's own stamps, the integral interpolated linearly at
+  the period boundaries (the fitted clock line, :meth:`ClockFit.times_s
+  <lti_motion.clocks.ClockFit.times_s>` of ``k - 1`` and ``k``), differenced and
+  divided by the period. An Imu faster than the wheels is averaged over each period,
+  a slower one interpolated linearly between its messages. A period reaching
+  outside the Imu's messages, or over a gap between two of them longer than
+  ``max_gap_s``, has no reading (NaN: the EKF starts a new gyro window).
 
 Times in the log count from the bag's first stamp (``meta["bag_start_ns"]``).
 """
@@ -92,20 +102,24 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
         (default 20 m/s: far beyond any robot this library models, while encoder
         glitches of several hundred ticks still pass, for the monitor to find).
     max_gap_s : float
-        Reference poses are blank across gaps longer than this [s].
+        Reference poses and the Imu's yaw rate are blank across gaps longer than
+        this [s].
 
     Returns
     -------
     FrameLog
-        One robot; ``meta`` holds ``m_per_tick``, ``ticks_per_rad``,
-        ``bag_start_ns``, the topics and joints used, ``has_commands``,
-        ``lost_frames`` and ``clock`` (the period assignment's summary line).
+        One robot (``yaw_rate_rad_s`` when the recording has an Imu); ``meta``
+        holds ``m_per_tick``, ``ticks_per_rad``, ``bag_start_ns``, the topics and
+        joints used, ``has_commands``, ``lost_frames`` and ``clock`` (the period
+        assignment's summary line).
 
     Raises
     ------
     BagError
         No wheel angles (the bag's topics listed); fewer than 2 messages; stamps
         all equal and no ``dt_s``; a wheel or command faster than ``max_wheel_m_s``.
+        (A non-finite Imu value or Imu stamps going backwards are refused by
+        :func:`drivers.bags.read_bag`.)
     ValueError
         For a non-positive ``wheel_base_m``, ``ticks_per_rad`` or ``wheel_radius_m``.
     """
@@ -156,6 +170,9 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
     at_s = t_s.copy()
     at_s[k] = t[got]                         # a pose belongs to its frame's own stamp
     truth = None if rec.truth is None else _reference(rec.truth, rec.start_ns, at_s, max_gap_s)
+    yaw = None
+    if rec.imu is not None:
+        yaw = _mean_rate(rec.imu, rec.start_ns, clock.times_s(np.arange(-1, n)), max_gap_s)
     dt_s = snap_period_s(clock.period_s) if dt_s is None else float(dt_s)
     meta = {"source": "ROS bag", "bag": str(rec.path), "bag_start_ns": int(rec.start_ns),
             "ticks_per_rad": float(ticks_per_rad), "wheel_radius_m": float(wheel_radius_m),
@@ -167,7 +184,26 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
             "lost_frames": int(n - len(k)), "clock": a.summary()}
     return FrameLog(t_s=t_s, ticks=ticks, light_bump=np.zeros((n, N_LIGHT_BUMPS), np.int64),
                     bumps=np.zeros((n, 2), bool), cmd_m_s=wheel_cmd, valid=valid, dt_s=dt_s,
-                    true_pose=truth, meta=meta)
+                    true_pose=truth, yaw_rate_rad_s=yaw, meta=meta)
+
+
+def _mean_rate(rate: StampedSeries, start_ns: int, bounds_s: np.ndarray,
+               max_gap_s: float) -> np.ndarray:
+    """Mean of a rate stream over each interval between ``bounds_s`` (module docstring);
+    NaN for an interval reaching outside the stream or over a gap longer than ``max_gap_s``."""
+    t, v = _seconds(rate, start_ns), rate.values[:, 0]
+    # the trapezoid rule's running integral (resample.py, module Notes step 1)
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    out = np.diff(np.interp(bounds_s, t, cum)) / np.diff(bounds_s)
+    if len(t) < 2:
+        return np.full(len(out), np.nan)
+    big = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])   # gaps before message i
+    first = np.clip(np.searchsorted(t, bounds_s[:-1], "right") - 1, 0, len(t) - 2)
+    last = np.clip(np.searchsorted(t, bounds_s[1:], "left") - 1, 0, len(t) - 2)
+    tol = 1e-6                # 1 us: a clock line fitted through a stamp misses it by rounding
+    out[(bounds_s[:-1] < t[0] - tol) | (bounds_s[1:] > t[-1] + tol)
+        | (big[last + 1] > big[first])] = np.nan
+    return out
 
 
 def _reference(truth: StampedSeries, start_ns: int, t_s: np.ndarray,

@@ -20,7 +20,10 @@ renamed into place when complete; an existing path is refused.
   tenth frame (a localiser's correction drifting at a constant rate: 20 mm/s in x,
   -10 mm/s in y, 0.01 rad/s in yaw), ``odom -> base_footprint`` on ``/tf`` per frame
   (the pose in ``odom`` that makes the chain the truth) and a static
-  ``base_footprint -> base_link`` mount 0.05 m up on ``/tf_static``.
+  ``base_footprint -> base_link`` mount 0.05 m up on ``/tf_static``; and, when the
+  drive has a yaw-rate gyro (``log.yaw_rate_rad_s``), ``/imu/data``
+  (``sensor_msgs/Imu``: the yaw rate and its variance, orientation and acceleration
+  marked absent, REP 145).
 """
 
 from __future__ import annotations
@@ -240,18 +243,48 @@ def _write_alarm(bag: _Bag, topic: str, alarm: BagAlarm, frame_id: str) -> None:
         header=bag.header(alarm.t_ns, frame_id), status=[status]))
 
 
+def _imu_message(bag: _Bag, t_ns: int, yaw_rate_rad_s: float, yaw_rate_var: float,
+                frame_id: str = "base_link") -> object:
+    """A ``sensor_msgs/Imu`` holding only a yaw rate, as REP 145 asks of a partial IMU.
+
+    ``angular_velocity.z`` is the reading and its variance is
+    ``angular_velocity_covariance[8]`` (row-major 3x3; 0 for "unknown", as the
+    message definition reads an all-zero matrix); the roll and pitch rates, not
+    measured, get :data:`UNESTIMATED_VARIANCE`. Orientation and linear acceleration
+    are not given: element 0 of their covariances is -1 (the message definition,
+    REP 145 section "Data Sources").
+    """
+    t = bag.types
+    unknown = np.zeros(9)
+    unknown[0] = -1.0
+    rate_cov = np.diag([UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE, 0.0]).ravel()
+    rate_cov[8] = yaw_rate_var
+    return t["sensor_msgs/msg/Imu"](
+        header=bag.header(t_ns, frame_id),
+        orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=unknown.copy(), angular_velocity=bag.vector3(z=yaw_rate_rad_s),
+        angular_velocity_covariance=rate_cov, linear_acceleration=bag.vector3(),
+        linear_acceleration_covariance=unknown.copy())
+
+
 def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1_700_000_000
                     * 1_000_000_000, ticks_per_rad: float = CREATE2_TICKS_PER_RAD,
                     wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M, wheel_base_m: float = 0.235,
                     joints: tuple[str, str] = ("wheel_left_joint", "wheel_right_joint"),
                     storage: Storage = "mcap",
-                    truth: Literal["pose", "tf", "tf_chain"] = "pose") -> Path:
+                    truth: Literal["pose", "tf", "tf_chain"] = "pose",
+                    gyro_noise_density_rad_s_sqrt_hz: float | None = None,
+                    imu_topic: str = "/imu/data") -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
     command of frame ``k`` (period ``k``) is stamped at the start of its period
     on the robot's clock, ``t_s[k] - dt_s``; wheel angles are the unwrapped
-    counts over ``ticks_per_rad``, stamped with the frame times.
+    counts over ``ticks_per_rad``, stamped with the frame times. A gyro's
+    reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
+    ``imu_topic`` stamped mid-period, ``t_s[k] - dt_s / 2``, as
+    :meth:`lti_motion.recording.Recording.from_frame_log` stamps it; a
+    received frame's NaN reading is left out too.
 
     Parameters
     ----------
@@ -271,16 +304,38 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         How the simulator's poses go in: a ``PoseStamped`` topic, tf directly, or
         tf as a chain ``map -> odom -> base_footprint -> base_link`` (module
         docstring).
+    gyro_noise_density_rad_s_sqrt_hz : float, optional
+        The gyro's white-noise density [rad/s/sqrt(Hz)]; the Imu's yaw-rate
+        variance is then ``density^2 / dt_s`` (a period's mean of white rate noise,
+        Woodman 2007, section 3.2.1), else 0 ("unknown").
+    imu_topic : str
+        Where the gyro goes (with a gyro in the drive).
 
     Returns
     -------
     Path
         The bag written.
+
+    Raises
+    ------
+    FileExistsError
+        If ``path`` exists.
+    ValueError
+        For an unknown ``truth``, a batch log, or a negative or non-finite noise
+        density (nothing is written).
+
+    References
+    ----------
+    REP 145, "Conventions for IMU sensor drivers"; ``sensor_msgs/msg/Imu``.
+    O. J. Woodman, "An introduction to inertial navigation", UCAM-CL-TR-696, 2007.
     """
     if truth not in ("pose", "tf", "tf_chain"):
         raise ValueError(f"truth must be 'pose', 'tf' or 'tf_chain', got {truth!r}")
     if log.n_robots is not None:
         raise ValueError("write_drive_bag writes one robot; pass log.robot(i)")
+    density = gyro_noise_density_rad_s_sqrt_hz
+    if density is not None and not (math.isfinite(density) and density >= 0):
+        raise ValueError(f"gyro_noise_density_rad_s_sqrt_hz must be >= 0, got {density!r}")
     rows = np.flatnonzero(log.valid)
     t_ns = start_ns + np.rint(log.t_s * 1e9).astype(np.int64)
     angles = unwrap_ticks(log.ticks, axis=0, counter_bits=log.counter_bits) / ticks_per_rad
@@ -316,10 +371,25 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
             if log.true_pose is not None and truth == "pose":
                 out.append((t_ns[k], "/ground_truth", t["geometry_msgs/msg/PoseStamped"](
                     header=bag.header(t_ns[k], "world"), pose=bag.pose(*log.true_pose[k]))))
+        out += _gyro_messages(bag, log, t_ns, imu_topic, gyro_noise_density_rad_s_sqrt_hz)
         out.sort(key=lambda item: item[0])        # in time order, as a recorder writes
         for stamp, topic, msg in out:
             bag.write(topic, stamp, msg)
     return Path(path)
+
+
+def _gyro_messages(bag: _Bag, log: FrameLog, t_ns: np.ndarray, topic: str,
+                   density: float | None) -> list[tuple[int, str, object]]:
+    """The gyro's readings of the received frames as Imu messages, stamped mid-period."""
+    if log.yaw_rate_rad_s is None:
+        return []
+    var = 0.0 if density is None else density**2 / log.dt_s      # Woodman 2007, 3.2.1
+    bag.topic(topic, "sensor_msgs/msg/Imu")
+    stamps = t_ns - round(0.5 * log.dt_s * 1e9)
+    rows = np.flatnonzero(log.valid & np.isfinite(log.yaw_rate_rad_s))
+    return [(int(stamps[k]), topic, _imu_message(bag, int(stamps[k]),
+                                                float(log.yaw_rate_rad_s[k]), var))
+            for k in rows]
 
 
 def _tf_truth(bag: _Bag, t_ns: np.ndarray, poses: np.ndarray, *, chain: bool

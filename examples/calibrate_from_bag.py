@@ -2,16 +2,19 @@
 
 The steps of ``docs/guide_ros_bags.md`` on the library's public API:
 
-1. record: ``ros2 bag record /cmd_vel /joint_states /odom`` on the robot (and a
-   reference pose topic, e.g. motion capture, for the replay). Without ``--bag``,
-   the script records stand-ins on the simulator instead: a 3-minute random
-   excitation and a 1-minute drive with its true poses as ``/ground_truth``;
+1. record: ``ros2 bag record /cmd_vel /joint_states /odom /imu/data`` on the robot
+   (and a reference pose topic, e.g. motion capture, for the replay). Without
+   ``--bag``, the script records stand-ins on the simulator instead: a 3-minute
+   random excitation and a 1-minute drive with its true poses as ``/ground_truth``,
+   by a Create 2 carrying a MEMS gyro (``/imu/data``, ``sensor_msgs/Imu``);
 2. calibrate: the ARX model from the excitation bag (commands against the speeds
    from the wheel angles);
-3. replay: encoder odometry and the model's EKF on the second bag, their error
-   against its reference poses;
-4. monitor: the EKF and the residual monitor over the second bag, each alarm with
-   its bag time; the estimates (``nav_msgs/Odometry`` with covariance) and alarms
+3. replay: encoder odometry and the model's EKF on the second bag (and, when it has
+   an Imu, the EKF that also fuses its yaw rate), their error against its
+   reference poses;
+4. monitor: the EKF (with the Imu's yaw rate, when there is one) and the residual
+   monitor over the second bag, each alarm with its bag time; the estimates
+   (``nav_msgs/Odometry`` with covariance) and alarms
    (``diagnostic_msgs/DiagnosticArray``) written into a new bag;
 5. plots: ``fit.png`` (measured speeds against the model's free run) and
    ``trajectories.png``.
@@ -32,10 +35,11 @@ from matplotlib.figure import Figure
 from drivers.bag_log import bag_to_log
 from drivers.bag_writer import BagAlarm, write_drive_bag, write_estimates_bag
 from drivers.bags import read_bag
-from drivers.sim.config import Fault, Room
+from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf import ModelEKF
 from fusion.monitoring import MonitoredFilter
+from fusion.noise import GyroNoise
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.excitation import random_held_normal
 from lti_motion.frames import FrameLog
@@ -45,6 +49,7 @@ from lti_motion.model import MotionModel, fit_arx
 from lti_motion.odometry import tick_deltas
 
 WHEEL_BASE_M = 0.235                   # the Create 2's; give your robot's
+GYRO_DENSITY = 0.005                   # the stand-ins' gyro: a MEMS one [rad/s/sqrt(Hz)]
 
 
 def record_stand_ins(folder: Path, *, seed: int = 0, excitation_s: float = 180.0,
@@ -64,10 +69,15 @@ def record_stand_ins(folder: Path, *, seed: int = 0, excitation_s: float = 180.0
     lost = Fault("lost_frames", t_s=0.0, probability=0.02)
     spikes = Fault("encoder_spikes", t_s=0.7 * drive_s, duration_s=1.0, rate_hz=20.0)
     room = Room.empty()
+    # a gyro changes none of the simulator's other outputs (its noise has its own stream)
+    robot = get_preset("create2").replace(gyro_noise_density_rad_s_sqrt_hz=GYRO_DENSITY,
+                                          gyro_bias_rad_s=0.004)
     cal = write_drive_bag(folder / "calibration_drive", Simulator(
-        "create2", seed=seed, room=room, faults=[lost]).run(excitation))
+        robot, seed=seed, room=room, faults=[lost]).run(excitation),
+        gyro_noise_density_rad_s_sqrt_hz=GYRO_DENSITY)
     ref = write_drive_bag(folder / "reference_drive", Simulator(
-        "create2", seed=seed + 1, room=room, faults=[lost, spikes]).run(drive))
+        robot, seed=seed + 1, room=room, faults=[lost, spikes]).run(drive),
+        gyro_noise_density_rad_s_sqrt_hz=GYRO_DENSITY)
     return cal, ref
 
 
@@ -81,35 +91,61 @@ def calibrate_from_bag(path: Path) -> tuple[MotionModel, FrameLog]:
     return model, log
 
 
-def replay(path: Path, model: MotionModel) -> tuple[FrameLog, dict[str, np.ndarray]]:
-    """Encoder odometry and the model's EKF over a bag, from its first reference pose."""
-    log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
-    start = log.true_pose[0] if log.has_truth else np.zeros(3)
-    rows = np.flatnonzero(log.valid)
-    travel = tick_deltas(log.ticks[rows], axis=0) * model.m_per_tick
-    odometry = integrate_poses(body_from_wheel(travel, wheel_base_m=model.wheel_base_m), 1.0,
-                               initial_pose=start)
+def _gyro_readings(log: FrameLog) -> np.ndarray | None:
+    """Each frame's Imu yaw rate [rad/s], NaN at lost frames (a new gyro window); None
+    without an Imu."""
+    if log.yaw_rate_rad_s is None:
+        return None
+    return np.where(log.valid, log.yaw_rate_rad_s, np.nan)
+
+
+def _ekf_poses(model: MotionModel, log: FrameLog, start: np.ndarray,
+               gyro: np.ndarray | None) -> np.ndarray:
+    """The model's EKF over the frames: encoders, and the gyro's readings when given."""
     ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=log.ticks[0], history=0)
+                   initial_ticks=log.ticks[0], history=0,
+                   gyro=None if gyro is None else GyroNoise())
     poses = np.empty((len(log), 3))
     poses[0] = ekf.pose
     for k in range(1, len(log)):
         ekf.predict(log.cmd_m_s[k])
         if log.valid[k]:
             ekf.update_encoders(log.ticks[k])
+        if gyro is not None:
+            ekf.update_gyro(gyro[k])
         poses[k] = ekf.pose
+    return poses
+
+
+def replay(path: Path, model: MotionModel) -> tuple[FrameLog, dict[str, np.ndarray]]:
+    """Encoder odometry and the model's EKF (and with an Imu, the EKF fusing its yaw rate)
+    over a bag, from its first reference pose."""
+    log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
+    start = log.true_pose[0] if log.has_truth else np.zeros(3)
+    rows = np.flatnonzero(log.valid)
+    travel = tick_deltas(log.ticks[rows], axis=0) * model.m_per_tick
+    odometry = integrate_poses(body_from_wheel(travel, wheel_base_m=model.wheel_base_m), 1.0,
+                               initial_pose=start)
     held = np.searchsorted(rows, np.arange(len(log)), side="right") - 1
-    return log, {"encoder odometry": odometry[held], "EKF, model and encoders": poses}
+    poses = {"encoder odometry": odometry[held],
+             "EKF, model and encoders": _ekf_poses(model, log, start, None)}
+    gyro = _gyro_readings(log)
+    if gyro is not None:
+        poses["EKF, model, encoders and gyro"] = _ekf_poses(model, log, start, gyro)
+    return log, poses
 
 
 def monitor(path: Path, model: MotionModel, out_bag: Path) -> list[str]:
     """The EKF and the residual monitor over a bag; alarms with bag time into a new bag."""
     log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
     start_ns = log.meta["bag_start_ns"] + round(log.t_s[0] * 1e9)
-    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005))
+    gyro = _gyro_readings(log)
+    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005),
+                         gyro=None if gyro is None else GyroNoise())
     poses, covs = np.zeros((len(log), 3)), np.zeros((len(log), 3, 3))
     for k in range(len(log)):
-        result = mf.step(log.ticks[k], log.cmd_m_s[k], valid=bool(log.valid[k]))
+        result = mf.step(log.ticks[k], log.cmd_m_s[k], valid=bool(log.valid[k]),
+                         yaw_rate_rad_s=None if gyro is None else float(gyro[k]))
         poses[k], covs[k] = result.pose, mf.ekf.P[:3, :3]
     alarms = [BagAlarm(start_ns + round(e.t_s * 1e9), f"lti_motion/{e.kind}",
                        f"{e.kind}: {e.test} statistic {e.statistic:.3g} > {e.threshold:.3g}",

@@ -18,10 +18,14 @@ out at its start):
    per-sample gate and glitch-burst tests;
 6. with a Phase-I fit (:func:`~fusion.monitoring.phase_one.fit_nominal`), the
    dynamics tests get the command and the count changes;
-7. with a landmark map, the frame's sightings go to the scale test and, unless
+7. with a gyro (``gyro=``), the frame's yaw-rate reading goes to
+   :meth:`ModelEKF.update_gyro <fusion.ekf.ModelEKF.update_gyro>` after the
+   encoders (a lost frame or a missing reading gives it NaN: the window so far
+   is dropped and a new one starts); its innovations are not monitored;
+8. with a landmark map, the frame's sightings go to the scale test and, unless
    ``fuse_landmarks=False``, are fused into the EKF (their records to the
    landmark stream's gate);
-8. each reset the EKF made during the frame (an implausible scale error or a
+9. each reset the EKF made during the frame (an implausible scale error or a
    divergence, :mod:`fusion.ekf.resets`) becomes a ``"filter_reset"`` alarm
    (its ``test`` the cause, its statistic and threshold the reset's).
 
@@ -31,6 +35,7 @@ Alarms go to ``on_alarm`` as they are raised and come back in each
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -39,13 +44,13 @@ import numpy as np
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import FilterReset
 from fusion.ekf.updates import UpdateRecord
-from fusion.exceptions import MeasurementShapeError
+from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.dynamics import DynamicsMonitor
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor
-from fusion.noise import LandmarkNoise
+from fusion.noise import GyroNoise, LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import wheel_from_body
@@ -121,6 +126,9 @@ class MonitoredFilter:
     counter_bits : int
         Width of the encoder counters [bits] (16: the Open Interface's;
         :class:`~fusion.ekf.ModelEKF`).
+    gyro : GyroNoise, optional
+        A yaw-rate gyro's noise: the EKF fuses the readings given to
+        :meth:`step` (:mod:`fusion.ekf.gyro`); without it they are refused.
 
     Attributes
     ----------
@@ -164,7 +172,7 @@ class MonitoredFilter:
                  pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
                  initial_ticks: np.ndarray | Sequence[int] | None = None, t0_s: float = 0.0,
                  on_alarm: Callable[[AlarmEvent], None] | None = None,
-                 counter_bits: int = 16) -> None:
+                 counter_bits: int = 16, gyro: GyroNoise | None = None) -> None:
         if model.m_per_tick is None:
             raise MissingEncoderScaleError.needed_by("the monitor")
         self.model = model
@@ -184,7 +192,8 @@ class MonitoredFilter:
         self._fuse = landmarks is not None and bool(fuse_landmarks)
         self._ekf_args = {"initial_pose": initial_pose, "pose_std": pose_std, "t0_s": t0_s,
                           "history": 0, "landmarks": landmarks if self._fuse else None,
-                          "landmark_noise": landmark_noise, "counter_bits": counter_bits}
+                          "landmark_noise": landmark_noise, "counter_bits": counter_bits,
+                          "gyro": gyro}
         self.ekf: ModelEKF | None = None
         self._last_ticks: np.ndarray | None = None
         if initial_ticks is not None:
@@ -212,7 +221,8 @@ class MonitoredFilter:
     def step(self, ticks: np.ndarray | Sequence[int], cmd_m_s: np.ndarray | Sequence[float], *,
              valid: bool = True, sightings: RangeBearing | None = None,
              motor_current_a: np.ndarray | Sequence[float] | None = None,
-             wheel_overcurrent: np.ndarray | Sequence[bool] | None = None) -> FrameResult:
+             wheel_overcurrent: np.ndarray | Sequence[bool] | None = None,
+             yaw_rate_rad_s: float | None = None) -> FrameResult:
         """Take one frame: predict, test, fuse, in the module's order.
 
         Parameters
@@ -232,18 +242,32 @@ class MonitoredFilter:
             Wheel overcurrent flags (left, right) where the robot reports them.
             With either, a flat count is called a ``"stalled_wheel"`` or a
             ``"stuck_encoder"`` (:mod:`fusion.monitoring.wheel_check`).
+        yaw_rate_rad_s : float, optional
+            The gyro's reading over the period [rad/s] (needs ``gyro=``); ``None``
+            or NaN: no reading, the gyro window starts again.
 
         Returns
         -------
         FrameResult
+
+        Raises
+        ------
+        FilterOptionError
+            For a reading given to a filter built without ``gyro=``.
         """
+        if yaw_rate_rad_s is not None and self._ekf_args["gyro"] is None:
+            raise FilterOptionError("a yaw rate was given, but this monitored filter has no "
+                                    "gyro; give gyro=GyroNoise(...)")
         if self.ekf is None:
             self._anchor(ticks)
             return self._result(np.zeros(2), None, [])
         ekf, mon = self.ekf, self.monitor
         cmd = np.asarray(cmd_m_s, dtype=float)
         ekf.predict(cmd)
+        gyro = ekf.fm.gyro is not None
         if not valid:
+            if gyro:
+                ekf.update_gyro(math.nan)           # a lost frame: the window starts again
             return self._result(np.zeros(2), None, [])
         now = np.asarray(ticks, np.int64)
         deltas = tick_deltas(np.stack([self._last_ticks, now]), axis=0,
@@ -256,6 +280,8 @@ class MonitoredFilter:
         resets = ekf.n_resets
         record = ekf.update_encoders(now)
         alarms += mon.update_record(record)
+        if gyro:
+            ekf.update_gyro(math.nan if yaw_rate_rad_s is None else yaw_rate_rad_s)
         if self.dynamics is not None:
             alarms += mon.update_commands(t, cmd, deltas)
         if self.scale is not None:

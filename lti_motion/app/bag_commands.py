@@ -15,6 +15,11 @@ runs as it does on a log (``docs/guide_ros_bags.md``):
 - :func:`monitor_bag`: the EKF and the residual monitor over the recorded drive,
   alarms printed with their bag time, and with ``out_bag`` the estimates and the
   alarms (``diagnostic_msgs/DiagnosticArray``) in a new bag.
+
+In replay and monitor, a bag's ``sensor_msgs/Imu`` yaw rate (found by type, or
+``--imu-topic``) is put on the frames (:func:`drivers.bag_log.bag_to_log`) and
+fused by the EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNoise`
+defaults); ``BagOptions(gyro=False)`` (``--no-gyro``) leaves the Imu unread.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from drivers.bags import read_bag
 from drivers.exceptions import BagError
 from fusion.monitoring.monitored_filter import FrameResult
 from fusion.monitoring.residual import AlarmEvent
+from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
 from lti_motion.app.replay import ReplayResult, run_replay
 from lti_motion.app.replay_sources import source_from_frame_log
@@ -73,6 +79,9 @@ class BagOptions:
     max_wheel_m_s : float
         Wheel speeds above this are refused as impossible [m/s]
         (:func:`drivers.bag_log.bag_to_log`).
+    gyro : bool
+        Replay and monitor: read the bag's Imu yaw rate and fuse it (default
+        ``True``; ``False``: the Imu is not read, ``--no-gyro``).
     """
 
     topics: dict = field(default_factory=dict)
@@ -85,6 +94,7 @@ class BagOptions:
     dt_s: float | None = None
     encoders: Literal["commanded", "quadrature"] = "commanded"
     max_wheel_m_s: float = 20.0
+    gyro: bool = True
 
 
 def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
@@ -208,11 +218,13 @@ def _bag_ns(log: FrameLog, t_s: np.ndarray | float) -> np.ndarray:
 
 def _model_log(path: str | os.PathLike, model: MotionModel,
                options: BagOptions | None) -> FrameLog:
-    """The bag's drive on the model's period (unless a period is given)."""
+    """The bag's drive on the model's period (unless a period is given), with the Imu's yaw
+    rate unless ``options.gyro`` is false."""
     opt = options or BagOptions()
     if opt.dt_s is None:
         opt = replace(opt, dt_s=model.dt_s)
-    return load_bag_log(path, wheel_base_m=model.wheel_base_m, options=opt)
+    kinds = ("cmd", "wheels", "odom", "truth") + (("imu",) if opt.gyro else ())
+    return load_bag_log(path, wheel_base_m=model.wheel_base_m, options=opt, kinds=kinds)
 
 
 def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.PathLike, *,
@@ -276,10 +288,12 @@ class BagRun:
 
 
 def _frames(log: FrameLog):
+    yaw = log.yaw_rate_rad_s
     for k in range(len(log)):
         yield SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
                           light_bump=log.light_bump[k], bumps=log.bumps[k],
-                          cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]))
+                          cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
+                          yaw_rate_rad_s=None if yaw is None else float(yaw[k]))
 
 
 def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
@@ -331,8 +345,13 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
 
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
              f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
+    gyro = None if log.yaw_rate_rad_s is None else GyroNoise()
+    if gyro is not None:
+        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro "
+                 "(--no-gyro: leave it out)")
     run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
-                         on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits)
+                         on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits,
+                         gyro=gyro)
     for text in run.summary():
         print_fn(text)
     alarm_ns = np.array([int(_bag_ns(log, t0 + e.t_s)) for e in run.events], np.int64)

@@ -102,9 +102,13 @@ def _bag_options(args: argparse.Namespace):
                                ("wheel_radius_m", wheel_radius_m), ("dt_s", args.dt),
                                ("max_wheel_m_s", args.max_wheel_speed))
              if v is not None}
+    no_gyro = getattr(args, "no_gyro", False)            # replay and monitor only
+    if no_gyro and args.imu_topic:
+        raise ValueError("--imu-topic chooses the Imu to fuse and --no-gyro leaves it out; "
+                         "give one of them")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders, **extra)
+                      encoders=args.encoders, gyro=not no_gyro, **extra)
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
@@ -319,6 +323,9 @@ def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool =
                            help="commanded: the angles count in the commanded direction "
                                 "(Roomba, Create 2; default); quadrature: they know the way "
                                 "the wheel turns")
+        group.add_argument("--no-gyro", action="store_true",
+                           help="leave the bag's Imu yaw rate out (default: the EKF fuses it "
+                                "as a gyro when the bag has an Imu topic)")
     group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
                        help="refuse wheel speeds above this as impossible [m/s] (default 20)")
     group.add_argument("--dt", type=float, default=None,

@@ -19,7 +19,9 @@ The drive (:func:`monitor_route`) is open loop: 1 s at rest, then a rounded
 rectangle (straights at changing speeds, 90 degree arcs of 0.4 m radius) with
 both wheel commands positive, so the encoders never count a reversal.
 On the simulator, scheduled faults (:data:`FAULTS`) can be injected. The
-filter and the monitor read only what a robot reports.
+filter and the monitor read only what a robot reports. A robot with a yaw-rate
+gyro (a robot file's ``[gyro]``; a bag's ``sensor_msgs/Imu``) has its readings
+fused by the EKF (:class:`~fusion.noise.GyroNoise` defaults, the bias estimated).
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from fusion.monitoring.monitored_filter import FrameResult, MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.wheel_check import WheelVerdict
-from fusion.noise import gate_threshold
+from fusion.noise import GyroNoise, gate_threshold
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
     MONITOR_LANDMARKS,
@@ -203,6 +205,8 @@ class MonitorRun:
         The EKF's last pose (x [m], y [m], theta [rad]) from the origin.
     tests : list of str
         What ran, one line each (gate, dynamics, scale).
+    gyro_windows : tuple of 2 int or None
+        With a gyro: its windows fused and gated by the EKF; ``None`` without.
     """
 
     frames: int = 0
@@ -214,6 +218,7 @@ class MonitorRun:
     fusion_gate_nis: float = math.nan
     final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tests: list[str] = field(default_factory=list)
+    gyro_windows: tuple[int, int] | None = None
 
     def summary(self) -> list[str]:
         """Lines for the end of the command's output."""
@@ -231,6 +236,9 @@ class MonitorRun:
             f"gate (NIS {_nis(self.glitch_gate_nis)}; 3 within 20 readings make a burst); "
             f"{self.encoders_gated} readings not fused by the EKF (its own fusion gate, "
             f"NIS {self.fusion_gate_nis:.3g}; no alarm)",
+            *([] if self.gyro_windows is None else [
+                f"gyro: {self.gyro_windows[0]} windows fused, {self.gyro_windows[1]} gated by "
+                "the EKF"]),
             f"alarms: {len(self.events)} ({kinds})",
             f"EKF pose at the end: x {x:.3f} m, y {y:.3f} m, heading {heading_deg(th):.1f} deg "
             "(from the start, in (-180, 180])",
@@ -245,7 +253,7 @@ def monitor_frames(model: MotionModel,
                    on_alarm_line: Callable[[str], object] | None = None,
                    on_frame: Callable[[SensorFrame], None] | None = None,
                    on_step: Callable[[FrameResult, np.ndarray], None] | None = None,
-                   counter_bits: int = 16) -> MonitorRun:
+                   counter_bits: int = 16, gyro: GyroNoise | None = None) -> MonitorRun:
     """Run a :class:`~fusion.monitoring.MonitoredFilter` over frames.
 
     Parameters
@@ -282,6 +290,9 @@ def monitor_frames(model: MotionModel,
         pose covariance, shape (3, 3) [m^2, m rad, rad^2] (to write the estimates).
     counter_bits : int
         Width of the frames' encoder counters [bits] (16: the Open Interface's).
+    gyro : GyroNoise, optional
+        The EKF fuses each frame's ``yaw_rate_rad_s`` (a frame without one: no
+        reading); without it the frames' readings are not used.
 
     Returns
     -------
@@ -302,7 +313,7 @@ def monitor_frames(model: MotionModel,
 
     mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
                          fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay,
-                         counter_bits=counter_bits)
+                         counter_bits=counter_bits, gyro=gyro)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
                      glitch_gate_nis=mf.monitor.thresholds().gate)
     for item in frames:
@@ -312,7 +323,8 @@ def monitor_frames(model: MotionModel,
         run.frames += 1
         result = mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)),
                          sightings=seen, motor_current_a=frame.motor_current_a,
-                         wheel_overcurrent=frame.wheel_overcurrent)
+                         wheel_overcurrent=frame.wheel_overcurrent,
+                         yaw_rate_rad_s=None if gyro is None else frame.yaw_rate_rad_s)
         if on_step is not None and mf.ekf is not None:
             on_step(result, mf.ekf.P[:3, :3].copy())
     if mf.ekf is not None:
@@ -321,6 +333,9 @@ def monitor_frames(model: MotionModel,
         if mf.ekf.gate_probability is not None:
             run.fusion_gate_nis = gate_threshold(mf.ekf.gate_probability, 2)
         run.final_pose = mf.ekf.pose
+        if gyro is not None:
+            run.gyro_windows = (mf.ekf.stats.count("gyro", "fused"),
+                                mf.ekf.stats.count("gyro", "gated"))
     run.events = list(mf.events)
     run.counts = dict(mf.monitor.counts)
     return run
@@ -447,7 +462,9 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                                    cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
                                    true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k],
                                    motor_current_a=log.motor_current_a[k],
-                                   wheel_overcurrent=log.wheel_overcurrent[k])
+                                   wheel_overcurrent=log.wheel_overcurrent[k],
+                                   yaw_rate_rad_s=None if log.yaw_rate_rad_s is None
+                                   else float(log.yaw_rate_rad_s[k]))
                 if record:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
@@ -458,11 +475,15 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                 yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,
                                    full.cmd_m_s, valid=full.valid,
                                    motor_current_a=full.motor_current_a,
-                                   wheel_overcurrent=full.wheel_overcurrent), seen)
+                                   wheel_overcurrent=full.wheel_overcurrent,
+                                   yaw_rate_rad_s=full.yaw_rate_rad_s), seen)
 
+    gyro = None if params.gyro_noise_density_rad_s_sqrt_hz is None else GyroNoise()
+    if gyro is not None:
+        print_fn("the robot has a gyro: the EKF fuses its yaw rate (bias estimated)")
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
-                         on_alarm_line=print_fn, counter_bits=params.counter_bits)
+                         on_alarm_line=print_fn, counter_bits=params.counter_bits, gyro=gyro)
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
     if record:
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")

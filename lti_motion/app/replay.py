@@ -356,8 +356,11 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
     for name, counts in extra.items():
         enc = (f"{counts['encoders_gated']} encoder readings gated, "
                if src.ticks is not None else "")
+        gyro = (f"; gyro: {counts['gyro_windows_fused']} windows fused, "
+                f"{counts['gyro_windows_gated']} gated" if "gyro_windows_fused" in counts
+                else "")
         print_fn(f"  {src.label(name)}: {enc}{counts['landmarks_fused']} sightings fused, "
-                 f"{counts['landmarks_gated']} gated")
+                 f"{counts['landmarks_gated']} gated{gyro}")
         if counts["filter_resets"]:
             print_fn(f"  {src.label(name)}: the filter reset itself {counts['filter_resets']} "
                      f"times ({counts['resets_scale_implausible']} implausible scale errors, "

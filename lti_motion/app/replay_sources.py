@@ -115,9 +115,12 @@ class ReplaySource:
 
     def label(self, name: str) -> str:
         """What estimator ``name`` is on this source, for tables and plots."""
+        gyro = self.yaw_rate_rad_s is not None          # both EKFs fuse it
         if name == "ekf_landmarks":
-            return ("EKF, model, encoders, landmarks" if self.ticks is not None
-                    else "EKF, model and landmarks")
+            return (("EKF, model, encoders, landmarks" if self.ticks is not None
+                     else "EKF, model and landmarks") + (", gyro" if gyro else ""))
+        if name == "ekf" and gyro:
+            return "EKF, model, encoders and gyro"
         return ESTIMATORS[name]
 
     def available(self) -> list[str]:
