@@ -8,12 +8,12 @@ turning left (0.34 rad/s on average), 5% of frames lost after 6 s; drive seeds
 ``/imu/data`` (:func:`drivers.bag_writer.write_drive_bag`) and read back the way
 ``lti-motion replay --bag`` reads it (:func:`lti_motion.app.bag_commands.load_bag_log`
 on the model's period); the ``ekf`` estimator runs on it with the Imu and with
-``--no-gyro``, and on the in-memory log (the simulator's own readings, no bag).
+no ``--gyro``, and on the in-memory log (the simulator's own readings, no bag).
 One ARX model (``calibrate_simulator("create2", seed=4)``, 40 s of excitation). The
 truth is read afterwards.
 
 Figures (means over the runs): ``bag_gyro.heading_final_rad`` (|heading error| at
-the end, with the bag's Imu; baseline the same bags with ``--no-gyro``),
+the end, with the bag's Imu; baseline the same bags with no ``--gyro``),
 ``bag_gyro.memory_gap_rad`` (largest |bag - in-memory| difference of that error:
 what the bag and the resampling cost), ``bag_gyro.worse_runs`` (runs where the Imu
 made the heading worse). The spread is printed.
@@ -95,7 +95,7 @@ def bag_gyro() -> list[Figure]:
     gap = max(abs(a - b) for a, b in zip(runs["imu"], runs["memory"], strict=True))
     worse = sum(a > b for a, b in zip(runs["imu"], runs["no_gyro"], strict=True))
     return [Figure("bag_gyro.heading_final_rad", statistics.fmean(runs["imu"]), "rad",
-                   better="lower", baseline="--no-gyro, same bags",
+                   better="lower", baseline="without --gyro, same bags",
                    baseline_value=statistics.fmean(runs["no_gyro"])),
             Figure("bag_gyro.memory_gap_rad", gap, "rad", better="lower"),
             Figure("bag_gyro.worse_runs", float(worse), "runs", target=0.0, better="lower")]

@@ -19,7 +19,9 @@ runs as it does on a log (``docs/guide_ros_bags.md``):
 In replay and monitor, a bag's ``sensor_msgs/Imu`` yaw rate (found by type, or
 ``--imu-topic``) is put on the frames (:func:`drivers.bag_log.bag_to_log`) and
 fused by the EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNoise`
-defaults); ``BagOptions(gyro=False)`` (``--no-gyro``) leaves the Imu unread.
+defaults) with ``BagOptions(gyro=True)`` (``--gyro``); by default the Imu is not read
+(opt-in: on a hard floor with the default scale priors the gyro can cost accuracy,
+``docs/ekf.md``).
 """
 
 from __future__ import annotations
@@ -80,8 +82,8 @@ class BagOptions:
         Wheel speeds above this are refused as impossible [m/s]
         (:func:`drivers.bag_log.bag_to_log`).
     gyro : bool
-        Replay and monitor: read the bag's Imu yaw rate and fuse it (default
-        ``True``; ``False``: the Imu is not read, ``--no-gyro``).
+        Replay and monitor: read the bag's Imu yaw rate and fuse it (``--gyro``;
+        default ``False``: the Imu is not read).
     """
 
     topics: dict = field(default_factory=dict)
@@ -94,7 +96,7 @@ class BagOptions:
     dt_s: float | None = None
     encoders: Literal["commanded", "quadrature"] = "commanded"
     max_wheel_m_s: float = 20.0
-    gyro: bool = True
+    gyro: bool = False
 
 
 def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
@@ -250,7 +252,7 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
     log = _model_log(path, model, options)
     src = source_from_frame_log(log, Path(path).name, start_s=start_s, duration_s=duration_s)
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
-                        rpe_s=rpe_s, print_fn=print_fn)
+                        rpe_s=rpe_s, gyro=(options or BagOptions()).gyro, print_fn=print_fn)
     if out_bag is not None:
         name = "ekf" if "ekf" in result.pose_covs else next(iter(result.pose_covs), None)
         if name is None:
@@ -347,8 +349,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
              f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
     gyro = None if log.yaw_rate_rad_s is None else GyroNoise()
     if gyro is not None:
-        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro "
-                 "(--no-gyro: leave it out)")
+        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro")
     run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
                          on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits,
                          gyro=gyro)

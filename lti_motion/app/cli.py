@@ -102,13 +102,12 @@ def _bag_options(args: argparse.Namespace):
                                ("wheel_radius_m", wheel_radius_m), ("dt_s", args.dt),
                                ("max_wheel_m_s", args.max_wheel_speed))
              if v is not None}
-    no_gyro = getattr(args, "no_gyro", False)            # replay and monitor only
-    if no_gyro and args.imu_topic:
-        raise ValueError("--imu-topic chooses the Imu to fuse and --no-gyro leaves it out; "
-                         "give one of them")
+    gyro = getattr(args, "gyro", False)                  # replay and monitor only
+    if args.imu_topic and hasattr(args, "gyro") and not gyro:
+        raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders, gyro=not no_gyro, **extra)
+                      encoders=args.encoders, gyro=gyro, **extra)
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
@@ -202,7 +201,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                          "--fit-first-half for an MRCLAM data set")
     run_replay(args.source, model, args.out, estimators=args.estimators, robot=args.robot,
                start_s=start_s, duration_s=args.duration_s, initial_pose=args.initial_pose,
-               rpe_s=args.rpe_s)
+               rpe_s=args.rpe_s, gyro=args.gyro)
     return 0
 
 
@@ -233,6 +232,9 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         raise ValueError("--fault injects a simulator fault; it needs --robot (the simulator)")
     if args.listen and args.sim:
         raise ValueError("--listen reads a robot's stream; it needs --port")
+    if args.gyro and not args.sim:
+        raise ValueError("--gyro fuses a robot file's [gyro] or a bag's Imu; a Roomba's "
+                         "stream has no gyro")
     if args.nominal and args.sim:
         raise ValueError("--nominal reads logs of a robot's nominal drives; it needs --port "
                          "(--robot drives --nominal-drives itself)")
@@ -258,7 +260,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
                                       seed=args.seed, floor=args.floor, fault=args.fault,
                                       fault_at_s=args.fault_at, record=args.record,
-                                      nominal_drives=args.nominal_drives)
+                                      nominal_drives=args.nominal_drives, gyro=args.gyro)
     else:
         from drivers.exceptions import PassiveModeError
 
@@ -323,9 +325,6 @@ def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool =
                            help="commanded: the angles count in the commanded direction "
                                 "(Roomba, Create 2; default); quadrature: they know the way "
                                 "the wheel turns")
-        group.add_argument("--no-gyro", action="store_true",
-                           help="leave the bag's Imu yaw rate out (default: the EKF fuses it "
-                                "as a gyro when the bag has an Imu topic)")
     group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
                        help="refuse wheel speeds above this as impossible [m/s] (default 20)")
     group.add_argument("--dt", type=float, default=None,
@@ -443,6 +442,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"),
                     help="start pose [m m rad] (default: the first ground-truth pose, else 0 0 0)")
     rp.add_argument("--rpe-s", type=float, default=1.0, help="RPE step [s] (default 1)")
+    rp.add_argument("--gyro", action="store_true",
+                    help="the EKF fuses the log's gyro or the bag's Imu yaw rate (bias "
+                         "estimated; it helps where the wheels slip, and can cost on a hard "
+                         "floor: docs/ekf.md)")
     _add_bag_options(rp)
     rp.set_defaults(func=_cmd_replay)
 
@@ -492,6 +495,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="--port only: send no wheel command, only read the stream")
     mo.add_argument("--record", metavar="FILE.npz",
                     help="also write the frames as a log that 'lti-motion replay' reads")
+    mo.add_argument("--gyro", action="store_true",
+                    help="the EKF fuses the robot file's [gyro] or the bag's Imu yaw rate "
+                         "(bias estimated; it helps where the wheels slip, and can cost on a "
+                         "hard floor: docs/ekf.md)")
     _add_bag_options(mo)
     mo.set_defaults(func=_cmd_monitor)
 

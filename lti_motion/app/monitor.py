@@ -384,7 +384,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                      duration_s: float = 30.0, seed: int = 0,
                      floor: str | FloorMap | None = None, fault: str | None = None,
                      fault_at_s: float | None = None, record: str | None = None,
-                     nominal_drives: int = 20, landmarks: bool = True,
+                     nominal_drives: int = 20, landmarks: bool = True, gyro: bool = False,
                      print_fn: Callable[[str], object] = print) -> MonitorRun:
     """Drive :func:`monitor_route` on the simulator, monitor it, print alarms and a summary.
 
@@ -408,6 +408,9 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         0 leaves the dynamics tests off.
     landmarks : bool
         Simulate the landmark sensor and run the scale test.
+    gyro : bool
+        Fuse the robot's gyro (its ``[gyro]``) in the EKF (``--gyro``; opt-in: on a
+        hard floor with the default scale priors it can cost accuracy, ``docs/ekf.md``).
     print_fn : callable
         Where the lines go.
 
@@ -415,6 +418,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     ------
     MissingEncoderScaleError
         If the model has no encoder scale (before any drive).
+    ValueError
+        ``gyro`` for a robot without a ``[gyro]``.
     """
     from drivers.logs import Recorder
     from drivers.sim.config import Room, floor_name, load_robot
@@ -422,6 +427,9 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
 
     _require_scale(model)
     params = load_robot(robot) if isinstance(robot, str) else robot
+    if gyro and params.gyro_noise_density_rad_s_sqrt_hz is None:
+        raise ValueError(f"--gyro: the robot {params.name} has no gyro (a robot file's [gyro], "
+                         "docs/robot_file.md)")
     floor = params.floor if floor is None else floor
     preset = params.name
 
@@ -478,12 +486,14 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                                    wheel_overcurrent=full.wheel_overcurrent,
                                    yaw_rate_rad_s=full.yaw_rate_rad_s), seen)
 
-    gyro = None if params.gyro_noise_density_rad_s_sqrt_hz is None else GyroNoise()
-    if gyro is not None:
-        print_fn("the robot has a gyro: the EKF fuses its yaw rate (bias estimated)")
+    has_gyro = params.gyro_noise_density_rad_s_sqrt_hz is not None
+    if has_gyro:
+        print_fn("the robot has a gyro: the EKF fuses its yaw rate (bias estimated)" if gyro
+                 else "the robot has a gyro; --gyro fuses its yaw rate")
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
-                         on_alarm_line=print_fn, counter_bits=params.counter_bits, gyro=gyro)
+                         on_alarm_line=print_fn, counter_bits=params.counter_bits,
+                         gyro=GyroNoise() if gyro and has_gyro else None)
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
     if record:
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")

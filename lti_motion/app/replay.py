@@ -26,7 +26,7 @@ import json
 import math
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -304,7 +304,7 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
                *, estimators: Sequence[str] | None = None, robot: int | None = None,
                start_s: float = 0.0, duration_s: float | None = None,
                initial_pose: Sequence[float] | None = None, rpe_s: float = 1.0,
-               print_fn: Callable[[str], object] = print) -> ReplayResult:
+               gyro: bool = False, print_fn: Callable[[str], object] = print) -> ReplayResult:
     """Replay a log or data set robot: estimate, print the table, write TUM files and plots.
 
     Writes ``OUT/<estimator>.tum`` per estimator, ``OUT/groundtruth.tum``
@@ -326,6 +326,10 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
         As for :func:`load_source`.
     initial_pose, rpe_s
         As for :func:`estimate` and :func:`evaluate`.
+    gyro : bool
+        Fuse the source's gyro readings in the EKFs (``--gyro``); without it they are
+        left out, and a line says the recording has them (opt-in: on a hard floor with
+        the default scale priors a gyro can cost accuracy, ``docs/ekf.md``).
     print_fn : callable
         Where the lines a person reads go.
     """
@@ -333,6 +337,9 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
 
     src = (source_path if isinstance(source_path, ReplaySource) else
            load_source(source_path, model, robot=robot, start_s=start_s, duration_s=duration_s))
+    if src.yaw_rate_rad_s is not None and not gyro:
+        print_fn("the recording has gyro readings; --gyro fuses them")
+        src = replace(src, yaw_rate_rad_s=None)
     names = list(estimators) if estimators else src.available()
     n_sight = len(src.sightings)
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "

@@ -71,23 +71,25 @@ def _heading_error(poses: np.ndarray, truth: np.ndarray) -> float:
     return abs(float(wrap_angle(poses[-1, 2] - truth[-1, 2])))
 
 
-def test_replay_bag_fuses_the_imu_and_no_gyro_leaves_it_out(carpet, model, tmp_path):
+def test_replay_bag_fuses_the_imu_with_gyro_and_leaves_it_out_by_default(carpet, model,
+                                                                          tmp_path):
     """With the Imu the EKF ends under a third of its encoders-only heading error (measured:
     0.04-0.29 of it over 10 seeds, 0.043 on this one) and within 0.01 rad of the same drive
     replayed from memory (measured: within 0.0053 on every seed)."""
     log, bag = carpet
     lines = []
     err = {}
-    for name, gyro in (("gyro", True), ("plain", False)):
-        result = replay_bag(bag, model, tmp_path / name, options=BagOptions(gyro=gyro),
+    for name, options in (("gyro", BagOptions(gyro=True)), ("plain", None)):
+        result = replay_bag(bag, model, tmp_path / name, options=options,
                             estimators=["ekf"], print_fn=lines.append)
+        gyro = name == "gyro"
         err[name] = _heading_error(result.poses["ekf"], result.source.truth)
         assert ("gyro_windows_fused" in result.metrics["ekf"]) == gyro
     assert err["gyro"] < err["plain"] / 3, err
     said = "\n".join(lines)
     assert re.search(r"EKF, model, encoders and gyro: .*; gyro: \d+ windows fused, \d+ gated",
                      said), said
-    assert "EKF, model and encoders: " in said          # the --no-gyro replay's label
+    assert "EKF, model and encoders: " in said          # the default replay's label
     memory = source_from_frame_log(log, "memory")
     poses, extra = estimate(memory, model, ["ekf"])
     assert abs(err["gyro"] - _heading_error(poses["ekf"], memory.truth)) < 0.01
@@ -111,10 +113,9 @@ def test_monitor_bag_fuses_the_imu(carpet, model):
 
 
 @pytest.mark.parametrize(("extra", "message"), [
-    (["--imu-topic", "/odom"],
+    (["--imu-topic", "/odom", "--gyro"],
      "topic /odom holds nav_msgs/msg/Odometry, but --imu-topic needs sensor_msgs/Imu"),
-    (["--imu-topic", "/imu/data", "--no-gyro"],
-     "--imu-topic chooses the Imu to fuse and --no-gyro leaves it out; give one of them"),
+    (["--imu-topic", "/imu/data"], "--imu-topic chooses the Imu that --gyro fuses; add --gyro"),
 ])
 @pytest.mark.parametrize("command", ["replay", "monitor"])
 def test_imu_options_given_wrong_are_one_line_and_exit_2(carpet, model_file, tmp_path, capsys,
@@ -147,14 +148,24 @@ def test_monitored_filter_estimates_a_gyro_bias_at_rest(tiny_model, rng):
 
 
 def test_monitor_sim_with_a_robot_file_that_has_a_gyro(model_file, tmp_path, capsys):
-    """``lti-motion monitor --robot FILE`` with a ``[gyro]``: the EKF fuses it (8 s drive,
-    no Phase I)."""
+    """``lti-motion monitor --robot FILE --gyro`` with a ``[gyro]``: the EKF fuses it (8 s
+    drive, no Phase I); without ``--gyro`` it is left out and a line says how to fuse it;
+    ``--gyro`` for a robot without one or with ``--port`` is a one-line error."""
     robot = tmp_path / "gyro_robot.toml"
     preset = Path(drivers.sim.__file__).parent / "robots" / "create2.toml"
     robot.write_text(preset.read_text() + "\n[gyro]\ngyro_noise_density_rad_s_sqrt_hz = 0.005\n"
                      "gyro_bias_rad_s = 0.004\n")
-    assert main(["monitor", "--robot", str(robot), "--model", str(model_file),
-                 "--duration", "8", "--nominal-drives", "0"]) == 0
+    argv = ["monitor", "--robot", str(robot), "--model", str(model_file), "--duration", "8",
+            "--nominal-drives", "0"]
+    assert main([*argv, "--gyro"]) == 0
     out = capsys.readouterr().out
     assert "the robot has a gyro: the EKF fuses its yaw rate" in out
     assert int(re.search(r"^gyro: (\d+) windows fused", out, re.M)[1]) >= 10, out
+    assert main([*argv, "--duration", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "the robot has a gyro; --gyro fuses its yaw rate" in out and "windows fused" not in out
+    for where, message in ((["--robot", "create2"], "--gyro: the robot create2 has no gyro"),
+                           (["--port", "/dev/null"], "a Roomba's stream has no gyro")):
+        assert main(["monitor", *where, "--model", str(model_file), "--gyro"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err

@@ -5,7 +5,7 @@ import pytest
 
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.app.replay import estimate
+from lti_motion.app.replay import estimate, run_replay
 from lti_motion.app.replay_sources import source_from_log
 from lti_motion.kinematics import wrap_angle
 from lti_motion.logfile import load_log, save_log
@@ -42,3 +42,16 @@ def test_a_carpet_drive_with_a_gyro_replays_with_a_better_heading(model, tmp_pat
                                      Simulator("create2", seed=21).run(cmd[:100])))
     assert plain.yaw_rate_rad_s is None
     assert "gyro_windows_fused" not in estimate(plain, model, ["ekf"])[1]["ekf"]
+
+
+def test_replay_fuses_a_logs_gyro_only_when_asked(model, tmp_path):
+    """``run_replay`` (``lti-motion replay LOG``) leaves a log's gyro out unless ``gyro=True``
+    (``--gyro``), and says the recording has one."""
+    robot = get_preset("create2").replace(gyro_noise_density_rad_s_sqrt_hz=0.005)
+    path = save_log(tmp_path / "g.npz", Simulator(robot, seed=5).run(np.full((300, 2), 0.1)))
+    for gyro in (False, True):
+        lines = []
+        result = run_replay(path, model, tmp_path / f"out{gyro}", estimators=["ekf"],
+                            gyro=gyro, print_fn=lines.append)
+        assert ("gyro_windows_fused" in result.metrics["ekf"]) == gyro
+        assert ("the recording has gyro readings; --gyro fuses them" in lines) != gyro
