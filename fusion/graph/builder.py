@@ -150,8 +150,8 @@ class GraphBuilder:
             names = "(s, g)" if opts.n_calibration == 2 else "(s, g, kappa)"
             raise GraphInputError(
                 f"the smoother estimates {names} but the motion was preintegrated with "
-                f"calibration {pre.calibration.tolist()}; preintegrate with "
-                f"calibration=options.calibration_prior")
+                f"calibration {pre.calibration.tolist()}; preintegrate with a calibration of "
+                f"{opts.n_calibration} entries, e.g. options.calibration_prior")
         for k in range(len(pre)):
             i = self.n_poses - 1
             key_i, key_j = pose_key(i), pose_key(i + 1)

@@ -414,7 +414,7 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y,
                              covariance_scale=covariance_scale,
                              speed_covariance=speed_covariance,
-                             calibration=opts.calibration_prior if opts.calibrate else (1.0, 1.0))
+                             calibration=(1.0, 1.0, 0.0)[:opts.n_calibration])
     obs = None if observations is None else observations.with_index(
         np.searchsorted(kf, observations.index))
     if method == "batch":

@@ -229,11 +229,9 @@ class SmootherEstimator:
         first = len(self._u) - (self._n - start)
         u = np.array([c[i] for c in self._u[first:]])
         y = np.array([c[i] for c in self._y[first:]])
-        opts = self.options
         pre = preintegrate_model(self.model, u, keyframes=[0, len(u)], mode="filtered",
                                  measured_speeds=y, z0=self._z_kf[i],
-                                 calibration=opts.calibration_prior if opts.calibrate
-                                 else (1.0, 1.0))
+                                 calibration=(1.0, 1.0, 0.0)[:self.options.n_calibration])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
         if len(seen):
