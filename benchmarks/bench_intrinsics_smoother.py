@@ -34,6 +34,10 @@ against the same smoother with ``(s, g)``:
     each run's periods up to its end (:func:`benchmarks.bench_intrinsics._route_end`), mean
     over the seeds; baseline the ``(s, g)`` smoother. The closure is mostly the follower's
     3 cm arrival tolerance (README), which hides millimetres of estimation error.
+``intrinsics.smoother_{landmarks,half_landmarks,default}_{closure,route_rmse}_paired_m``
+    Mean over the seeds of the paired difference (with ``kappa`` minus without) of the
+    closure and of the route RMSE; ``..._paired_std_m`` its standard deviation (the
+    standard error of the mean is that over sqrt(30)).
 ``intrinsics.smoother_*_closure_std_m``, ``intrinsics.smoother_*_baseline_std_m``
     Standard deviations over the seeds of those closures and of their baselines.
 """
@@ -185,10 +189,16 @@ def smoother_figures(seeds: list[int]) -> list[Figure]:
                               better="lower", baseline=baselines[key],
                               baseline_value=float(base.mean())))
     for key, (with_kappa, without) in pairs.items():
-        figures.append(Figure(f"intrinsics.smoother_{key}_route_rmse_m",
-                              float(_route_rmse(with_kappa).mean()), "m", better="lower",
-                              baseline=baselines[key],
-                              baseline_value=float(_route_rmse(without).mean())))
+        rmse, rmse_base = _route_rmse(with_kappa), _route_rmse(without)
+        figures.append(Figure(f"intrinsics.smoother_{key}_route_rmse_m", float(rmse.mean()),
+                              "m", better="lower", baseline=baselines[key],
+                              baseline_value=float(rmse_base.mean())))
+        for name, diff in (("closure", closures[key][0] - closures[key][1]),
+                           ("route_rmse", rmse - rmse_base)):
+            figures.append(Figure(f"intrinsics.smoother_{key}_{name}_paired_m",
+                                  float(diff.mean()), "m", better="lower"))
+            figures.append(Figure(f"intrinsics.smoother_{key}_{name}_paired_std_m",
+                                  float(diff.std()), "m", better="lower"))
     for key, (value, base) in closures.items():      # spreads over the seeds
         figures.append(Figure(f"intrinsics.smoother_{key}_closure_std_m", float(value.std()),
                               "m", better="lower"))
