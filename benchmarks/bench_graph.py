@@ -17,6 +17,10 @@
   (:func:`fusion.graph.factors.calibrated_motion_group_factor`), the newest, still
   open group native between-factors at the current calibration estimate
   until it completes (:mod:`fusion.graph.builder`).
+- ``graph.isam2_curvature_s``: the same with the curvature ``kappa`` of a wheel
+  diameter ratio in the calibration variable (``(s, g, kappa)``, a ``Point3``;
+  :meth:`fusion.graph.SmootherOptions.with_curvature`), the intervals
+  preintegrated with its third Jacobian column.
 
 One repeat of each iSAM2 variant, after a warm-up on 300 keyframes; the
 whole benchmark takes under a minute.
@@ -118,6 +122,7 @@ def graph() -> list[Figure]:
     obs = obs_frames.with_index(np.searchsorted(kf, obs_frames.index))
     start = log.true_pose[0]
     plain, calibrated = SmootherOptions(calibrate=False), SmootherOptions(calibrate=True)
+    curvature = calibrated.with_curvature(wheel_base_m=model.wheel_base_m)
 
     def encoder(n_kf: int) -> None:
         _smooth(_encoder_odometry(y, p.period_s, kf[:n_kf + 1]), obs, landmarks, start, plain)
@@ -132,11 +137,17 @@ def graph() -> list[Figure]:
                                  speed_covariance=phi)
         _smooth(pre, obs, landmarks, start, calibrated)
 
-    for fn in (encoder, model_plain, model_calibrated):     # warm-up
+    def model_curvature(n_kf: int) -> None:
+        pre = preintegrate_model(model, u[:kf[n_kf]], keyframes=kf[:n_kf + 1],
+                                 speed_covariance=phi, calibration=curvature.calibration_prior)
+        _smooth(pre, obs, landmarks, start, curvature)
+
+    for fn in (encoder, model_plain, model_calibrated, model_curvature):     # warm-up
         fn(300)
     t_enc = _timed(lambda: encoder(N_KEYFRAMES))
     t_plain = _timed(lambda: model_plain(N_KEYFRAMES))
     t_cal = _timed(lambda: model_calibrated(N_KEYFRAMES))
+    t_kappa = _timed(lambda: model_curvature(N_KEYFRAMES))
     baseline = "encoder-odometry BetweenFactorPose2, same graph, iSAM2"
     return [
         Figure("graph.preintegrate_msamples_s", n / t_pre / 1e6, "Msamples/s", target=1.0),
@@ -145,5 +156,7 @@ def graph() -> list[Figure]:
         Figure("graph.isam2_model_s", t_plain, "s", target=1.2 * t_enc, better="lower",
                baseline=baseline, baseline_value=t_enc),
         Figure("graph.isam2_calibrated_s", t_cal, "s", target=3.0 * t_enc, better="lower",
+               baseline=baseline, baseline_value=t_enc),
+        Figure("graph.isam2_curvature_s", t_kappa, "s", target=3.0 * t_enc, better="lower",
                baseline=baseline, baseline_value=t_enc),
     ]

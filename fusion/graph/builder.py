@@ -10,9 +10,12 @@ range-bearing factors (:func:`~fusion.graph.factors.range_bearing_factors`, a
 full Gaussian noise model per sighting: its own covariance, or
 ``options.landmark_noise``) to landmark variables, known landmarks held by a
 prior of ``options.landmark_sigma_m``, unknown ones initialised from their
-first observation. With ``options.calibrate`` the intervals are grouped by
-calibration variable (``calibration_every`` consecutive intervals share
-``C(g)``, with a prior on ``C(0)`` and a random walk between successive ones):
+first observation. With ``options.calibrate`` the calibration variables are
+``(s, g)`` (``Point2``) or, with ``kappa`` (:meth:`SmootherOptions.with_curvature
+<fusion.graph.smoother_options.SmootherOptions.with_curvature>`), ``(s, g, kappa)``
+(``Point3``), and the intervals are grouped by calibration variable
+(``calibration_every`` consecutive intervals share ``C(g)``, with a prior on
+``C(0)`` and a random walk between successive ones):
 
 - a *closed* group (all its intervals added) is one
   :func:`~fusion.graph.factors.calibrated_motion_group_factor` on its poses and ``C(g)``;
@@ -39,7 +42,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from fusion.exceptions import KeyframeOrderError, UnknownPoseError
+from fusion.exceptions import GraphInputError, KeyframeOrderError, UnknownPoseError
 from fusion.graph.factors import (
     calibrated_motion_group_factor,
     calibration_key,
@@ -108,7 +111,9 @@ class GraphBuilder:
             pose_key(0), pose0, gtsam.noiseModel.Diagonal.Sigmas(options.initial_pose_sigmas)))
         self._values.insert(pose_key(0), pose0)
         if options.calibrate:
-            self._add(gtsam.PriorFactorPoint2(
+            prior = gtsam.PriorFactorPoint2 if options.n_calibration == 2 else (
+                gtsam.PriorFactorPoint3)
+            self._add(prior(
                 calibration_key(0), self.cal_guess,
                 gtsam.noiseModel.Diagonal.Sigmas(options.calibration_prior_sigmas)))
             self._values.insert(calibration_key(0), self.cal_guess)
@@ -141,6 +146,12 @@ class GraphBuilder:
                 f"motion starts at sample {int(pre.keyframes[0])} but the last keyframe is at "
                 f"sample {self.keyframes[-1]}; add intervals in order, without gaps")
         opts = self.opts
+        if opts.calibrate and len(pre.calibration) != opts.n_calibration:
+            names = "(s, g)" if opts.n_calibration == 2 else "(s, g, kappa)"
+            raise GraphInputError(
+                f"the smoother estimates {names} but the motion was preintegrated with "
+                f"calibration {pre.calibration.tolist()}; preintegrate with a calibration of "
+                f"{opts.n_calibration} entries, e.g. options.calibration_prior")
         for k in range(len(pre)):
             i = self.n_poses - 1
             key_i, key_j = pose_key(i), pose_key(i + 1)
@@ -248,7 +259,8 @@ class GraphBuilder:
         cal_idx = np.array([self.calibration_index(i) for i in range(n)])
         cals = cal_cov = pose_cov = None
         if self.opts.calibrate:
-            table = np.array([values.atPoint2(calibration_key(g))
+            at = gtsam.Values.atPoint2 if self.opts.n_calibration == 2 else gtsam.Values.atPoint3
+            table = np.array([at(values, calibration_key(g))
                               for g in range(cal_idx.max() + 1)])
             cals = table[cal_idx]
         if covariance is not None:

@@ -1,9 +1,11 @@
 """The calibration-aware motion factor: preintegrated motion corrected to first order in ``(s, g)``.
 
-The preintegrated relative pose for another calibration ``c = (s, g)`` is, to
-first order, ``iTj(c) = iTj_hat Exp(J_c (c - c_bar))`` (Forster et al. 2017,
-eq. 44, the first-order bias update of IMU preintegration). The factor on
-(pose ``i``, pose ``j``, calibration) returns the unwhitened 3-vector
+The preintegrated relative pose for another calibration ``c = (s, g)`` (or
+``(s, g, kappa)``, with the curvature ``kappa`` [rad/m] of a left/right wheel
+diameter ratio; :mod:`fusion.graph.preintegration`) is, to first order,
+``iTj(c) = iTj_hat Exp(J_c (c - c_bar))`` (Forster et al. 2017, eq. 44, the
+first-order bias update of IMU preintegration). The factor on (pose ``i``,
+pose ``j``, calibration) returns the unwhitened 3-vector
 
 .. math::
 
@@ -157,11 +159,11 @@ def calibrated_motion_errors(wTi: np.ndarray, wTj: np.ndarray, calibration: np.n
     ----------
     wTi, wTj : ndarray, shape (K, 3)
         Start and end poses ``(x [m], y [m], theta [rad])`` in the world.
-    calibration : ndarray, shape (2,)
-        Current ``(s, g)``.
+    calibration : ndarray, shape (nc,)
+        Current ``(s, g)`` or ``(s, g, kappa)``.
     measured_inverse : ndarray, shape (K, 3)
         ``iTj_hat^-1`` of each interval, as Pose2 parameters.
-    calibration_jacobian : ndarray, shape (K, 3, 2)
+    calibration_jacobian : ndarray, shape (K, 3, nc)
         ``J_c`` of each interval.
     calibration_offset : ndarray, shape (K, 3)
         ``J_c c_bar`` of each interval (``c_bar`` the calibration it was integrated with).
@@ -213,17 +215,17 @@ def calibrated_motion_error(wTi: gtsam.Pose2, wTj: gtsam.Pose2, calibration: np.
     ----------
     wTi, wTj : gtsam.Pose2
         Poses of keyframes ``i`` and ``j`` in the world.
-    calibration : ndarray, shape (2,)
-        Current ``(s, g)``.
+    calibration : ndarray, shape (nc,)
+        Current ``(s, g)`` or ``(s, g, kappa)``.
     measured_inverse : gtsam.Pose2
         ``iTj_hat^-1``, the inverse of the preintegrated relative pose.
-    calibration_jacobian : ndarray, shape (3, 2)
+    calibration_jacobian : ndarray, shape (3, nc)
         ``J_c`` of the preintegration.
-    linearization_point : ndarray, shape (2,)
+    linearization_point : ndarray, shape (nc,)
         ``c_bar``, the calibration the speeds were integrated with.
     jacobians : list of 3 ndarray, optional
         Filled with ``d e / d wTi``, ``d e / d wTj`` (3, 3, right perturbations
-        ``wT Exp(xi)``) and ``d e / d c`` (3, 2) when given.
+        ``wT Exp(xi)``) and ``d e / d c`` (3, nc) when given.
 
     Returns
     -------
@@ -235,9 +237,9 @@ def calibrated_motion_error(wTi: gtsam.Pose2, wTj: gtsam.Pose2, calibration: np.
     :func:`calibrated_motion_errors` for one interval. The error equals
     ``Log(iTj(c)^-1 wTi^-1 wTj)`` to first order in the error and in
     ``c - c_bar`` (Baker-Campbell-Hausdorff); it is exact in ``s`` (positions
-    scale linearly with ``s``).
+    scale linearly with ``s``) when ``kappa`` is not estimated.
     """
-    jc = np.asarray(calibration_jacobian, dtype=float).reshape(1, 3, 2)
+    jc = np.asarray(calibration_jacobian, dtype=float).reshape(1, 3, -1)
     err, d_i, d_j = calibrated_motion_errors(
         _pose_row(wTi)[None], _pose_row(wTj)[None], np.asarray(calibration, dtype=float),
         measured_inverse=_pose_row(measured_inverse)[None], calibration_jacobian=jc,
@@ -260,7 +262,8 @@ def calibrated_motion_group_factor(pre: Preintegrated | Sequence[Preintegrated],
     pose_keys : sequence of int, length K + 1
         Keys of the poses at the interval ends (``Pose2``).
     key_c : int
-        Key of the calibration ``(s, g)`` (``Point2``).
+        Key of the calibration: ``(s, g)`` as a ``Point2``, or ``(s, g, kappa)`` as a
+        ``Point3`` when the intervals were preintegrated with a curvature.
 
     Returns
     -------
@@ -274,7 +277,8 @@ def calibrated_motion_group_factor(pre: Preintegrated | Sequence[Preintegrated],
     Raises
     ------
     ShapeError
-        If ``pose_keys`` does not hold one key more than there are intervals.
+        If ``pose_keys`` does not hold one key more than there are intervals, or
+        the intervals disagree on the calibration's size.
 
     Notes
     -----
@@ -284,23 +288,29 @@ def calibrated_motion_group_factor(pre: Preintegrated | Sequence[Preintegrated],
     ``BetweenFactorPose2`` takes 1 us), before the ``Values`` copy (module Notes).
     """
     parts = [pre] if isinstance(pre, Preintegrated) else list(pre)
+    sizes = sorted({len(p.calibration) for p in parts})
+    if len(sizes) != 1:
+        raise ShapeError(f"the intervals of one group need calibrations of one size, got sizes "
+                         f"{sizes}; preintegrate them all with (s, g) or all with (s, g, kappa)")
     m_inv = _inverse(np.concatenate([p.delta_pose for p in parts]))
     jc = np.concatenate([p.calibration_jacobian for p in parts])
     offset = np.concatenate([np.einsum("kij,j->ki", p.calibration_jacobian, p.calibration)
                              for p in parts])
     cov = scipy.linalg.block_diag(*np.concatenate([p.covariance for p in parts]))
-    n = len(jc)
+    n, nc = len(jc), sizes[0]
     keys = [int(k) for k in pose_keys]
     if len(keys) != n + 1:
         raise ShapeError(f"{n} intervals need {n + 1} pose keys, got {len(keys)}")
-    neg_jc = -jc.reshape(3 * n, 2)
+    neg_jc = -jc.reshape(3 * n, nc)
     rows = np.arange(n)
+    calibration_at = gtsam.Values.atPoint2 if nc == 2 else gtsam.Values.atPoint3
 
     def error(_: gtsam.CustomFactor, values: gtsam.Values,
               jacobians: list[np.ndarray] | None) -> np.ndarray:
         poses = np.array([[p.x(), p.y(), p.theta()] for p in map(values.atPose2, keys)])
         err, d_i, d_j = calibrated_motion_errors(
-            poses[:-1], poses[1:], np.asarray(values.atPoint2(key_c)), measured_inverse=m_inv,
+            poses[:-1], poses[1:], np.asarray(calibration_at(values, key_c)),
+            measured_inverse=m_inv,
             calibration_jacobian=jc, calibration_offset=offset, jacobians=jacobians is not None)
         if jacobians is not None:
             full = np.zeros((n, 3, n + 1, 3))         # (interval, row, pose, column)
@@ -327,7 +337,8 @@ def calibrated_motion_factor(pre: Preintegrated, k: int, *, key_i: int, key_j: i
     k : int
         Which interval.
     key_i, key_j, key_c : int
-        Keys of the start pose, end pose (``Pose2``) and calibration (``Point2``).
+        Keys of the start pose, end pose (``Pose2``) and calibration (``Point2``, or
+        ``Point3`` for ``(s, g, kappa)``).
 
     Returns
     -------

@@ -5,7 +5,7 @@
   (:mod:`fusion.graph.preintegration`): no Python runs at optimisation time.
 - :func:`calibrated_motion_factor` and :func:`calibrated_motion_group_factor`
   (from :mod:`fusion.graph.calibrated_factors`, re-exported): ``gtsam.CustomFactor``
-  on (poses, calibration ``c = (s, g)``) that correct the preintegrated pose to
+  on (poses, calibration ``c = (s, g)`` or ``(s, g, kappa)``) that correct the preintegrated pose to
   first order in ``c``, as IMU preintegration corrects for the bias (Forster et
   al. 2017, eq. 44), so a smoother with landmarks estimates the calibration
   online. :func:`calibration_walk_factor` lets ``c`` drift.
@@ -27,7 +27,8 @@
   :func:`observe_landmarks` a simulator of observations for experiments.
 
 Variables: poses ``X(i)`` (``gtsam.Pose2``, ``wTb``: body in world), calibrations
-``C(i)`` (``Point2`` holding ``(s, g)`` around ``(1, 1)``), landmarks ``L(id)``
+``C(i)`` (``Point2`` holding ``(s, g)`` around ``(1, 1)``, or ``Point3`` holding
+``(s, g, kappa)`` around ``(1, 1, 0)``), landmarks ``L(id)``
 (``Point2`` in the world frame).
 
 Range-bearing noise: gtsam's ``BearingRange`` measurement, and so its error
@@ -101,7 +102,7 @@ def pose_key(i: int) -> int:
 
 
 def calibration_key(i: int) -> int:
-    """GTSAM key of the calibration ``(s, g)`` in force from keyframe ``i`` (``C(i)``)."""
+    """GTSAM key ``C(i)`` of the calibration ``(s, g)`` or ``(s, g, kappa)`` from keyframe ``i``."""
     return C(int(i))
 
 
@@ -135,26 +136,29 @@ def motion_factor(pre: Preintegrated, k: int, *, key_i: int, key_j: int
 
 
 def calibration_walk_factor(key_a: int, key_b: int, *, sigma_per_sqrt_s: np.ndarray,
-                            duration_s: float) -> gtsam.BetweenFactorPoint2:
+                            duration_s: float
+                            ) -> gtsam.BetweenFactorPoint2 | gtsam.BetweenFactorPoint3:
     """Random walk of the calibration between two keyframes.
 
     Parameters
     ----------
     key_a, key_b : int
         Calibration keys of consecutive keyframes.
-    sigma_per_sqrt_s : array_like, shape (2,)
-        Diffusion of ``(s, g)`` [1/sqrt(s)].
+    sigma_per_sqrt_s : array_like, shape (2,) or (3,)
+        Diffusion of ``(s, g)`` [1/sqrt(s)], or of ``(s, g, kappa)``
+        [1/sqrt(s), 1/sqrt(s), rad/m/sqrt(s)].
     duration_s : float
         Time between the keyframes [s].
 
     Returns
     -------
-    gtsam.BetweenFactorPoint2
-        ``c_b - c_a ~ N(0, diag(sigma^2) duration_s)``.
+    gtsam.BetweenFactorPoint2 or gtsam.BetweenFactorPoint3
+        ``c_b - c_a ~ N(0, diag(sigma^2) duration_s)``, on ``Point2`` or ``Point3``
+        variables as ``sigma_per_sqrt_s`` has 2 or 3 entries.
     """
-    sig = np.asarray(sigma_per_sqrt_s, dtype=float) * np.sqrt(float(duration_s))
-    return gtsam.BetweenFactorPoint2(key_a, key_b, np.zeros(2),
-                                     gtsam.noiseModel.Diagonal.Sigmas(sig))
+    sig = np.asarray(sigma_per_sqrt_s, dtype=float).reshape(-1) * np.sqrt(float(duration_s))
+    between = gtsam.BetweenFactorPoint2 if len(sig) == 2 else gtsam.BetweenFactorPoint3
+    return between(key_a, key_b, np.zeros(len(sig)), gtsam.noiseModel.Diagonal.Sigmas(sig))
 
 
 def predict_range_bearing(wTb: np.ndarray, points_xy: np.ndarray, *,

@@ -12,8 +12,12 @@ the model's predicted speeds ``(v, w)`` into that relative pose once, with
   Jacobians (:func:`lti_motion.kinematics.pose_step_jacobians`), and
 - the first-order derivative of ``iTj`` with respect to the calibration
   ``c = (s, g)``: a scale ``s`` on the linear speed and a gain ``g`` on the
-  yaw rate (true speeds ``(s v, g w)``), so a smoother can correct the
-  relative pose for a new calibration without integrating again.
+  yaw rate (true speeds ``(s v, g w)``), or ``c = (s, g, kappa)`` with a
+  curvature ``kappa`` [rad/m] as well (true speeds ``(s v, g w + kappa v)``:
+  the model EKF's ``D_c`` with ``s = 1 + k_v``, ``g = 1 + k_w``, a left/right
+  wheel diameter ratio; :mod:`fusion.ekf.functions`, *Pose noise*), so a
+  smoother can correct the relative pose for a new calibration without
+  integrating again.
 
 Everything is vectorised over all samples of all intervals at once: headings
 and positions by cumulative sums, per-interval sums by ``np.add.reduceat``.
@@ -60,8 +64,11 @@ with ``G_k = T (F_speed,k + [J (p_j - p_{k+1}) dt_k; 0] e_w^T)``: the
 kinematics Jacobian of step ``k`` plus the lever arm by which a yaw-rate
 error at step ``k`` swings the rest of the interval (``J`` is the rotation by
 90 degrees, ``T = diag(R_j^T, 1)`` takes frame-``i`` errors to the local
-coordinates at ``j``). So ``cov = sum_k G_k Phi G_k^T`` and the calibration
-Jacobian is ``sum_k G_k diag(v_k, w_k)``.
+coordinates at ``j``). So ``cov = sum_k G_k D_c Phi D_c^T G_k^T`` with
+``D_c = [[s, 0], [kappa, g]]`` (``diag(s, g)`` without ``kappa``), and the
+calibration Jacobian is ``sum_k G_k D_s,k`` with ``D_s = d(true speeds)/dc =
+[[v, 0, 0], [0, w, v]]`` at the encoder/model speeds ``(v, w)`` (its first two
+columns without ``kappa``; the EKF's ``D_s``, :mod:`fusion.ekf.functions`).
 
 References
 ----------
@@ -147,11 +154,12 @@ class Preintegrated:
     covariance : ndarray, shape (m, 3, 3)
         Covariance of ``Log(iTj_hat^-1 iTj_true)`` (gtsam ``Pose2`` local
         coordinates at ``iTj``: ``(x, y)`` in frame ``j`` [m^2], ``theta`` [rad^2]).
-    calibration_jacobian : ndarray, shape (m, 3, 2)
+    calibration_jacobian : ndarray, shape (m, 3, nc)
         ``d Log(iTj_hat^-1 iTj(c)) / d c`` at ``c = calibration``, columns for
-        the scale ``s`` of ``v`` and the gain ``g`` of ``w``.
-    calibration : ndarray, shape (2,)
-        The calibration ``(s, g)`` the speeds were integrated with.
+        the scale ``s`` of ``v``, the gain ``g`` of ``w`` and, with ``nc = 3``,
+        the curvature ``kappa`` [rad/m].
+    calibration : ndarray, shape (nc,)
+        The calibration ``(s, g)`` or ``(s, g, kappa)`` the speeds were integrated with.
     """
 
     keyframes: np.ndarray
@@ -182,6 +190,18 @@ class Preintegrated:
         return Preintegrated(self.keyframes[rng.start:rng.stop + 1], self.duration_s[sl],
                              self.delta_pose[sl], self.covariance[sl],
                              self.calibration_jacobian[sl], self.calibration)
+
+
+def _scaled_speed_covariance(phi_cov: np.ndarray, cal: np.ndarray
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Entries ``(p, q, r)`` of ``D_c Phi D_c^T``, ``D_c = [[s, 0], [kappa, g]]`` (module notes)."""
+    s, g = cal[0], cal[1]
+    kappa = cal[2] if len(cal) == 3 else 0.0
+    p0, q0, r0 = phi_cov[..., 0, 0], phi_cov[..., 0, 1], phi_cov[..., 1, 1]
+    if kappa == 0.0:
+        return s * s * p0, s * g * q0, g * g * r0                 # diag(c) Phi diag(c)
+    return (s * s * p0, s * (kappa * p0 + g * q0),
+            kappa * kappa * p0 + 2.0 * kappa * g * q0 + g * g * r0)
 
 
 def speed_error_covariance(model: MotionModel, *, mode: SpeedMode = "free_run") -> np.ndarray:
@@ -264,7 +284,7 @@ def _check_keyframes(keyframes: np.ndarray, n: int) -> np.ndarray:
 
 def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.ndarray,
                  speed_covariance: np.ndarray,
-                 calibration: tuple[float, float] | np.ndarray = (1.0, 1.0),
+                 calibration: tuple[float, ...] | np.ndarray = (1.0, 1.0),
                  slip_density: tuple[float, float, float] | np.ndarray = SLIP_DENSITY,
                  ) -> Preintegrated:
     """Preintegrate body speeds between consecutive keyframes.
@@ -281,9 +301,11 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     speed_covariance : array_like, shape (2, 2) or (n, 2, 2)
         Per-sample (long-run) covariance ``Phi`` of the speed errors
         (:func:`speed_error_covariance`), one for all samples or one per sample.
-    calibration : (float, float)
+    calibration : (float, float) or (float, float, float)
         ``(s, g)``: the speeds integrated are ``(s v, g w)``; the errors
-        scale with them (``diag(c) Phi diag(c)``).
+        scale with them (``diag(c) Phi diag(c)``). ``(s, g, kappa)``: the
+        speeds are ``(s v, g w + kappa v)`` (``kappa`` [rad/m]), the errors
+        ``D_c Phi D_c^T`` (module notes), and the Jacobian has a third column.
     slip_density : (float, float, float)
         White pose noise outside the speed model (sideways slip and scrub,
         floor roughness), ``(x [m^2/s], y [m^2/s], theta [rad^2/s])`` in the
@@ -337,8 +359,9 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
         raise GraphInputError(f"slip_density must be three non-negative densities, got "
                               f"{slip_density}")
     cal = np.asarray(calibration, dtype=float)
-    if cal.shape != (2,):
-        raise MeasurementShapeError(f"expected calibration (s, g) of shape (2,), got {cal.shape}")
+    if cal.shape not in ((2,), (3,)):
+        raise MeasurementShapeError(f"expected calibration (s, g) or (s, g, kappa) of shape (2,) "
+                                    f"or (3,), got {cal.shape}")
     lo, hi = int(kf[0]), int(kf[-1])
     sp, dt = sp[lo:hi], dt[lo:hi]
     if phi_cov.ndim == 3:
@@ -354,7 +377,8 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     lengths = np.diff(kf)
     seg = np.repeat(np.arange(len(starts)), lengths)
     v_raw, w_raw = sp[:, 0], sp[:, 1]
-    v, w = cal[0] * v_raw, cal[1] * w_raw
+    kappa = float(cal[2]) if len(cal) == 3 else 0.0
+    v, w = cal[0] * v_raw, cal[1] * w_raw + kappa * v_raw          # D_c (module notes)
 
     # headings relative to keyframe i at the start of each sample: exclusive cumsum per interval
     phi = w * dt
@@ -374,16 +398,18 @@ def preintegrate(speeds: np.ndarray, dt_s: float | np.ndarray, *, keyframes: np.
     b = f_speed[:, 0, 1] - rem_y * dt
     d = f_speed[:, 1, 1] + rem_x * dt
     # G Phi G^T with G = [[a, b], [c, d], [0, dt]], six distinct entries per sample
-    pc = phi_cov * np.outer(cal, cal)                             # diag(c) Phi diag(c)
-    p, q, r = pc[..., 0, 0], pc[..., 0, 1], pc[..., 1, 1]
+    p, q, r = _scaled_speed_covariance(phi_cov, cal)
     ga, gb, gc, gd = p * a + q * b, q * a + r * b, p * c + q * d, q * c + r * d
-    per_sample = np.stack([ga * a + gb * b, ga * c + gb * d, gb * dt, gc * c + gd * d, gd * dt,
-                           r * dt * dt, a * v_raw, b * w_raw, c * v_raw, d * w_raw, dt * w_raw],
-                          axis=-1)
-    acc = np.add.reduceat(per_sample, starts, axis=0)
+    columns = [ga * a + gb * b, ga * c + gb * d, gb * dt, gc * c + gd * d, gd * dt,
+               r * dt * dt, a * v_raw, b * w_raw, c * v_raw, d * w_raw, dt * w_raw]
+    if len(cal) == 3:                  # d/dkappa: the yaw-rate column G e_w times v (D_s)
+        columns += [b * v_raw, d * v_raw, dt * v_raw]
+    acc = np.add.reduceat(np.stack(columns, axis=-1), starts, axis=0)
     cov_i = acc[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
-    jac_i = np.zeros((len(starts), 3, 2))
-    jac_i[:, 0, 0], jac_i[:, 0, 1], jac_i[:, 1, 0], jac_i[:, 1, 1], jac_i[:, 2, 1] = acc[:, 6:].T
+    jac_i = np.zeros((len(starts), 3, len(cal)))
+    jac_i[:, 0, 0], jac_i[:, 0, 1], jac_i[:, 1, 0], jac_i[:, 1, 1], jac_i[:, 2, 1] = acc[:, 6:11].T
+    if len(cal) == 3:
+        jac_i[:, 0, 2], jac_i[:, 1, 2], jac_i[:, 2, 2] = acc[:, 11:].T
 
     cs, sn = np.cos(d_theta), np.sin(d_theta)
     t = np.zeros((len(starts), 3, 3))                             # diag(R_j^T, 1)
@@ -402,7 +428,7 @@ def preintegrate_model(model: MotionModel, cmd_m_s: np.ndarray, *, keyframes: np
                        mode: SpeedMode = "free_run", measured_speeds: np.ndarray | None = None,
                        z0: np.ndarray | None = None, covariance_scale: float = 1.0,
                        speed_covariance: np.ndarray | TransientSpeedCovariance | None = None,
-                       calibration: tuple[float, float] | np.ndarray = (1.0, 1.0),
+                       calibration: tuple[float, ...] | np.ndarray = (1.0, 1.0),
                        slip_density: tuple[float, float, float] | np.ndarray | None = None,
                        ) -> Preintegrated:
     """Predict speeds with a model, then preintegrate them between keyframes.
@@ -435,8 +461,8 @@ def preintegrate_model(model: MotionModel, cmd_m_s: np.ndarray, *, keyframes: np
         :class:`fusion.graph.transient_noise.TransientSpeedCovariance`, evaluated
         per sample at the commands and the predicted speeds (larger during
         the model's transients).
-    calibration : (float, float)
-        Linearisation point ``(s, g)``.
+    calibration : (float, float) or (float, float, float)
+        Linearisation point ``(s, g)`` or ``(s, g, kappa)`` (:func:`preintegrate`).
     slip_density : (float, float, float), optional
         Pose noise outside the model, as in :func:`preintegrate`; default
         :data:`SLIP_DENSITY`, or :data:`FILTERED_SLIP_DENSITY` when the per-sample
@@ -557,7 +583,7 @@ def relative_pose_errors(pre: Preintegrated, poses: np.ndarray) -> np.ndarray:
 
 
 def fit_calibration(pre: Preintegrated, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The constant calibration ``(s, g)`` that best explains reference keyframe poses.
+    """The constant calibration ``(s, g)`` or ``(s, g, kappa)`` best explaining reference poses.
 
     Parameters
     ----------
@@ -568,12 +594,12 @@ def fit_calibration(pre: Preintegrated, poses: np.ndarray) -> tuple[np.ndarray, 
 
     Returns
     -------
-    calibration : ndarray, shape (2,)
+    calibration : ndarray, shape (nc,)
         Weighted least squares ``c = c_bar + (sum J^T W J)^-1 sum J^T W r`` with
         ``r`` from :func:`relative_pose_errors` and ``W`` the inverse
         interval covariances: what a calibration-aware graph with perfectly
         known poses would estimate (one Gauss-Newton step, exact in ``s``).
-    covariance : ndarray, shape (2, 2)
+    covariance : ndarray, shape (nc, nc)
         ``(sum J^T W J)^-1``.
     """
     r = relative_pose_errors(pre, poses)

@@ -24,23 +24,30 @@ relinearisation, partial re-elimination).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Literal
 
 import gtsam
 import numpy as np
 
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate
 from fusion.exceptions import UnknownPoseError
 from fusion.graph.builder import GraphBuilder
 from fusion.graph.factors import calibration_key, pose_key
 from fusion.graph.preintegration import Preintegrated, SpeedMode, preintegrate_model
-from fusion.graph.smoother_options import SmootherOptions, SmootherResult
+from fusion.graph.smoother_options import (
+    SmootherOptions,
+    SmootherResult,
+    calibration_intrinsics_estimate,
+)
 from fusion.graph.transient_noise import TransientSpeedCovariance
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
 from lti_motion.calibration import speeds_from_log
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import FrameLog
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.metrics import ate
 from lti_motion.model import MotionModel
 
@@ -48,6 +55,7 @@ __all__ = [
     "IncrementalSmoother",
     "SmootherOptions",
     "SmootherResult",
+    "calibration_intrinsics_estimate",
     "log_keyframes",
     "smooth_batch",
     "smooth_log",
@@ -106,7 +114,8 @@ class IncrementalSmoother:
         # calibrations never need relinearising (Kaess et al. 2012, alg. 3)
         thresholds = gtsam.ISAM2ThresholdMap()
         thr = self.options.relinearize_threshold
-        for char, size, value in (("x", 3, thr), ("l", 2, thr), ("c", 2, np.inf)):
+        for char, size, value in (("x", 3, thr), ("l", 2, thr),
+                                  ("c", self.options.n_calibration, np.inf)):
             thresholds.insert((char, np.full(size, value)))
         params.setRelinearizeThreshold(thresholds)
         params.relinearizeSkip = self.options.relinearize_skip
@@ -169,7 +178,7 @@ class IncrementalSmoother:
         self._graph.guess[last] = self._isam.calculateEstimatePose2(pose_key(last))
         if self.options.calibrate:
             key = calibration_key(self._graph.calibration_index(last))
-            self._graph.cal_guess = np.asarray(self._isam.calculateEstimatePoint2(key))
+            self._graph.cal_guess = self.options.bounded_calibration(self._calibration_at(key))
 
     def _flush(self) -> None:
         if self._graph.has_pending:
@@ -186,17 +195,55 @@ class IncrementalSmoother:
         self._flush()
         return self._isam.marginalCovariance(pose_key(self._check(index)))
 
+    def _calibration_at(self, key: int) -> np.ndarray:
+        if self.options.n_calibration == 2:
+            return np.asarray(self._isam.calculateEstimatePoint2(key))
+        return np.asarray(self._isam.calculateEstimatePoint3(key))
+
     def calibration(self, index: int) -> np.ndarray:
-        """Estimate of ``(s, g)`` in force at keyframe ``index``, shape (2,)."""
+        """Estimate of ``(s, g)`` (or ``(s, g, kappa)``) in force at keyframe ``index``, (nc,)."""
         key = self._calibration_key(index)
         self._flush()
-        return np.asarray(self._isam.calculateEstimatePoint2(key))
+        return self._calibration_at(key)
 
     def calibration_covariance(self, index: int) -> np.ndarray:
-        """Marginal covariance of ``(s, g)`` at keyframe ``index``, (2, 2)."""
+        """Marginal covariance of the calibration at keyframe ``index``, (nc, nc)."""
         key = self._calibration_key(index)
         self._flush()
         return self._isam.marginalCovariance(key)
+
+    def intrinsics_estimate(self, intrinsics: OdometryIntrinsics, *, index: int = -1,
+                            t_s: float = math.nan) -> IntrinsicsEstimate:
+        """The odometry intrinsics the calibration at keyframe ``index`` says the robot has.
+
+        Parameters
+        ----------
+        intrinsics : OdometryIntrinsics
+            The intrinsics the encoder speeds of the preintegrated motion were
+            computed with (the calibration is relative to them).
+        index : int
+            Keyframe (negative counts from the newest).
+        t_s : float
+            Time of the estimate [s], for the record.
+
+        Returns
+        -------
+        IntrinsicsEstimate
+            As :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`, from the scale errors
+            ``(s - 1, g - 1, kappa)`` and their marginal covariance
+            (:func:`fusion.graph.calibration_intrinsics_estimate`); write it into a
+            model with :meth:`lti_motion.model.MotionModel.with_intrinsics`.
+
+        Raises
+        ------
+        ValueError
+            Without ``calibrate``, or if the estimate is not a possible robot.
+        UnknownPoseError
+            For a keyframe not in the graph.
+        """
+        i = self.n_poses + int(index) if int(index) < 0 else int(index)
+        return calibration_intrinsics_estimate(intrinsics, self.calibration(i),
+                                               self.calibration_covariance(i), t_s=t_s)
 
     def result(self, *, covariances: bool = True) -> SmootherResult:
         """The whole current estimate (marginals cost one Bayes-tree query per variable).
@@ -363,9 +410,11 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
         u, y = speeds_from_log(log, intrinsics=model.intrinsics)
     frames = np.zeros(0, np.int64) if observations is None else observations.index
     kf = log_keyframes(len(u), every=keyframe_every, extra=frames)
+    opts = options or SmootherOptions()
     pre = preintegrate_model(model, u, keyframes=kf, mode=mode, measured_speeds=y,
                              covariance_scale=covariance_scale,
-                             speed_covariance=speed_covariance)
+                             speed_covariance=speed_covariance,
+                             calibration=(1.0, 1.0, 0.0)[:opts.n_calibration])
     obs = None if observations is None else observations.with_index(
         np.searchsorted(kf, observations.index))
     if method == "batch":

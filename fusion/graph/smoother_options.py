@@ -1,16 +1,27 @@
-"""Settings and results of the smoothers in :mod:`fusion.graph.smoother` (re-exported there)."""
+"""Settings and results of the smoothers in :mod:`fusion.graph.smoother` (re-exported there).
+
+:func:`calibration_intrinsics_estimate` turns a smoother's calibration ``(s, g, kappa)``
+into the odometry intrinsics it implies, as the model EKF's scale errors ``(k_v, k_w,
+kappa)`` are (:mod:`fusion.ekf.intrinsics_estimate`): ``k_v = s - 1``, ``k_w = g - 1``
+(the speeds are ``(s v, g w + kappa v)``, the EKF's ``D_c s``), a shift, so the
+covariance of ``(k_v, k_w, kappa)`` is the calibration's own.
+"""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
+from fusion.ekf.resets import MAX_RATIO_ERROR
 from fusion.graph.factors import CONSTANT_SIGMA_M
-from fusion.noise import LandmarkNoise
+from fusion.noise import LandmarkNoise, ScaleErrors
+from lti_motion.intrinsics import OdometryIntrinsics
 
-__all__ = ["SmootherOptions", "SmootherResult"]
+__all__ = ["SmootherOptions", "SmootherResult", "calibration_intrinsics_estimate"]
 
 
 def _positive_tuple(value: Sequence[float], n: int, name: str) -> tuple[float, ...]:
@@ -29,17 +40,31 @@ class SmootherOptions:
     initial_pose_sigmas : (float, float, float)
         Prior standard deviations on the first pose (x [m], y [m], theta [rad]).
     calibrate : bool
-        Use the calibration-aware motion factors and estimate ``(s, g)``.
-    calibration_prior : (float, float)
-        Prior mean of ``(s, g)``.
-    calibration_prior_sigmas : (float, float)
-        Prior standard deviations of ``(s, g)``: wide (0.2) by default, the
-        robot may have changed since calibration.
-    calibration_walk_sigmas : (float, float)
-        Random-walk diffusion of ``(s, g)`` [1/sqrt(s)]: ``1e-3`` lets them
-        move by ``1e-3 sqrt(60)``, about 0.8% (1 sigma), a minute; a larger
-        value follows a floor change faster and forgets a constant scale
-        faster (the trade-off is measured in ``docs/factor_graph.md``).
+        Use the calibration-aware motion factors and estimate ``(s, g)`` (and
+        ``kappa`` when the three calibration tuples have three entries).
+    calibration_prior : (float, float) or (float, float, float)
+        Prior mean of ``(s, g)``, or of ``(s, g, kappa [rad/m])``: the curvature
+        of a left/right wheel diameter ratio, true speeds ``(s v, g w + kappa v)``
+        (:mod:`fusion.graph.preintegration`; ``s = 1 + k_v``, ``g = 1 + k_w`` of
+        the model EKF). :meth:`with_curvature` adds ``kappa`` with the EKF's
+        prior and walk. The motions must be preintegrated with a calibration of
+        the same size (``calibration=options.calibration_prior``).
+    calibration_prior_sigmas : (float, float) or (float, float, float)
+        Prior standard deviations: wide (0.2) by default, the robot may have
+        changed since calibration.
+    calibration_walk_sigmas : (float, float) or (float, float, float)
+        Random-walk diffusion [1/sqrt(s), 1/sqrt(s), rad/m/sqrt(s)]: ``1e-3``
+        lets ``(s, g)`` move by ``1e-3 sqrt(60)``, about 0.8% (1 sigma), a
+        minute; a larger value follows a floor change faster and forgets a
+        constant scale faster (the trade-off is measured in ``docs/factor_graph.md``).
+    curvature_bound_rad_per_m : float
+        ``|kappa|`` beyond which the estimate is not a robot (the EKF's clip,
+        :data:`fusion.ekf.resets.MAX_RATIO_ERROR` over the wheel base, set by
+        :meth:`with_curvature`). The graph cannot clip a variable, so it bounds
+        what the smoother *uses* of its estimate: the calibration it
+        linearises new intervals at (:class:`~fusion.graph.IncrementalSmoother`)
+        is clipped to it; the estimate itself is the least-squares one, held
+        near zero by its 1% prior (the bound is 10 prior sigmas away).
     calibration_every : int
         Consecutive keyframe intervals that share one calibration variable
         (at 0.5 s keyframes, 10 means a new calibration every 5 s, far
@@ -101,15 +126,26 @@ class SmootherOptions:
     landmark_noise: LandmarkNoise = field(default_factory=LandmarkNoise)
     landmark_sigma_m: float = CONSTANT_SIGMA_M
     reinitialize_every: int = 10
+    curvature_bound_rad_per_m: float = math.inf
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
         setf(self, "initial_pose_sigmas",
              _positive_tuple(self.initial_pose_sigmas, 3, "initial_pose_sigmas"))
-        setf(self, "calibration_prior",
-             _positive_tuple(self.calibration_prior, 2, "calibration_prior"))
+        nc = len(self.calibration_prior)
+        if nc not in (2, 3):
+            raise ValueError(f"calibration_prior must be (s, g) or (s, g, kappa), got "
+                             f"{self.calibration_prior!r}")
+        prior = (*_positive_tuple(self.calibration_prior[:2], 2, "calibration_prior"),
+                 *(float(k) for k in self.calibration_prior[2:]))
+        if not np.all(np.isfinite(prior)):
+            raise ValueError(f"calibration_prior must be finite, got {self.calibration_prior!r}")
+        setf(self, "calibration_prior", prior)
         for name in ("calibration_prior_sigmas", "calibration_walk_sigmas"):
-            setf(self, name, _positive_tuple(getattr(self, name), 2, name))
+            setf(self, name, _positive_tuple(getattr(self, name), nc, name))
+        bound = self.curvature_bound_rad_per_m
+        if not bound > 0:
+            raise ValueError(f"curvature_bound_rad_per_m must be positive, got {bound}")
         for name in ("calibration_every", "relinearize_skip", "reinitialize_every"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -125,6 +161,70 @@ class SmootherOptions:
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive, got {value}")
 
+    @property
+    def n_calibration(self) -> int:
+        """Size of the calibration variable: 2 for ``(s, g)``, 3 with ``kappa``."""
+        return len(self.calibration_prior)
+
+    def bounded_calibration(self, calibration: np.ndarray) -> np.ndarray:
+        """``calibration`` with ``|kappa|`` clipped to :attr:`curvature_bound_rad_per_m`
+        (the model EKF's clip, :mod:`fusion.ekf.resets`): what a smoother linearises new
+        intervals at and dead-reckons with.
+
+        Examples
+        --------
+        >>> opts = SmootherOptions().with_curvature(wheel_base_m=0.25)
+        >>> opts.bounded_calibration([1.0, 1.0, -0.9]).tolist()
+        [1.0, 1.0, -0.4]
+        """
+        cal = np.array(calibration, dtype=float)
+        if len(cal) == 3:
+            bound = self.curvature_bound_rad_per_m
+            cal[2] = np.clip(cal[2], -bound, bound)
+        return cal
+
+    def with_curvature(self, *, wheel_base_m: float, scales: ScaleErrors | None = None
+                       ) -> SmootherOptions:
+        """These options with the curvature ``kappa`` [rad/m] estimated as well.
+
+        ``kappa`` gets the model EKF's prior and walk (:class:`fusion.noise.ScaleErrors`:
+        ``ratio_prior_std / b`` and ``ratio_walk_per_sqrt_s / b``, a 1% diameter ratio and
+        0.1% in 100 s by default), a prior mean of 0, and the EKF's bound
+        ``MAX_RATIO_ERROR / b`` (:mod:`fusion.ekf.resets`); ``(s, g)`` keep theirs.
+
+        Parameters
+        ----------
+        wheel_base_m : float
+            Wheel base ``b`` [m] of the intrinsics the encoder speeds are computed with.
+        scales : ScaleErrors, optional
+            The EKF's scale-error settings (default :class:`~fusion.noise.ScaleErrors()`).
+
+        Returns
+        -------
+        SmootherOptions
+
+        Raises
+        ------
+        ValueError
+            For a non-positive wheel base.
+
+        Examples
+        --------
+        >>> opts = SmootherOptions().with_curvature(wheel_base_m=0.235)
+        >>> opts.n_calibration, round(opts.calibration_prior_sigmas[2], 4)
+        (3, 0.0426)
+        """
+        b = float(wheel_base_m)
+        if not (math.isfinite(b) and b > 0):
+            raise ValueError(f"wheel_base_m must be positive, got {wheel_base_m}")
+        sc = scales or ScaleErrors()
+        return replace(self, calibration_prior=(*self.calibration_prior[:2], 0.0),
+                       calibration_prior_sigmas=(*self.calibration_prior_sigmas[:2],
+                                                 sc.prior_stds(b)[2]),
+                       calibration_walk_sigmas=(*self.calibration_walk_sigmas[:2],
+                                                sc.walk_rates(b)[2]),
+                       curvature_bound_rad_per_m=MAX_RATIO_ERROR / b)
+
 
 @dataclass(frozen=True, eq=False)
 class SmootherResult:
@@ -138,9 +238,10 @@ class SmootherResult:
         ``wTb`` per keyframe ``(x [m], y [m], theta [rad])``, theta in (-pi, pi].
     pose_covariances : ndarray, shape (n, 3, 3), or None
         Marginal covariances in gtsam ``Pose2`` local coordinates (body frame).
-    calibrations : ndarray, shape (n, 2), or None
-        ``(s, g)`` in force at each keyframe (``None`` without ``calibrate``).
-    calibration_covariances : ndarray, shape (n, 2, 2), or None
+    calibrations : ndarray, shape (n, nc), or None
+        ``(s, g)`` (``nc = 2``) or ``(s, g, kappa)`` (``nc = 3``) in force at each
+        keyframe (``None`` without ``calibrate``).
+    calibration_covariances : ndarray, shape (n, nc, nc), or None
         Their marginal covariances.
     landmark_ids : ndarray of int, shape (k,)
         Landmarks in the graph.
@@ -155,3 +256,68 @@ class SmootherResult:
     calibration_covariances: np.ndarray | None
     landmark_ids: np.ndarray
     landmarks_xy: np.ndarray
+
+    def intrinsics_estimate(self, intrinsics: OdometryIntrinsics, *, index: int = -1
+                            ) -> IntrinsicsEstimate:
+        """The intrinsics the calibration at keyframe ``index`` implies
+        (:func:`calibration_intrinsics_estimate`; needs ``calibration_covariances``).
+
+        Raises
+        ------
+        ValueError
+            Without calibrations or their covariances (smooth with ``calibrate`` and
+            ``covariances=True``), or if the estimate is not a possible robot.
+        """
+        if self.calibrations is None or self.calibration_covariances is None:
+            raise ValueError("this result holds no calibrations with covariances; smooth with "
+                             "SmootherOptions(calibrate=True) and covariances=True")
+        return calibration_intrinsics_estimate(intrinsics, self.calibrations[index],
+                                               self.calibration_covariances[index])
+
+
+def calibration_intrinsics_estimate(intrinsics: OdometryIntrinsics, calibration: np.ndarray,
+                                    covariance: np.ndarray, *, t_s: float = math.nan
+                                    ) -> IntrinsicsEstimate:
+    """The odometry intrinsics a smoother's calibration implies, with their spread.
+
+    Parameters
+    ----------
+    intrinsics : OdometryIntrinsics
+        The intrinsics the preintegrated encoder speeds were computed with.
+    calibration : array_like, shape (2,) or (3,)
+        ``(s, g)`` or ``(s, g, kappa [rad/m])``; without ``kappa`` it is taken as
+        exactly 0 (no diameter-ratio information).
+    covariance : array_like, shape (2, 2) or (3, 3)
+        Its (marginal) covariance.
+    t_s : float
+        Time of the estimate [s], for the record.
+
+    Returns
+    -------
+    IntrinsicsEstimate
+        :func:`fusion.ekf.intrinsics_estimate.intrinsics_estimate` of the scale errors
+        ``(s - 1, g - 1, kappa)`` (module notes): ``intrinsics.corrected(s - 1, g - 1,
+        kappa)``, eq. 1 there.
+
+    Raises
+    ------
+    ValueError
+        For shapes that do not match, or an estimate that is not a possible robot.
+
+    Examples
+    --------
+    >>> k = OdometryIntrinsics.symmetric(m_per_tick=4.4e-4, wheel_base_m=0.235)
+    >>> est = calibration_intrinsics_estimate(k, [1.0, 1.0, -0.01 / 0.235],
+    ...                                       np.diag([1e-6, 1e-6, 0.002 ** 2]))
+    >>> round(est.intrinsics.diameter_ratio, 5), round(est.diameter_ratio_std, 6)
+    (1.01005, 0.000475)
+    """
+    c = np.asarray(calibration, dtype=float).reshape(-1)
+    cov = np.asarray(covariance, dtype=float)
+    if c.shape not in ((2,), (3,)) or cov.shape != (len(c), len(c)):
+        raise ValueError(f"expected a calibration (2,) or (3,) and its square covariance, got "
+                         f"{c.shape} and {cov.shape}")
+    errors = np.array([c[0] - 1.0, c[1] - 1.0, c[2] if len(c) == 3 else 0.0])
+    full = np.zeros((3, 3))
+    full[:len(c), :len(c)] = cov
+    return intrinsics_estimate(intrinsics, errors, full, t_s=t_s)

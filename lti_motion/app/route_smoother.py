@@ -12,7 +12,11 @@ known landmark. One iSAM2 update per keyframe.
 Between keyframes the route still needs a pose every period: the newest keyframe's
 smoothed pose, advanced by the encoder speeds (paper eq. 11,
 :func:`lti_motion.kinematics.pose_step`; the filtered speeds equal them to within
-``1 - W``, about 2e-6) times the newest calibration estimate ``(s, g)``.
+``1 - W``, about 2e-6) corrected by the newest calibration estimate: ``(s v, g w)``, or
+``(s v, g w + kappa v)`` when the options estimate the curvature ``kappa`` of a wheel
+diameter ratio (:meth:`fusion.graph.SmootherOptions.with_curvature`; then
+:meth:`SmootherEstimator.intrinsics_estimates` gives the intrinsics it implies, as the
+model EKF's :meth:`~fusion.ekf.ModelEKF.intrinsics_estimate` does).
 At a keyframe the pose jumps to the smoother's estimate. The estimator sees what the robot
 reports (commands, encoder counts) and the landmark sensor, never the simulator's truth.
 """
@@ -26,6 +30,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
@@ -70,7 +75,8 @@ class SmootherEstimator:
         ``examples/factor_graph.py``); periods with observations are keyframes as well.
     options : SmootherOptions, optional
         Graph and iSAM2 settings (:data:`ROUTE_SMOOTHER_OPTIONS`), the sighting noise
-        included.
+        included; ``ROUTE_SMOOTHER_OPTIONS.with_curvature(wheel_base_m=...)`` estimates
+        the wheels' diameter ratio as well (module notes).
 
     Raises
     ------
@@ -86,7 +92,9 @@ class SmootherEstimator:
     Sample ``j`` of a robot is the period closed by its ``j``-th frame after the first
     (which anchors the encoder counts); keyframe ``k`` is the pose after sample
     ``keyframes[k]``. Encoder body speeds as :class:`~lti_motion.app.route.ArxHybrid`
-    reads them (tick increments times the scale, over the model's period). Each interval
+    reads them (tick increments times the scale, over the model's period; through the
+    model's per-wheel :attr:`~lti_motion.model.MotionModel.intrinsics` when it has
+    them, e.g. written back from :meth:`intrinsics_estimates`). Each interval
     is preintegrated from the filtered speeds ``s+ = s- + W (y - s-)``
     (:func:`fusion.graph.speed_noise.filtered_speeds`, Simon 2006 eq. 5.19), starting from the
     model state its predecessor ended in (:meth:`MotionModel.state_from_data`, the
@@ -181,15 +189,20 @@ class SmootherEstimator:
             self._start(ticks)
             return self.pose
         m = self.model
-        d = tick_deltas(np.stack([self._ticks, ticks]))[0] * (m.m_per_tick / m.dt_s)
+        counts = tick_deltas(np.stack([self._ticks, ticks]))[0]
         self._ticks = ticks
-        y = body_from_wheel(d, wheel_base_m=m.wheel_base_m)
+        if m.intrinsics is None:
+            y = body_from_wheel(counts * (m.m_per_tick / m.dt_s), wheel_base_m=m.wheel_base_m)
+        else:                               # each wheel's own scale (docs/intrinsics.md)
+            y = m.intrinsics.body_motion(counts) / m.dt_s
         self._u.append(cmd)
         self._y.append(y)
         self._n += 1
         # between keyframes: the encoder speeds, which the filtered ones equal to within
         # 1 - W = R_enc (R + R_enc)^-1 (about 2e-6 for the create2 model)
-        self.pose = pose_step(self.pose, self._cal[:, 0] * y[:, 0], self._cal[:, 1] * y[:, 1],
+        cal = self._cal
+        kappa_v = cal[:, 2] * y[:, 0] if cal.shape[1] == 3 else 0.0
+        self.pose = pose_step(self.pose, cal[:, 0] * y[:, 0], cal[:, 1] * y[:, 1] + kappa_v,
                               m.dt_s)
         none = RangeBearing.empty()
         for i in range(n):
@@ -217,7 +230,8 @@ class SmootherEstimator:
         u = np.array([c[i] for c in self._u[first:]])
         y = np.array([c[i] for c in self._y[first:]])
         pre = preintegrate_model(self.model, u, keyframes=[0, len(u)], mode="filtered",
-                                 measured_speeds=y, z0=self._z_kf[i])
+                                 measured_speeds=y, z0=self._z_kf[i],
+                                 calibration=(1.0, 1.0, 0.0)[:self.options.n_calibration])
         sm = self.smoothers[i]
         k = sm.add_motion(replace(pre, keyframes=pre.keyframes + start))
         if len(seen):
@@ -227,10 +241,35 @@ class SmootherEstimator:
         sm.update()
         self.pose[i] = sm.pose(k)
         if self.options.calibrate:
-            self._cal[i] = sm.calibration(k)
+            self._cal[i] = self.options.bounded_calibration(sm.calibration(k))
         self._kf_sample[i] = self._n
         self._z_kf[i] = self.model.state_from_data(u, y, z0=self._z_kf[i])
         self._trim()
+
+    def intrinsics_estimates(self) -> list[IntrinsicsEstimate]:
+        """Per robot, the odometry intrinsics its newest calibration says the robot has.
+
+        Returns
+        -------
+        list of IntrinsicsEstimate
+            :meth:`fusion.graph.IncrementalSmoother.intrinsics_estimate` at the newest
+            keyframe, relative to the model's
+            :attr:`~lti_motion.model.MotionModel.encoder_intrinsics` (what the encoder
+            speeds are computed with); write one into a model with
+            :meth:`lti_motion.model.MotionModel.with_intrinsics`.
+
+        Raises
+        ------
+        RuntimeError
+            Before the first frame.
+        ValueError
+            If the options do not estimate the calibration.
+        """
+        if not self.smoothers:
+            raise RuntimeError("no smoother yet: call reset() and step() first")
+        t_s = self._n * self.model.dt_s
+        return [sm.intrinsics_estimate(self.model.encoder_intrinsics, t_s=t_s)
+                for sm in self.smoothers]
 
     def _trim(self) -> None:
         """Forget the samples every robot's newest keyframe has passed."""
