@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 from gtsam.utils.numerical_derivative import numericalDerivative11
+from preintegration_speeds import DT, PHI
+from preintegration_speeds import speeds as _speeds
 
 from fusion.ekf.intrinsics_estimate import intrinsics_estimate
 from fusion.exceptions import GraphInputError
@@ -32,15 +34,8 @@ from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import integrate_poses
 from lti_motion.model import MotionModel
 
-DT = 0.015
-PHI = np.array([[1e-4, 2e-5], [2e-5, 5e-3]])
 B = 0.235
 
-
-def _speeds(rng, n, *, turn=0.8):
-    t = np.arange(n) * DT
-    return np.column_stack([0.2 + 0.05 * rng.standard_normal(n),
-                            turn * np.sin(t / 0.7) + 0.2 * rng.standard_normal(n)])
 
 
 def _true_speeds(speeds, cal):
@@ -67,22 +62,7 @@ def test_mean_and_covariance_are_those_of_the_true_speeds(cal, rng):
     assert pre.calibration_jacobian.shape == (2, 3, 3)
 
 
-@pytest.mark.parametrize("cal", [(1.0, 1.0, 0.0), (1.1, 0.93, 0.08)])
-def test_calibration_jacobian_with_kappa_matches_central_differences(cal, rng):
-    speeds = _speeds(rng, 200, turn=2.5)      # the second interval turns by more than pi
-    kf = [0, 60, 200]
-    pre = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal)
-    h = 1e-6
-    for col in range(3):
-        step = np.zeros(3)
-        step[col] = h
-        hi = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal + step)
-        lo = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal - step)
-        for k in range(2):
-            mean = gtsam.Pose2(*pre.delta_pose[k])
-            num = (mean.localCoordinates(gtsam.Pose2(*hi.delta_pose[k]))
-                   - mean.localCoordinates(gtsam.Pose2(*lo.delta_pose[k]))) / (2 * h)
-            np.testing.assert_allclose(pre.calibration_jacobian[k, :, col], num, atol=1e-7)
+# the kappa column against central differences: test_factors.py, with (s, g)
 
 
 def test_without_kappa_the_first_two_columns_are_unchanged(rng):

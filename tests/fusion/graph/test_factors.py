@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 from gtsam.utils.numerical_derivative import numericalDerivative11
+from preintegration_speeds import DT, PHI
+from preintegration_speeds import speeds as _speeds
 
 from fusion.exceptions import (
     EmptyIntervalError,
@@ -47,15 +49,6 @@ from lti_motion.arx import ArxFit
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import integrate_poses
 from lti_motion.model import MotionModel
-
-DT = 0.015
-PHI = np.array([[1e-4, 2e-5], [2e-5, 5e-3]])
-
-
-def _speeds(rng, n, *, turn=0.8):
-    t = np.arange(n) * DT
-    return np.column_stack([0.2 + 0.05 * rng.standard_normal(n),
-                            turn * np.sin(t / 0.7) + 0.2 * rng.standard_normal(n)])
 
 
 def _relative(poses, i, j):
@@ -146,14 +139,15 @@ def test_covariance_is_symmetric_positive_definite_even_at_rest():
         assert np.linalg.eigvalsh(cov).min() > 0
 
 
-@pytest.mark.parametrize("cal", [(1.0, 1.0), (1.1, 0.93)])
+@pytest.mark.parametrize("cal", [(1.0, 1.0), (1.1, 0.93),
+                                 (1.0, 1.0, 0.0), (1.1, 0.93, 0.08)])   # (s, g[, kappa])
 def test_calibration_jacobian_matches_central_differences(cal, rng):
     speeds = _speeds(rng, 200, turn=2.5)      # the second interval turns by more than pi
     kf = [0, 60, 200]
     pre = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal)
     h = 1e-6
-    for col in range(2):
-        step = np.zeros(2)
+    for col in range(len(cal)):
+        step = np.zeros(len(cal))
         step[col] = h
         hi = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal + step)
         lo = preintegrate(speeds, DT, keyframes=kf, speed_covariance=PHI, calibration=cal - step)
