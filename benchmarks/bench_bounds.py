@@ -31,15 +31,13 @@ Run ``python -m benchmarks bounds --json out/bench-bounds.json``.
 
 from __future__ import annotations
 
-import importlib.util
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-from benchmarks.harness import Figure, benchmark
+from benchmarks.harness import Figure, benchmark, load_example
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
@@ -65,15 +63,6 @@ class _Unbounded(ModelEKF):
     """The model EKF with the bounds bypassed: the shared gated update alone (as before)."""
 
     _gated = GatedUpdates._gated
-
-
-def _example():
-    path = Path(__file__).resolve().parents[1] / "examples" / "ekf_plugin.py"
-    spec = importlib.util.spec_from_file_location("ekf_plugin_example", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None,
@@ -163,7 +152,7 @@ def _mean_spread(values: list[float]) -> tuple[float, float]:
 
 @benchmark("bounds")
 def bounds() -> list[Figure]:
-    example = _example()
+    example = load_example("ekf_plugin")
     model = example.calibrate_model()
     acc = _accuracy(example, model)
     for name, values in acc.items():

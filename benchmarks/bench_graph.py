@@ -34,7 +34,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from benchmarks.harness import Figure, benchmark, median_seconds
+from benchmarks.harness import Figure, benchmark, load_example, median_seconds
 from drivers.sim.config import get_preset
 from fusion.graph.factors import observe_landmarks
 from fusion.graph.preintegration import Preintegrated, preintegrate, preintegrate_model
@@ -48,18 +48,6 @@ N_KEYFRAMES = int(os.environ.get("BENCH_GRAPH_KEYFRAMES", "10000"))
 EVERY = 33
 #: A 30 m x 30 m hall with a marker every 3 m (121 markers).
 FIELD_HALF_WIDTH_M = 15.0
-
-
-def _example():
-    from importlib import util
-    from pathlib import Path
-
-    spec = util.spec_from_file_location(
-        "factor_graph_example", Path(__file__).resolve().parents[1] / "examples" /
-        "factor_graph.py")
-    mod = util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _encoder_odometry(y: np.ndarray, dt_s: float, keyframes: np.ndarray) -> Preintegrated:
@@ -97,7 +85,7 @@ def _timed(fn: Callable[[], object]) -> float:
 
 @benchmark("graph")
 def graph() -> list[Figure]:
-    ex = _example()
+    ex = load_example("factor_graph")
     rng = np.random.default_rng(0)
     n = 1_000_000
     speeds = np.column_stack([0.25 + 0.05 * rng.standard_normal(n), rng.standard_normal(n)])

@@ -25,14 +25,12 @@ Run ``python -m benchmarks gyro --json out/bench-gyro.json``.
 
 from __future__ import annotations
 
-import importlib.util
 import statistics
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from benchmarks.harness import Figure, benchmark
+from benchmarks.harness import Figure, benchmark, load_example
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
@@ -45,15 +43,6 @@ N_RUNS, SEED0, DURATION_S, REST_S = 10, 300, 60.0, 1.0
 DENSITY = 0.005                   # rad/s/sqrt(Hz)
 START = (2.5, 1.3, 0.0)
 WORSE_RAD = 0.003
-
-
-def _example():
-    path = Path(__file__).resolve().parents[1] / "examples" / "ekf_plugin.py"
-    spec = importlib.util.spec_from_file_location("ekf_plugin_example", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def gyro_drives(example, *, floor: str, bias_rad_s: float, seed0: int = SEED0,
@@ -140,7 +129,7 @@ SCENARIOS = (
 
 @benchmark("gyro")
 def gyro() -> list[Figure]:
-    example = _example()
+    example = load_example("ekf_plugin")
     model = example.calibrate_model()
     figures = []
     for tag, floor, bias, rest_s, diameter, scales in SCENARIOS:

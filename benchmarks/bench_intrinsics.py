@@ -284,6 +284,20 @@ def online_scores(errors: np.ndarray, intrinsics: OdometryIntrinsics, truth_rati
     return np.array(conv), np.array(final)
 
 
+def writeback_closures(params: RobotParams, model, learned: list[OdometryIntrinsics],
+                       seeds: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Closure offsets [m] of the EKF without landmarks on the route again, on seeds
+    ``seed + WRITEBACK_SEED_OFFSET`` (new slip): each run's learned intrinsics written into
+    the model (``MotionModel.with_intrinsics``), and the model as it was."""
+    written = np.array([drive_route(params, EkfEstimator(model.with_intrinsics(k)),
+                                    seeds=[seed + WRITEBACK_SEED_OFFSET],
+                                    floor=FLOOR).closure_offset_m[0]
+                        for seed, k in zip(seeds, learned, strict=True)])
+    symmetric = drive_route(params, EkfEstimator(model), floor=FLOOR,
+                            seeds=[s + WRITEBACK_SEED_OFFSET for s in seeds]).closure_offset_m
+    return written, symmetric
+
+
 def _route_end(res) -> np.ndarray:
     """Each seed's periods of the route after the anchoring frame, up to where its true pose
     stopped changing (the length of its :attr:`LearningEkf.errors`)."""
@@ -325,13 +339,7 @@ def online_figures(seeds: list[int]) -> list[Figure]:
                                   scales=HELD_RATIO))
     learned = [model.encoder_intrinsics.corrected(*errors[ends[i] - 1, i])
                for i in range(len(seeds))]
-    # each run's model drives the route again, no landmarks, on another seed (new slip)
-    written = np.array([drive_route(params, EkfEstimator(model.with_intrinsics(k)),
-                                    seeds=[seed + WRITEBACK_SEED_OFFSET],
-                                    floor=FLOOR).closure_offset_m[0]
-                        for seed, k in zip(seeds, learned, strict=True)])
-    symmetric = drive_route(params, EkfEstimator(model), floor=FLOOR,
-                            seeds=[s + WRITEBACK_SEED_OFFSET for s in seeds]).closure_offset_m
+    written, symmetric = writeback_closures(params, model, learned, seeds)
     return [
         Figure("intrinsics.online_ratio_converged_s", float(np.median(conv)), "s", target=60.0,
                better="lower"),

@@ -50,18 +50,18 @@ from benchmarks.bench_intrinsics import (
     FLOOR,
     REPEATS,
     ROUTE_SEEDS,
-    WRITEBACK_SEED_OFFSET,
     _route_end,
     asymmetric_robot,
     online_scores,
     straight_line_truth,
+    writeback_closures,
 )
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive
 from drivers.sim.simulator import Simulator
-from lti_motion.app.route import ROUTE_LANDMARKS, EkfEstimator, drive_route
+from lti_motion.app.route import ROUTE_LANDMARKS, drive_route
 from lti_motion.app.route_smoother import ROUTE_SMOOTHER_OPTIONS, SmootherEstimator
 from lti_motion.calibration import CalibrationPlan
 
@@ -148,12 +148,7 @@ def smoother_figures(seeds: list[int]) -> list[Figure]:
                                   landmarks_until_s=half_s))
     half_sg = route(LearningSmoother(model, landmarks=ROUTE_LANDMARKS, options=sg,
                                      landmarks_until_s=half_s))
-    written = np.array([drive_route(params, EkfEstimator(model.with_intrinsics(k)),
-                                    seeds=[seed + WRITEBACK_SEED_OFFSET],
-                                    floor=FLOOR).closure_offset_m[0]
-                        for seed, k in zip(seeds, learned, strict=True)])
-    symmetric = drive_route(params, EkfEstimator(model), floor=FLOOR,
-                            seeds=[s + WRITEBACK_SEED_OFFSET for s in seeds]).closure_offset_m
+    written, symmetric = writeback_closures(params, model, learned, seeds)
     default = get_preset("create2")
     own = str(default.floor)
     d_model = _model(default, own)

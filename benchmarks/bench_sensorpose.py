@@ -28,15 +28,12 @@ The spread (standard deviation over the runs) is printed to stderr for the recor
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from dataclasses import replace
-from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 
-from benchmarks.harness import Figure, benchmark
+from benchmarks.harness import Figure, benchmark, load_example
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from fusion.sensor_pose import CENTRED
@@ -47,18 +44,6 @@ N_RUNS, DURATION_S, SEED = 16, 30.0, 5
 AHEAD_M = 0.15
 
 
-def _example() -> ModuleType:
-    name = "aruco_end_to_end_example"
-    if name in sys.modules:
-        return sys.modules[name]
-    path = Path(__file__).resolve().parents[1] / "examples" / "aruco_end_to_end.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 def mount_runs(*, n_runs: int = N_RUNS, duration_s: float = DURATION_S, seed: int = SEED
                ) -> dict[str, np.ndarray]:
     """Per-run EKF closure error and RMS [m] and gated share, per camera variant.
@@ -66,7 +51,7 @@ def mount_runs(*, n_runs: int = N_RUNS, duration_s: float = DURATION_S, seed: in
     Keys ``"{variant}_{figure}"``, variants ``centred``, ``ahead`` and ``ignored`` (the
     ``ahead`` detections with their mount dropped), figures ``closure``, ``rms``, ``gated``.
     """
-    ex = _example()
+    ex = load_example("aruco_end_to_end")
     model = ex.load_ekf_example().calibrate_model()
     sim = Simulator("create2", n_robots=n_runs, seed=seed, room=Room.box(ex.ROOM_M, ex.ROOM_M),
                     initial_pose=ex.START_POSE)

@@ -21,13 +21,17 @@ Record format (one JSON object per figure; stable, other tools read it):
 
 from __future__ import annotations
 
+import importlib.util
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
+from types import ModuleType
 from typing import Literal
 
-__all__ = ["REGISTRY", "Figure", "benchmark", "median_seconds"]
+__all__ = ["REGISTRY", "Figure", "benchmark", "load_example", "median_seconds"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +104,16 @@ def median_seconds(fn: Callable[[], object], *, repeat: int = 7, warmup: int = 1
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def load_example(name: str) -> ModuleType:
+    """``examples/NAME.py`` as a module (once per process, kept in ``sys.modules`` as
+    ``NAME_example``), for benchmarks that drive the examples' helpers."""
+    key = f"{name}_example"
+    if key not in sys.modules:
+        path = Path(__file__).resolve().parents[1] / "examples" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(key, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[key] = module
+        spec.loader.exec_module(module)
+    return sys.modules[key]

@@ -5,9 +5,9 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
+from graph_scenes import DT, PHI, ring_sightings
+from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
-from preintegration_speeds import DT, PHI
-from preintegration_speeds import speeds as _speeds
 
 from fusion.ekf.intrinsics_estimate import intrinsics_estimate
 from fusion.exceptions import GraphInputError
@@ -25,9 +25,7 @@ from fusion.graph.smoother import (
     calibration_intrinsics_estimate,
     smooth_batch,
 )
-from fusion.landmark_map import LandmarkMap
 from fusion.noise import ScaleErrors
-from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import ShapeError
 from lti_motion.fir import FirFit
 from lti_motion.intrinsics import OdometryIntrinsics
@@ -239,16 +237,7 @@ def _ratio_drive(n_intervals, cal):
     truth = compose_motions(preintegrate(_true_speeds(speeds, cal), 0.01, keyframes=kf,
                                          speed_covariance=np.eye(2) * 1e-5).delta_pose,
                             initial_pose=np.zeros(3))
-    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    lm = LandmarkMap.from_arrays(np.arange(8), np.column_stack([3 * np.cos(angles),
-                                                                3 * np.sin(angles)]))
-    d = lm.xy_m[None, :, :] - truth[:, None, :2]
-    bearing = np.arctan2(d[..., 1], d[..., 0]) - truth[:, 2:3]
-    index = np.repeat(np.arange(len(truth)), 8)
-    obs = RangeBearing(index, np.tile(np.arange(8), len(truth)),
-                       np.hypot(d[..., 0], d[..., 1]).ravel(),
-                       np.arctan2(np.sin(bearing), np.cos(bearing)).ravel(),
-                       cov=np.broadcast_to(np.eye(2) * 1e-4, (len(index), 2, 2)))
+    obs, lm = ring_sightings(truth)
     return pre, obs, lm, truth
 
 

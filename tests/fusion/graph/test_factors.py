@@ -4,9 +4,9 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
+from graph_scenes import DT, PHI
+from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
-from preintegration_speeds import DT, PHI
-from preintegration_speeds import speeds as _speeds
 
 from fusion.exceptions import (
     EmptyIntervalError,

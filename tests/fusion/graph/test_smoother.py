@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import gtsam
 import numpy as np
 import pytest
+from graph_scenes import ring_sightings
 from scipy import stats
 
 from drivers.sim.config import Fault, get_preset
@@ -363,16 +364,7 @@ def _scaled_drive(n_intervals: int, *, scale: float):
     truth = compose_motions(preintegrate(speeds * [scale, 1.0], 0.01, keyframes=kf,
                                          speed_covariance=np.eye(2) * 1e-5).delta_pose,
                             initial_pose=np.zeros(3))
-    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    lm = LandmarkMap.from_arrays(np.arange(8), np.column_stack([3 * np.cos(angles),
-                                                                3 * np.sin(angles)]))
-    d = lm.xy_m[None, :, :] - truth[:, None, :2]
-    bearing = np.arctan2(d[..., 1], d[..., 0]) - truth[:, 2:3]
-    index = np.repeat(np.arange(len(truth)), 8)
-    obs = RangeBearing(index, np.tile(np.arange(8), len(truth)),
-                       np.hypot(d[..., 0], d[..., 1]).ravel(),
-                       np.arctan2(np.sin(bearing), np.cos(bearing)).ravel(),
-                       cov=np.broadcast_to(np.eye(2) * 1e-4, (len(index), 2, 2)))
+    obs, lm = ring_sightings(truth)
     return pre, obs, lm
 
 
