@@ -1,7 +1,9 @@
 """Synthetic drives for the preintegration, factor and smoother tests (tests/fusion/graph)."""
 
+import gtsam
 import numpy as np
 
+from fusion.graph.factors import calibration_key, pose_key
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
 
@@ -31,3 +33,17 @@ def ring_sightings(truth: np.ndarray) -> tuple[RangeBearing, LandmarkMap]:
                        np.arctan2(np.sin(bearing), np.cos(bearing)).ravel(),
                        cov=np.broadcast_to(np.eye(2) * 1e-4, (len(index), 2, 2)))
     return obs, lm
+
+
+def factor_values(pre, k: int, rng: np.random.Generator, *, cal) -> gtsam.Values:
+    """Values for a calibrated motion factor of interval ``k`` of ``pre``: a random first
+    pose, the second where the preintegrated motion puts it plus a small offset, and the
+    calibration ``cal`` under ``calibration_key(0)``."""
+    wTi = gtsam.Pose2(*rng.uniform(-2, 2, 3))
+    wTj = wTi.compose(gtsam.Pose2(*pre.delta_pose[k])).compose(
+        gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
+    values = gtsam.Values()
+    values.insert(pose_key(0), wTi)
+    values.insert(pose_key(1), wTj)
+    values.insert(calibration_key(0), np.asarray(cal, dtype=float))
+    return values

@@ -5,7 +5,7 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
-from graph_scenes import DT, PHI, ring_sightings
+from graph_scenes import DT, PHI, factor_values, ring_sightings
 from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
@@ -97,17 +97,6 @@ def pre3(rng):
                         speed_covariance=PHI, calibration=(1.02, 0.97, 0.02))
 
 
-def _values(pre, k, rng, *, cal):
-    wTi = gtsam.Pose2(*rng.uniform(-2, 2, 3))
-    wTj = wTi.compose(gtsam.Pose2(*pre.delta_pose[k])).compose(
-        gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
-    values = gtsam.Values()
-    values.insert(pose_key(0), wTi)
-    values.insert(pose_key(1), wTj)
-    values.insert(calibration_key(0), np.asarray(cal, dtype=float))
-    return values
-
-
 def _check_jacobians(factor, values, keys, cov):
     a_whitened, _ = factor.linearize(values).jacobian()
     analytic = np.linalg.solve(np.linalg.cholesky(np.linalg.inv(cov)).T, a_whitened)
@@ -132,7 +121,7 @@ def _check_jacobians(factor, values, keys, cov):
 def test_calibrated_factor_with_kappa_jacobians_match_numerical_derivatives(pre3, k, cal, rng):
     f = calibrated_motion_factor(pre3, k, key_i=pose_key(0), key_j=pose_key(1),
                                  key_c=calibration_key(0))
-    values = _values(pre3, k, rng, cal=cal)
+    values = factor_values(pre3, k, rng, cal=cal)
     _check_jacobians(f, values, [pose_key(0), pose_key(1), calibration_key(0)],
                      pre3.covariance[k])
 

@@ -4,7 +4,7 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
-from graph_scenes import DT, PHI
+from graph_scenes import DT, PHI, factor_values
 from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
@@ -283,23 +283,12 @@ def test_plain_factor_is_zero_at_directly_integrated_poses(pre, rng):
         np.testing.assert_allclose(f.noiseModel().covariance(), pre.covariance[k], rtol=1e-9)
 
 
-def _values(pre, k, rng, *, cal):
-    wTi = gtsam.Pose2(*rng.uniform(-2, 2, 3))
-    wTj = wTi.compose(gtsam.Pose2(*pre.delta_pose[k])).compose(
-        gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
-    values = gtsam.Values()
-    values.insert(pose_key(0), wTi)
-    values.insert(pose_key(1), wTj)
-    values.insert(calibration_key(0), np.asarray(cal, dtype=float))
-    return values
-
-
 @pytest.mark.parametrize("k", [0, 1])
 @pytest.mark.parametrize("cal", [(1.02, 0.97), (1.12, 0.9)])
 def test_calibrated_factor_jacobians_match_numerical_derivatives(pre, k, cal, rng):
     f = calibrated_motion_factor(pre, k, key_i=pose_key(0), key_j=pose_key(1),
                                  key_c=calibration_key(0))
-    values = _values(pre, k, rng, cal=cal)
+    values = factor_values(pre, k, rng, cal=cal)
     sqrt_info = np.linalg.cholesky(np.linalg.inv(pre.covariance[k])).T
     a_whitened, _ = f.linearize(values).jacobian()
     analytic = np.linalg.solve(sqrt_info, a_whitened)          # unwhiten
@@ -317,7 +306,7 @@ def test_calibrated_factor_jacobians_match_numerical_derivatives(pre, k, cal, rn
 
 
 def test_calibrated_factor_equals_the_plain_one_at_the_linearisation_point(pre, rng):
-    values = _values(pre, 1, rng, cal=pre.calibration)
+    values = factor_values(pre, 1, rng, cal=pre.calibration)
     plain = motion_factor(pre, 1, key_i=pose_key(0), key_j=pose_key(1))
     cal = calibrated_motion_factor(pre, 1, key_i=pose_key(0), key_j=pose_key(1),
                                    key_c=calibration_key(0))
@@ -327,7 +316,7 @@ def test_calibrated_factor_equals_the_plain_one_at_the_linearisation_point(pre, 
 
 
 def test_pure_error_function_agrees_with_the_factor(pre, rng):
-    values = _values(pre, 0, rng, cal=(1.05, 0.95))
+    values = factor_values(pre, 0, rng, cal=(1.05, 0.95))
     f = calibrated_motion_factor(pre, 0, key_i=pose_key(0), key_j=pose_key(1),
                                  key_c=calibration_key(0))
     jac = [None, None, None]
@@ -452,7 +441,7 @@ def test_vectorised_pose2_log_and_its_derivative_match_gtsam(pose):
 
 
 def test_pure_error_equals_gtsams_between_and_logmap(pre, rng):
-    values = _values(pre, 1, rng, cal=(1.05, 0.95))
+    values = factor_values(pre, 1, rng, cal=(1.05, 0.95))
     wTi, wTj = values.atPose2(pose_key(0)), values.atPose2(pose_key(1))
     c = values.atPoint2(calibration_key(0))
     m_inv = gtsam.Pose2(*pre.delta_pose[1]).inverse()
