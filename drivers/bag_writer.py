@@ -274,13 +274,16 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     storage: Storage = "mcap",
                     truth: Literal["pose", "tf", "tf_chain"] = "pose",
                     gyro_noise_density_rad_s_sqrt_hz: float | None = None,
-                    imu_topic: str = "/imu/data") -> Path:
+                    imu_topic: str = "/imu/data", joint_states: bool = True) -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
     command of frame ``k`` (period ``k``) is stamped at the start of its period
     on the robot's clock, ``t_s[k] - dt_s``; wheel angles are the unwrapped
-    counts over ``ticks_per_rad``, stamped with the frame times. A gyro's
+    counts over ``ticks_per_rad``, stamped with the frame times. ``/odom`` holds
+    the encoder odometry, as ``diff_drive_controller`` publishes it: the pose
+    integrated from the wheel travel and the twist, the body speeds over the
+    period since the last received frame. A gyro's
     reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
     ``imu_topic`` stamped mid-period, ``t_s[k] - dt_s / 2``, as
     :meth:`lti_motion.recording.Recording.from_frame_log` stamps it; a
@@ -310,6 +313,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         Woodman 2007, section 3.2.1), else 0 ("unknown").
     imu_topic : str
         Where the gyro goes (with a gyro in the drive).
+    joint_states : bool
+        Write the wheel angles on ``/joint_states``; ``False`` leaves them out, as
+        from a robot that publishes only its odometry.
 
     Returns
     -------
@@ -343,13 +349,17 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     cmd_ns = t_ns - round(log.dt_s * 1e9)
     travel = tick_deltas(log.ticks[rows], axis=0, counter_bits=log.counter_bits) * (
         wheel_radius_m / ticks_per_rad)
-    odom = integrate_poses(body_from_wheel(travel, wheel_base_m=wheel_base_m), 1.0)
+    body_m = body_from_wheel(travel, wheel_base_m=wheel_base_m)
+    odom = integrate_poses(body_m, 1.0)
+    twist = np.zeros((len(rows), 2))            # (v [m/s], w [rad/s]) since the last frame
+    twist[1:] = body_m / (np.diff(rows) * log.dt_s)[:, None]
     with _open_bag(path, storage) as bag:
         t, out = bag.types, []
         for topic, msgtype in (("/cmd_vel", "geometry_msgs/msg/Twist"),
                                ("/joint_states", "sensor_msgs/msg/JointState"),
                                ("/odom", "nav_msgs/msg/Odometry")):
-            bag.topic(topic, msgtype)
+            if joint_states or topic != "/joint_states":
+                bag.topic(topic, msgtype)
         if log.true_pose is not None and truth == "pose":
             bag.topic("/ground_truth", "geometry_msgs/msg/PoseStamped")
         elif log.true_pose is not None:
@@ -359,15 +369,16 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                 for k in range(1, len(log))]
         empty = np.zeros(0)
         for j, k in enumerate(rows):
-            out.append((t_ns[k], "/joint_states", t["sensor_msgs/msg/JointState"](
-                header=bag.header(t_ns[k], "base_link"), name=list(joints),
-                position=angles[k].copy(), velocity=empty, effort=empty)))
+            if joint_states:
+                out.append((t_ns[k], "/joint_states", t["sensor_msgs/msg/JointState"](
+                    header=bag.header(t_ns[k], "base_link"), name=list(joints),
+                    position=angles[k].copy(), velocity=empty, effort=empty)))
             out.append((t_ns[k], "/odom", t["nav_msgs/msg/Odometry"](
                 header=bag.header(t_ns[k], "odom"), child_frame_id="base_link",
                 pose=t["geometry_msgs/msg/PoseWithCovariance"](
                     pose=bag.pose(*odom[j]), covariance=np.zeros(36)),
                 twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=bag.twist(0.0, 0.0), covariance=np.zeros(36)))))
+                    twist=bag.twist(*twist[j]), covariance=np.zeros(36)))))
             if log.true_pose is not None and truth == "pose":
                 out.append((t_ns[k], "/ground_truth", t["geometry_msgs/msg/PoseStamped"](
                     header=bag.header(t_ns[k], "world"), pose=bag.pose(*log.true_pose[k]))))

@@ -8,7 +8,11 @@ runs as it does on a log (``docs/guide_ros_bags.md``):
 - :func:`calibrate_from_bag`: the ARX model from the whole drive (commands
   against the wheel-angle speeds; the last 30 % held out to choose order and
   delay). A bag holds no rotation in place next to a wall, so the encoder scale
-  is the nominal one, ``wheel_radius_m / ticks_per_rad``;
+  is the nominal one, ``wheel_radius_m / ticks_per_rad``. A bag without
+  ``JointState`` wheel angles but with ``nav_msgs/Odometry`` (a robot that
+  publishes only its odometry, as ``diff_drive_controller`` does) is calibrated
+  on the odometry's twist as body speeds instead (:func:`odometry_recording`,
+  then :func:`lti_motion.offline.calibrate_recording`, as ``calibrate --log``);
 - :func:`replay_bag`: the estimators against the bag's reference poses
   (``PoseStamped``) if it has any; TUM files, plots, and with ``out_bag`` the EKF's
   estimates as ``nav_msgs/Odometry`` with covariance in a new bag;
@@ -36,7 +40,7 @@ import numpy as np
 
 from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
 from drivers.bag_writer import BagAlarm, write_estimates_bag
-from drivers.bags import read_bag
+from drivers.bags import TOPIC_TYPES, bag_topics, read_bag
 from drivers.exceptions import BagError
 from fusion.monitoring.monitored_filter import FrameResult
 from fusion.monitoring.residual import AlarmEvent
@@ -45,11 +49,13 @@ from lti_motion.app.monitor import format_alarm, monitor_frames
 from lti_motion.app.replay import ReplayResult, run_replay
 from lti_motion.app.replay_sources import source_from_frame_log
 from lti_motion.calibration import speeds_from_log
+from lti_motion.clocks import median_period_s
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx
+from lti_motion.recording import Recording
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_log", "monitor_bag",
-           "plot_bag_fit", "replay_bag"]
+           "odometry_recording", "plot_bag_fit", "replay_bag"]
 
 
 @dataclass(frozen=True)
@@ -163,6 +169,42 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
                     m_per_tick=log.meta["m_per_tick"], floor=floor, validation=validation,
                     dc_gain="wheel_servo")
     return model, log
+
+
+def odometry_recording(path: str | os.PathLike, *,
+                       options: BagOptions | None = None) -> Recording | None:
+    """The drive as body speeds from the bag's ``nav_msgs/Odometry`` twist, for a bag that
+    has no ``sensor_msgs/JointState`` wheel angles; ``None`` when it has them (or no
+    Odometry: :func:`calibrate_from_bag` then says what is missing).
+
+    The twist ``(linear.x [m/s], angular.z [rad/s])`` of each message is the robot's own
+    estimate of its body speeds over the time since its last message
+    (``diff_drive_controller``'s ``/odom``); the commands are the bag's Twist topic. Both
+    keep their stamps; :func:`lti_motion.resample.on_grid` puts them on the sensor
+    period's grid, as for any recording.
+
+    Raises
+    ------
+    FileNotFoundError, BagError
+        The reader's errors; a bag with odometry and no commands.
+    """
+    opt = options or BagOptions()
+    types = bag_topics(path).values()
+    if (opt.topics.get("wheels") or TOPIC_TYPES["wheels"][0] in types
+            or not any(t in TOPIC_TYPES["odom"] for t in types)):
+        return None
+    rec = read_bag(path, kinds=("cmd", "odom"), cmd_topic=opt.topics.get("cmd"),
+                   odom_topic=opt.topics.get("odom"))
+    if rec.cmd is None:
+        raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
+                       "commands; calibration needs what was commanded (record /cmd_vel)")
+    t_s = (rec.odom.t_ns - rec.start_ns) * 1e-9
+    return Recording.from_streams(
+        wheel_t_s=t_s, body_speeds=rec.odom.values[:, 3:5],
+        dt_s=opt.dt_s if opt.dt_s is not None else median_period_s(t_s),
+        cmd_t_s=(rec.cmd.t_ns - rec.start_ns) * 1e-9, cmd_body=rec.cmd.values,
+        meta={"source": "ROS bag", "bag": str(Path(path)),
+              "topics": {"cmd": rec.cmd.topic, "odom": rec.odom.topic}})
 
 
 def plot_bag_fit(model: MotionModel, log: FrameLog, path: str | os.PathLike, *,

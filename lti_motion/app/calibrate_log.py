@@ -20,7 +20,7 @@ from lti_motion.offline import OfflineCalibration, calibrate_recording, rotation
 from lti_motion.persistence import atomic_write
 from lti_motion.recording import Recording
 
-__all__ = ["RobotDescription", "run_calibrate_log"]
+__all__ = ["RobotDescription", "run_calibrate_log", "run_calibrate_recording"]
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,14 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
         One line each, at the command-line user's level (the CLI exits 2);
         nothing is written.
     """
-    rec = load_recording(path)
+    return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor)
+
+
+def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Path,
+                            floor: str | None = None
+                            ) -> tuple[OfflineCalibration, list[str]]:
+    """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
+    odometry, :func:`lti_motion.app.bag_commands.odometry_recording`)."""
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,

@@ -111,15 +111,27 @@ def _bag_options(args: argparse.Namespace):
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
+    from lti_motion.app.bag_commands import calibrate_from_bag, odometry_recording, plot_bag_fit
+    from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.app.plots import plot_order_selection
 
     out = Path(args.out)
-    from lti_motion.app.calibrate_run import nominal_wheel_base_m
-
     described = load_robot(args.sim) if args.sim else None
+    options = _bag_options(args)
+    odometry = odometry_recording(args.bag, options=options)
+    if odometry is not None:             # no wheel angles: the robot's own odometry
+        from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_recording
+
+        print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
+              f"nav_msgs/Odometry twist on {odometry.meta['topics']['odom']} as body speeds")
+        robot = RobotDescription(wheel_base_m=nominal_wheel_base_m(args, described),
+                                 m_per_tick=None, wheel_radius_m=None,
+                                 source="the robot's odometry (body speeds)")
+        for line in run_calibrate_recording(odometry, robot, out=out, floor=args.floor)[1]:
+            print(line)
+        return 0
     model, log = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                    options=_bag_options(args), floor=args.floor)
+                                    options=options, floor=args.floor)
     out.mkdir(parents=True, exist_ok=True)
     path = model.save(out / "model_arx.json")
     print(f"calibrated from {args.bag}: {len(log)} frames of {log.dt_s * 1e3:g} ms "
