@@ -249,7 +249,7 @@ def _check_pose_inputs(
             f"and dt {dt.shape} do not broadcast"
         ) from None
     for name, arr in (("pose", pose), ("v_m_s", v), ("w_rad_s", w), ("dt_s", dt)):
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():      # the method: no np.all wrapper (per-step callers)
             raise NonFiniteError(f"{name} contains NaN or infinite values; clean the input first")
     return pose, v, w, dt
 

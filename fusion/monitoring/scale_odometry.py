@@ -101,7 +101,7 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     x, P : ndarray
         The predicted states and covariances (new arrays).
     """
-    missing = ~np.all(np.isfinite(tick_deltas), axis=1)
+    missing = ~np.isfinite(tick_deltas).all(axis=1)
     d = np.where(missing[:, None], 0.0, tick_deltas)
     ds, dth = intrinsics.body_motion(d).T                         # [m], [rad]
     gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth + x[:, KAPPA] * ds   # eq. 1
