@@ -37,6 +37,7 @@ __all__ = [
     "integrate_poses",
     "pose_step",
     "pose_step_jacobians",
+    "pose_step_terms",
     "sinc_and_derivative",
     "wheel_from_body",
     "wheel_from_body_matrix",
@@ -249,7 +250,7 @@ def _check_pose_inputs(
             f"and dt {dt.shape} do not broadcast"
         ) from None
     for name, arr in (("pose", pose), ("v_m_s", v), ("w_rad_s", w), ("dt_s", dt)):
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():      # the method: no np.all wrapper (per-step callers)
             raise NonFiniteError(f"{name} contains NaN or infinite values; clean the input first")
     return pose, v, w, dt
 
@@ -359,7 +360,52 @@ def pose_step_jacobians(
     >>> (F_pose[:, 2] + 0.0).tolist(), (F_speed + 0.0).tolist()
     ([0.0, 0.5, 1.0], [[0.5, 0.0], [0.0, 0.125], [0.0, 0.5]])
     """
+    return _jacobians(*_check_pose_inputs(pose, v_m_s, w_rad_s, dt_s))[:2]
+
+
+def pose_step_terms(
+    pose: np.ndarray,
+    v_m_s: np.ndarray | float,
+    w_rad_s: np.ndarray | float,
+    dt_s: np.ndarray | float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`pose_step` and :func:`pose_step_jacobians` in one evaluation.
+
+    One input check and one evaluation of ``sin(h)/h``, ``cos m`` and ``sin m``
+    for both (per-step filter code); the values are those of the two functions,
+    bit for bit (halving is exact away from underflow: ``(w dt) / 2 = (w / 2) dt``).
+
+    Returns
+    -------
+    pose_next : ndarray, shape broadcast(...) + (3,)
+        As :func:`pose_step`.
+    F_pose, F_speed : ndarray, shapes (..., 3, 3) and (..., 3, 2)
+        As :func:`pose_step_jacobians`.
+
+    Raises
+    ------
+    ShapeError, NonFiniteError
+        As :func:`pose_step`.
+
+    Examples
+    --------
+    >>> pose, F_pose, F_speed = pose_step_terms(np.zeros(3), 1.0, 0.0, 0.5)
+    >>> pose.tolist(), (F_speed[:, 0] + 0.0).tolist()
+    ([0.5, 0.0, 0.0], [0.5, 0.0, 0.0])
+    """
     pose, v, w, dt = _check_pose_inputs(pose, v_m_s, w_rad_s, dt_s)
+    f_pose, f_speed, (w, dt, chord, cos_m, sin_m) = _jacobians(pose, v, w, dt)
+    pose = np.broadcast_to(pose, (*chord.shape, 3))
+    theta = pose[..., 2]
+    pose_next = np.stack(               # paper eq. 11, chord form, as pose_step
+        [pose[..., 0] + chord * cos_m, pose[..., 1] + chord * sin_m, theta + w * dt], axis=-1)
+    return pose_next, f_pose, f_speed
+
+
+def _jacobians(pose: np.ndarray, v: np.ndarray, w: np.ndarray, dt: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+    """:func:`pose_step_jacobians` of checked inputs, and the pieces :func:`pose_step_terms`
+    shares: ``(w, dt)`` broadcast, the chord, ``cos m`` and ``sin m``."""
     shape = np.broadcast_shapes(pose.shape[:-1], v.shape, w.shape, dt.shape)
     v, w, dt = (np.broadcast_to(a, shape) for a in (v, w, dt))
     half = 0.5 * w * dt
@@ -383,7 +429,7 @@ def pose_step_jacobians(
     f_speed[..., 0, 1] = k * (ds * cos_m - s * sin_m)
     f_speed[..., 1, 1] = k * (ds * sin_m + s * cos_m)
     f_speed[..., 2, 1] = dt
-    return f_pose, f_speed
+    return f_pose, f_speed, (w, dt, chord, cos_m, sin_m)
 
 
 def integrate_poses(

@@ -531,7 +531,9 @@ def propagate_covariance(P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> np.ndar
     """
     out = F @ P @ F.T
     out += Q
-    return 0.5 * (out + out.T)
+    sym = out + out.T
+    sym *= 0.5
+    return sym
 
 
 def innovation_covariance(P: np.ndarray, H: np.ndarray, R: np.ndarray) -> np.ndarray:

@@ -301,6 +301,8 @@ class GatedUpdates:
         FilterOptionError, UnknownLandmarkError
             As :meth:`update_landmark`.
         """
+        if not len(sightings):                   # most frames see no landmark
+            return []
         mount = sightings.sensor_pose
         return [self.update_landmark(lid, z, cov=cov, t_s=t_s, sensor_pose=mount)
                 for lid, z, cov in sightings]

@@ -53,7 +53,6 @@ from fusion.monitoring.scale import ScaleMonitor
 from fusion.noise import GyroNoise, LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -176,6 +175,7 @@ class MonitoredFilter:
         if model.m_per_tick is None:
             raise MissingEncoderScaleError.needed_by("the monitor")
         self.model = model
+        self._wheel_base_m = float(model.wheel_base_m)
         if options is None:
             options = (nominal.options(model.dt_s) if nominal is not None
                        else MonitorOptions(dt_s=model.dt_s))
@@ -217,6 +217,25 @@ class MonitoredFilter:
                 alarms: list[AlarmEvent]) -> FrameResult:
         ekf = self.ekf
         return FrameResult(ekf.t_s, ekf.pose, ekf.speeds, deltas, record, tuple(alarms))
+
+    def _deltas(self, now: np.ndarray) -> np.ndarray:
+        """Count changes since the last valid frame [ticks], (2,) floats:
+        :func:`lti_motion.odometry.tick_deltas`, in scalar arithmetic below 63-bit counters
+        (the filter's ring step; int64 and Python integers agree there). Runs every frame."""
+        ekf = self.ekf
+        if ekf.counter_bits >= 63:
+            return tick_deltas(np.stack([self._last_ticks, now]), axis=0,
+                               counter_bits=ekf.counter_bits)[0].astype(float)
+        (l0, r0), (l1, r1) = self._last_ticks.tolist(), now.tolist()
+        return np.array((ekf._step(l1 - l0), ekf._step(r1 - r0)), dtype=float)
+
+    def _predicted_wheels(self) -> np.ndarray:
+        """The filter's predicted (left, right) wheel speeds [m/s], (2,):
+        :func:`lti_motion.kinematics.wheel_from_body` of its speeds, ``v -/+ (b / 2) w``,
+        in scalar arithmetic (it runs every frame)."""
+        v, w = self.ekf.x[-2:].tolist()
+        half_base = 0.5 * self._wheel_base_m
+        return np.array((v - half_base * w, v + half_base * w))
 
     def step(self, ticks: np.ndarray | Sequence[int], cmd_m_s: np.ndarray | Sequence[float], *,
              valid: bool = True, sightings: RangeBearing | None = None,
@@ -270,13 +289,12 @@ class MonitoredFilter:
                 ekf.update_gyro(math.nan)           # a lost frame: the window starts again
             return self._result(np.zeros(2), None, [])
         now = np.asarray(ticks, np.int64)
-        deltas = tick_deltas(np.stack([self._last_ticks, now]), axis=0,
-                             counter_bits=ekf.counter_bits)[0].astype(float)
+        deltas = self._deltas(now)
         t = ekf.t_s
         # the stuck check compares the counts with the model's prediction, before the update
-        alarms = mon.update_counts(t, deltas, wheel_from_body(
-            ekf.speeds, wheel_base_m=self.model.wheel_base_m), cmd_m_s=cmd,
-            motor_current_a=motor_current_a, wheel_overcurrent=wheel_overcurrent)
+        alarms = mon.update_counts(t, deltas, self._predicted_wheels(), cmd_m_s=cmd,
+                                   motor_current_a=motor_current_a,
+                                   wheel_overcurrent=wheel_overcurrent)
         resets = ekf.n_resets
         record = ekf.update_encoders(now)
         alarms += mon.update_record(record)

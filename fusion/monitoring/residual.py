@@ -358,7 +358,7 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
     if nu.ndim != 1 or S.shape != (nu.size, nu.size):
         raise MeasurementShapeError(f"expected an innovation (m,) and covariance (m, m), got "
                                     f"{nu.shape} and {S.shape}")
-    if not np.allclose(S, S.T, rtol=1e-9, atol=1e-15):
+    if not _symmetric(S):
         raise CovarianceNotPositiveDefiniteError(f"innovation covariance is not symmetric: {S}")
     try:
         L = np.linalg.cholesky(S)
@@ -368,6 +368,17 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
             f"{np.linalg.eigvalsh(0.5 * (S + S.T))}); check the filter's P and R") from None
     # forward substitution with the lower-triangular factor
     return np.linalg.solve(L, nu)
+
+
+def _symmetric(S: np.ndarray) -> bool:
+    """``numpy.allclose(S, S.T, rtol=1e-9, atol=1e-15)``; for a finite 2 x 2 ``S`` the same
+    comparisons in scalar arithmetic (:func:`whiten` runs at every reading)."""
+    if S.shape == (2, 2):
+        (a, b), (c, d) = S.tolist()
+        if math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(d):
+            # numpy.isclose(x, y): |x - y| <= atol + rtol |y|, both ways round off the diagonal
+            return abs(b - c) <= 1e-15 + 1e-9 * abs(c) and abs(c - b) <= 1e-15 + 1e-9 * abs(b)
+    return bool(np.allclose(S, S.T, rtol=1e-9, atol=1e-15))
 
 
 def one_step_innovations(model: MotionModel, cmd_m_s: np.ndarray, speeds: np.ndarray
@@ -539,7 +550,7 @@ class ResidualMonitor:
             raise FilterOptionError(f"stream must be 'encoders' or 'landmark', got {stream!r}")
         nu = np.asarray(innovation, dtype=float)
         S = np.asarray(innovation_cov, dtype=float)
-        if not (np.all(np.isfinite(nu)) and np.all(np.isfinite(S))):
+        if not (np.isfinite(nu).all() and np.isfinite(S).all()):
             self.counts["missing"] += 1
             return []
         w = whiten(nu, S)
@@ -712,30 +723,25 @@ class ResidualMonitor:
         c = v if cmd_m_s is None else np.asarray(cmd_m_s, dtype=float)
         if c.shape != (2,):
             raise MeasurementShapeError(f"expected wheel commands (2,), got {c.shape}")
-        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(v)) and np.all(np.isfinite(c))):
+        if not (np.isfinite(d).all() and np.isfinite(v).all() and np.isfinite(c).all()):
             self.counts["missing"] += 1
             return []
+        c_l, c_r = c.tolist()
         if cmd_m_s is not None:
-            moving = bool(np.any(c != 0.0))
+            moving = c_l != 0.0 or c_r != 0.0
             if moving and self._at_rest:
                 self._start_t = t - self.options.dt_s     # the period began a frame ago
             self._at_rest = not moving
-        # the speed the command and the prediction agree on (Notes); v itself without commands
-        v = np.where(np.sign(v) == np.sign(c), np.minimum(np.abs(v), np.abs(c)), 0.0)
         opt = self.options
-        predicted_ticks = np.abs(v) * opt.dt_s / self.m_per_tick
-        # evidence only while the wheel is predicted to turn (half a tick a period or more):
-        # a wheel at rest keeps a flat count honestly
-        flat = (d == 0) & (predicted_ticks >= 0.5)
-        start = flat & (self._flat_n == 0)
-        self._flat_t0[start] = t - opt.dt_s            # the flat period began a frame ago
-        self._flat = np.where(flat, self._flat + predicted_ticks, 0.0)
-        self._flat_n = np.where(flat, self._flat_n + 1, 0)
-        self._wheel_check.update(flat, d, motor_current_a, wheel_overcurrent)
+        (d_l, d_r), (v_l, v_r) = d.tolist(), v.tolist()
+        flat = [self._flat_wheel(0, t, d_l, v_l, c_l), self._flat_wheel(1, t, d_r, v_r, c_r)]
+        self._wheel_check.update(np.array(flat), d, motor_current_a, wheel_overcurrent)
         raised = []
         if t - self._stuck_alarm_t >= opt.refractory_s:
-            for wheel in np.flatnonzero((self._flat >= opt.stuck_ticks)
-                                        & (self._flat_n >= opt.stuck_periods)):
+            for wheel in range(2):
+                if not (self._flat[wheel] >= opt.stuck_ticks
+                        and self._flat_n[wheel] >= opt.stuck_periods):
+                    continue
                 verdict = self._wheel_check.verdict(int(wheel))
                 if verdict is None:                 # a high current: wait for a stall
                     continue
@@ -745,6 +751,25 @@ class ResidualMonitor:
                 self._stuck_alarm_t = t
                 break
         return self._emit(raised)
+
+    def _flat_wheel(self, wheel: int, t: float, d: float, v: float, c: float) -> bool:
+        """One wheel's period of :meth:`update_counts`: whether its count stood while the
+        wheel surely turned, and the flat stretch's evidence [ticks] (scalar arithmetic: it
+        runs at every frame)."""
+        # the speed the command and the prediction agree on (Notes); v itself without commands
+        agreed = min(abs(v), abs(c)) if _sign(v) == _sign(c) else 0.0
+        predicted_ticks = agreed * self.options.dt_s / self.m_per_tick
+        # evidence only while the wheel is predicted to turn (half a tick a period or more):
+        # a wheel at rest keeps a flat count honestly
+        flat = d == 0 and predicted_ticks >= 0.5
+        if not flat:
+            self._flat[wheel], self._flat_n[wheel] = 0.0, 0
+            return False
+        if self._flat_n[wheel] == 0:
+            self._flat_t0[wheel] = t - self.options.dt_s   # the flat period began a frame ago
+        self._flat[wheel] += predicted_ticks
+        self._flat_n[wheel] += 1
+        return True
 
     # -- tests ---------------------------------------------------------------------------------
     def _allowed(self, st: _Stream, kind: AlarmKind, t: float) -> bool:
@@ -789,7 +814,8 @@ class ResidualMonitor:
     def _cusum(self, st: _Stream, t: float, w: np.ndarray) -> list[AlarmEvent]:
         if st.block_n == 0:
             st.block_t0 = t
-        st.block_sum += np.clip(w, -self.options.clip_sigma, self.options.clip_sigma)
+        clip = self.options.clip_sigma     # np.clip's values, without its wrapper's cost
+        st.block_sum += np.minimum(np.maximum(w, -clip), clip)
         st.block_n += 1
         if st.block_n < self.options.decimation:
             return []
@@ -831,3 +857,8 @@ class ResidualMonitor:
             if self.on_alarm is not None:
                 self.on_alarm(event)
         return raised
+
+
+def _sign(x: float) -> int:
+    """``numpy.sign`` of a finite float, as an int."""
+    return (x > 0) - (x < 0)

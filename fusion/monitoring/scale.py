@@ -502,7 +502,7 @@ class ScaleMonitor:
         if slot != self._slot:                               # staggered restarts
             self._slot = slot
             self._restart(slot % self.options.n_shadows, np.arange(n), t)
-        self.counts["missing"] += int((~np.all(np.isfinite(d), axis=1)).sum())
+        self.counts["missing"] += int((~np.isfinite(d).all(axis=1)).sum())
         self._predict(d)
         if observations is None:
             return []

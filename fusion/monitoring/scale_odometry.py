@@ -53,7 +53,7 @@ import numpy as np
 from fusion.noise import LandmarkNoise, SlipNoise
 from fusion.range_bearing import range_bearing_terms
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
+from lti_motion.kinematics import pose_step_terms, wrap_angle
 
 __all__ = [
     "KAPPA",
@@ -101,13 +101,13 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     x, P : ndarray
         The predicted states and covariances (new arrays).
     """
-    missing = ~np.all(np.isfinite(tick_deltas), axis=1)
+    missing = ~np.isfinite(tick_deltas).all(axis=1)
     d = np.where(missing[:, None], 0.0, tick_deltas)
     ds, dth = intrinsics.body_motion(d).T                         # [m], [rad]
     gs, gth = (1.0 + x[:, KV]) * ds, (1.0 + x[:, KW]) * dth + x[:, KAPPA] * ds   # eq. 1
-    f_pose, f_speed = pose_step_jacobians(x[:, :3], gs, gth, 1.0)
+    pose_next, f_pose, f_speed = pose_step_terms(x[:, :3], gs, gth, 1.0)
     x_new = x.copy()
-    x_new[:, :3] = pose_step(x[:, :3], gs, gth, 1.0)
+    x_new[:, :3] = pose_next
     F = np.zeros_like(P)
     F[:, :3, :3] = f_pose
     F[:, :3, KV] = f_speed[:, :, 0] * ds[:, None]                 # d pose / d k_v

@@ -11,6 +11,7 @@ from lti_motion.kinematics import (
     integrate_poses,
     pose_step,
     pose_step_jacobians,
+    pose_step_terms,
     wheel_from_body,
     wrap_angle,
 )
@@ -227,6 +228,20 @@ def test_jacobians_batch_shapes(rng):
     f_pose, f_speed = pose_step_jacobians(rng.normal(size=(2, 3, 3)), rng.normal(size=3), 0.2, 0.1)
     assert f_pose.shape == (2, 3, 3, 3)
     assert f_speed.shape == (2, 3, 3, 2)
+
+
+@pytest.mark.parametrize("dt", [1.0, 0.015, np.array([0.01, 0.02, 0.5])])
+def test_pose_step_terms_are_pose_step_and_jacobians_bit_for_bit(rng, dt):
+    # straight runs, turns on the series and on the closed-form branch, a batch broadcast
+    pose = rng.normal(size=(4, 3, 3)) * (1.0, 1.0, 3.0)
+    v = rng.normal(size=3) * 0.3
+    w = np.array([0.0, rng.normal() * 0.05, rng.normal() * 4.0])
+    nxt, f_pose, f_speed = pose_step_terms(pose, v, w, dt)
+    ref_pose, ref_speed = pose_step_jacobians(pose, v, w, dt)
+    assert np.array_equal(nxt, pose_step(pose, v, w, dt))
+    assert np.array_equal(f_pose, ref_pose) and np.array_equal(f_speed, ref_speed)
+    with pytest.raises(NonFiniteError, match="v_m_s"):
+        pose_step_terms(np.zeros(3), np.inf, 0.0, 0.1)
 
 
 def test_pose_shape_and_value_errors():
