@@ -59,6 +59,15 @@ from lti_motion.odometry import tick_deltas
 __all__ = ["FrameResult", "MonitoredFilter"]
 
 
+def _counts(ticks: np.ndarray | Sequence[int]) -> np.ndarray:
+    """A frame's raw counts as int64 ``(left, right)``, or a :class:`MeasurementShapeError`."""
+    counts = np.asarray(ticks, np.int64)
+    if counts.shape != (2,):
+        raise MeasurementShapeError(f"expected raw encoder counts of shape (2,) (left, "
+                                    f"right), got {counts.shape}")
+    return counts
+
+
 @dataclass(frozen=True)
 class FrameResult:
     """What one frame gave.
@@ -205,10 +214,7 @@ class MonitoredFilter:
         return self.monitor.events
 
     def _anchor(self, ticks: np.ndarray | Sequence[int]) -> np.ndarray:
-        first = np.asarray(ticks, np.int64)
-        if first.shape != (2,):
-            raise MeasurementShapeError(f"expected raw encoder counts of shape (2,) (left, "
-                                        f"right), got {first.shape}")
+        first = _counts(ticks)
         self.ekf = ModelEKF(self.model, initial_ticks=first, **self._ekf_args)
         self._last_ticks = first
         return first
@@ -273,6 +279,8 @@ class MonitoredFilter:
         ------
         FilterOptionError
             For a reading given to a filter built without ``gyro=``.
+        MeasurementShapeError
+            For counts that are not two numbers.
         """
         if yaw_rate_rad_s is not None and self._ekf_args["gyro"] is None:
             raise FilterOptionError("a yaw rate was given, but this monitored filter has no "
@@ -288,7 +296,7 @@ class MonitoredFilter:
             if gyro:
                 ekf.update_gyro(math.nan)           # a lost frame: the window starts again
             return self._result(np.zeros(2), None, [])
-        now = np.asarray(ticks, np.int64)
+        now = _counts(ticks)
         deltas = self._deltas(now)
         t = ekf.t_s
         # the stuck check compares the counts with the model's prediction, before the update

@@ -99,7 +99,10 @@ def test_bad_input_is_a_clear_error():
         MonitoredFilter(_model(m_per_tick=None))
     mf = MonitoredFilter(_model())
     with pytest.raises(MeasurementShapeError, match=r"shape \(2,\)"):
-        mf.step(np.zeros(3), np.zeros(2))
+        mf.step(np.zeros(3), np.zeros(2))             # the first frame anchors the counts
+    mf.step(np.zeros(2), np.zeros(2))
+    with pytest.raises(MeasurementShapeError, match=r"shape \(2,\).*\(3,\)"):
+        mf.step(np.zeros(3), np.zeros(2))             # and every later one
 
 
 def test_a_diverged_filter_resets_and_says_so_with_a_filter_reset_alarm():
