@@ -151,6 +151,7 @@ def run_wall_run(args: argparse.Namespace) -> int:
     from lti_motion.app.intrinsics_cli import write_into_model
     from lti_motion.exceptions import CurvedIntoWallError
     from lti_motion.logfile import save_log
+    from lti_motion.persistence import atomic_write
     from lti_motion.wall_run import calibrate_wall_run
     from lti_motion.wall_run_drive import wall_passes
 
@@ -184,7 +185,8 @@ def run_wall_run(args: argparse.Namespace) -> int:
               "heading_rad": list(cal.heading_rad), "wall_side": drive.wall_side,
               "intrinsics_in_use": known.as_dict(), "notes": list(cal.notes)}
     path = out / "wall_run.json"
-    path.write_text(json.dumps(result, indent=2) + "\n")
+    with atomic_write(path, text=True) as fh:       # never half-written
+        fh.write(json.dumps(result, indent=2) + "\n")
     written.append(path)
     if args.into_model:
         written.append(write_into_model(args.into_model, cal.intrinsics, out))
