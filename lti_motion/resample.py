@@ -81,7 +81,8 @@ class GridSignals:
     measured : ndarray of bool, shape (P,)
         ``False`` for periods inside a gap (speed spread from the next frame).
     yaw_rate_rad_s : ndarray, shape (P,), or None
-        Mean IMU yaw rate over each period [rad/s].
+        Mean IMU yaw rate over each period [rad/s]; NaN for a period reaching outside
+        the IMU's first and last stamps.
     true_pose : ndarray, shape (P, 3), or None
         Ground-truth pose at the end of each period.
     assignment : PeriodAssignment
@@ -134,11 +135,15 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
 
 
 def _integrate_at(stream: Stream, t_grid: np.ndarray) -> np.ndarray:
-    """Mean rate of a rate stream over each grid interval (trapezoid, then interpolate)."""
+    """Mean rate of a rate stream over each grid interval (trapezoid, then interpolate);
+    NaN for an interval reaching outside the stream's first and last stamps (no reading,
+    not a zero rate)."""
     t, v = stream.t_s, stream.values[:, 0]
     cum = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
     at = np.interp(t_grid, t, cum)
-    return np.diff(at) / np.diff(t_grid)
+    rate = np.diff(at) / np.diff(t_grid)
+    rate[(t_grid[:-1] < t[0]) | (t_grid[1:] > t[-1])] = np.nan
+    return rate
 
 
 def _frame_travel(rec: Recording, encoders: str) -> np.ndarray | None:

@@ -152,6 +152,10 @@ def test_yaw_rate_is_the_mean_over_each_period():
     mid = g.t_s - DT_S / 2
     inside = (g.t_s > imu_t[0] + DT_S) & (g.t_s < imu_t[-1])
     np.testing.assert_allclose(g.yaw_rate_rad_s[inside], np.sin(mid[inside]), atol=1e-4)
+    # a period reaching outside the IMU's stamps has no reading, not a zero rate
+    outside = (g.t_s - g.period_s < imu_t[0]) | (g.t_s > imu_t[-1])
+    assert outside.any() and np.isnan(g.yaw_rate_rad_s[outside]).all()
+    assert np.isfinite(g.yaw_rate_rad_s[~outside]).all()
 
 
 def test_speeds_from_log_matches_the_nominal_clock_on_a_clean_simulated_log():
