@@ -35,6 +35,21 @@ def ring_sightings(truth: np.ndarray) -> tuple[RangeBearing, LandmarkMap]:
     return obs, lm
 
 
+def group_values(pre, rng: np.random.Generator, cal) -> gtsam.Values:
+    """Values for a group factor over every interval of ``pre``: poses where the
+    preintegrated motions put them, each off by a small random offset, and ``cal`` under
+    ``calibration_key(0)``."""
+    values = gtsam.Values()
+    pose = gtsam.Pose2(*rng.uniform(-2, 2, 3))
+    for i in range(len(pre.delta_pose) + 1):
+        values.insert(pose_key(i), pose)
+        if i < len(pre.delta_pose):
+            pose = pose.compose(gtsam.Pose2(*pre.delta_pose[i])).compose(
+                gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
+    values.insert(calibration_key(0), np.asarray(cal, dtype=float))
+    return values
+
+
 def factor_values(pre, k: int, rng: np.random.Generator, *, cal) -> gtsam.Values:
     """Values for a calibrated motion factor of interval ``k`` of ``pre``: a random first
     pose, the second where the preintegrated motion puts it plus a small offset, and the

@@ -5,7 +5,7 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
-from graph_scenes import DT, PHI, factor_values, ring_sightings
+from graph_scenes import DT, PHI, factor_values, group_values, ring_sightings
 from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
@@ -130,14 +130,7 @@ def test_group_factor_with_kappa_jacobians_match_numerical_derivatives(rng):
     speeds = np.concatenate([_speeds(rng, 120, turn=1.5), np.tile([0.05, 2.0], (133, 1))])
     pre = preintegrate(speeds, DT, keyframes=[0, 50, 120, 253], speed_covariance=PHI,
                        calibration=(1.02, 0.97, -0.05))
-    values = gtsam.Values()
-    pose = gtsam.Pose2(*rng.uniform(-2, 2, 3))
-    for i in range(4):
-        values.insert(pose_key(i), pose)
-        if i < 3:
-            pose = pose.compose(gtsam.Pose2(*pre.delta_pose[i])).compose(
-                gtsam.Pose2(*(0.05 * rng.standard_normal(3))))
-    values.insert(calibration_key(0), np.array([1.08, 0.93, 0.1]))
+    values = group_values(pre, rng, [1.08, 0.93, 0.1])
     keys = [pose_key(i) for i in range(4)]
     g = calibrated_motion_group_factor(pre, pose_keys=keys, key_c=calibration_key(0))
     _check_jacobians(g, values, [*keys, calibration_key(0)],
