@@ -73,6 +73,9 @@ def _expand(src: ReplaySource) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
+    if src.ticks is None:                    # the robot's own odometry twist, integrated
+        speeds = np.repeat(src.body_speeds[1:], src.periods[1:], axis=0)
+        return integrate_poses(speeds, src.dt_s, initial_pose=pose0)[np.cumsum(src.periods)]
     k = model.encoder_intrinsics             # each wheel's scale, else the one m_per_tick
     if k is None:
         raise MissingEncoderScaleError.needed_by("encoder odometry")
@@ -102,6 +105,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
     encoders = src.ticks is not None
     first = int(np.argmax(src.valid)) if encoders else 0
     gyro = src.yaw_rate_rad_s           # a gyro's readings: fused (fusion.ekf.gyro)
+    twist = None if encoders else src.body_speeds    # the robot's own odometry, one period
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
                    initial_ticks=src.ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
@@ -117,6 +121,8 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
             ekf.predict(src.cmd_m_s[k])
         if encoders and src.valid[k] and k > first:
             ekf.update_encoders(src.ticks[k])
+        elif twist is not None and src.valid[k] and src.periods[k] == 1:
+            ekf.update_speeds(twist[k])           # NaN: skipped by the filter
         if gyro is not None:
             ekf.update_gyro(gyro[k])    # NaN (a lost frame) starts a new window
         ekf.update_landmarks(sightings.get(k, none))
@@ -181,7 +187,7 @@ def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
         if name not in ESTIMATORS:
             raise ValueError(f"unknown estimator {name!r}; known: {', '.join(ESTIMATORS)}")
         if name not in src.available():
-            why = ("encoder counts" if name in ("odometry", "ekf")
+            why = ("encoder counts or an odometry twist" if name in ("odometry", "ekf")
                    else "landmark sightings")
             raise ValueError(f"estimator {name!r} needs {why}, which {src.name} does not have; "
                              f"available: {', '.join(src.available())}")
@@ -343,7 +349,7 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
     names = list(estimators) if estimators else src.available()
     n_sight = len(src.sightings)
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
-             f"{'encoder counts' if src.ticks is not None else 'no encoders'}, "
+             f"{src.wheel_readings or 'no encoders'}, "
              f"{n_sight} landmark sightings, "
              f"{'ground truth' if src.has_truth else 'no ground truth'}")
     started = ("the first ground-truth pose" if initial_pose is None and src.has_truth
@@ -361,8 +367,8 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
         print_fn("  no ground truth in this recording: no ATE or RPE. Start-to-end distance "
                  "is the closure offset if the drive ended where it began")
     for name, counts in extra.items():
-        enc = (f"{counts['encoders_gated']} encoder readings gated, "
-               if src.ticks is not None else "")
+        enc = (f"{counts['encoders_gated']} {'encoder' if src.ticks is not None else 'twist'}"
+               f" readings gated, " if src.wheel_readings else "")
         gyro = (f"; gyro: {counts['gyro_windows_fused']} windows fused, "
                 f"{counts['gyro_windows_gated']} gated" if "gyro_windows_fused" in counts
                 else "")

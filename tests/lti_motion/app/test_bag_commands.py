@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
@@ -202,3 +203,28 @@ def test_a_bag_with_odometry_but_no_commands_is_refused(bags, tmp_path, capsys):
     assert main(["calibrate", "--bag", str(odom_only), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no geometry_msgs/Twist or TwistStamped commands" in err, err
+
+
+def test_replay_of_an_odometry_only_bag_integrates_and_fuses_the_twist(bags, model_file,
+                                                                      capsys):
+    """``replay --bag`` on a bag with ``/odom`` and no wheel angles: the twist, a mean
+    since the previous message, is integrated by the backward rectangle, so the robot's own
+    odometry tracks the truth as the encoder odometry of the same drive does (measured ATE
+    0.029 m both; the trapezoid rule gave 0.031 m and per-period errors 13x larger); the
+    EKF fuses it one period at a time (docs/replay.md: a gated period's motion is lost)."""
+    odom_bag = write_drive_bag(bags["folder"] / "odom_replay", bags["cal_log"],
+                               start_ns=START_NS, joint_states=False)
+    metrics = {}
+    for name, bag in (("wheels", bags["cal"]), ("twist", odom_bag)):
+        out = bags["folder"] / f"replay_{name}"
+        assert main(["replay", "--bag", str(bag), "--model", str(model_file),
+                     "--out", str(out)]) == 0
+        metrics[name] = json.loads((out / "metrics.json").read_text())["metrics"]
+    said = capsys.readouterr().out
+    assert "odometry twist, 0 landmark sightings, ground truth" in said
+    wheels, twist = metrics["wheels"], metrics["twist"]
+    assert {"odometry", "commands", "sensorless", "ekf"} == set(twist)
+    assert twist["odometry"]["ate_rmse_m"] == pytest.approx(wheels["odometry"]["ate_rmse_m"],
+                                                           rel=0.05, abs=1e-3)
+    assert twist["ekf"]["ate_rmse_m"] < twist["commands"]["ate_rmse_m"]
+    assert twist["ekf"]["encoders_gated"] < 0.03 * len(bags["cal_log"])
