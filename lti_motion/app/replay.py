@@ -44,7 +44,8 @@ from lti_motion.app.replay_sources import (
     source_from_mrclam,
 )
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, rpe
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -62,6 +63,7 @@ __all__ = [
     "run_replay",
     "source_from_log",
     "source_from_mrclam",
+    "twist_counts",
 ]
 
 
@@ -100,16 +102,39 @@ def _sensorless(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.
     return model.predict_poses(u, initial_pose=pose0)[at]
 
 
+def twist_counts(src: ReplaySource, intrinsics: OdometryIntrinsics) -> np.ndarray:
+    """The counts an encoder of ``intrinsics`` would have read under a source's odometry
+    twist, shape (n, 2), int64, never wrapping.
+
+    The twist's body travel over each period (``body_speeds`` times the periods times
+    ``dt_s``), turned into wheel travel through ``intrinsics.wheel_base_m`` and summed, is
+    rounded to whole ticks of each wheel's scale: the cumulative travel to half a tick,
+    the resolution the EKF's encoder noise assumes (``docs/ekf.md``). Fused as counts, a
+    reading the gate rejects keeps its motion (the next counts span it), which a per-period
+    speed update loses.
+    """
+    body = src.body_speeds * (src.periods * src.dt_s)[:, None]
+    body[0] = 0.0                                   # frame 0 closes no period
+    wheel = np.cumsum(wheel_from_body(body, wheel_base_m=intrinsics.wheel_base_m), axis=0)
+    scale = np.array([intrinsics.m_per_tick_left, intrinsics.m_per_tick_right])
+    return np.rint(wheel / scale).astype(np.int64)
+
+
 def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
          landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray]:
-    encoders = src.ticks is not None
+    ticks, bits, twist = src.ticks, src.counter_bits, None
+    if ticks is None and src.body_speeds is not None:   # the robot's own odometry twist
+        if model.encoder_intrinsics is not None:        # as the counts it stands for
+            ticks, bits = twist_counts(src, model.encoder_intrinsics), 64
+        else:                                           # as speeds, one period at a time
+            twist = src.body_speeds
+    encoders = ticks is not None
     first = int(np.argmax(src.valid)) if encoders else 0
     gyro = src.yaw_rate_rad_s           # a gyro's readings: fused (fusion.ekf.gyro)
-    twist = None if encoders else src.body_speeds    # the robot's own odometry, one period
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=src.ticks[first] if encoders else None,
+                   initial_ticks=ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
-                   landmark_noise=src.landmark_noise, history=0, counter_bits=src.counter_bits,
+                   landmark_noise=src.landmark_noise, history=0, counter_bits=bits,
                    gyro=None if gyro is None else GyroNoise())
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
@@ -120,7 +145,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
         for _ in range(int(src.periods[k])):
             ekf.predict(src.cmd_m_s[k])
         if encoders and src.valid[k] and k > first:
-            ekf.update_encoders(src.ticks[k])
+            ekf.update_encoders(ticks[k])
         elif twist is not None and src.valid[k] and src.periods[k] == 1:
             ekf.update_speeds(twist[k])           # NaN: skipped by the filter
         if gyro is not None:

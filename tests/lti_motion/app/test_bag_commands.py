@@ -209,9 +209,9 @@ def test_replay_of_an_odometry_only_bag_integrates_and_fuses_the_twist(bags, mod
                                                                       capsys):
     """``replay --bag`` on a bag with ``/odom`` and no wheel angles: the twist, a mean
     since the previous message, is integrated by the backward rectangle, so the robot's own
-    odometry tracks the truth as the encoder odometry of the same drive does (measured ATE
-    0.029 m both; the trapezoid rule gave 0.031 m and per-period errors 13x larger); the
-    EKF fuses it one period at a time (docs/replay.md: a gated period's motion is lost)."""
+    odometry tracks the truth as the encoder odometry of the same drive does, and the EKF,
+    fusing the twist as the counts it stands for, as the encoder EKF does (measured ATE
+    0.029 m all four; fused per period as speeds the EKF gave 0.041 m)."""
     odom_bag = write_drive_bag(bags["folder"] / "odom_replay", bags["cal_log"],
                                start_ns=START_NS, joint_states=False)
     metrics = {}
@@ -224,7 +224,30 @@ def test_replay_of_an_odometry_only_bag_integrates_and_fuses_the_twist(bags, mod
     assert "odometry twist, 0 landmark sightings, ground truth" in said
     wheels, twist = metrics["wheels"], metrics["twist"]
     assert {"odometry", "commands", "sensorless", "ekf"} == set(twist)
-    assert twist["odometry"]["ate_rmse_m"] == pytest.approx(wheels["odometry"]["ate_rmse_m"],
-                                                           rel=0.05, abs=1e-3)
-    assert twist["ekf"]["ate_rmse_m"] < twist["commands"]["ate_rmse_m"]
-    assert twist["ekf"]["encoders_gated"] < 0.03 * len(bags["cal_log"])
+    for name in ("odometry", "ekf"):
+        assert twist[name]["ate_rmse_m"] == pytest.approx(wheels[name]["ate_rmse_m"],
+                                                          rel=0.1, abs=1e-3), name
+    assert twist["ekf"]["ate_rmse_m"] < twist["sensorless"]["ate_rmse_m"]
+
+
+def test_twist_counts_are_the_counts_the_twist_was_made_of():
+    """Counts -> the twist over each period (1 or 2 periods: a lost frame) -> counts."""
+    from lti_motion.app.replay import twist_counts
+    from lti_motion.app.replay_sources import ReplaySource
+    from lti_motion.intrinsics import OdometryIntrinsics
+    from lti_motion.kinematics import body_from_wheel
+
+    k = OdometryIntrinsics(m_per_tick_left=4.5e-4, m_per_tick_right=4.4e-4, wheel_base_m=0.235)
+    rng = np.random.default_rng(5)
+    periods = np.concatenate([[0], rng.choice([1, 2], size=499, p=[0.9, 0.1])])
+    steps = rng.integers(-40, 41, size=(500, 2)) * periods[:, None]
+    counts = np.cumsum(steps, axis=0)
+    dt = 0.015
+    travel = steps * np.array([k.m_per_tick_left, k.m_per_tick_right])
+    twist = np.zeros((500, 2))
+    twist[1:] = body_from_wheel(travel[1:], wheel_base_m=k.wheel_base_m) / (periods[1:, None]
+                                                                              * dt)
+    src = ReplaySource(name="t", t_s=np.cumsum(periods) * dt, periods=periods,
+                       cmd_m_s=np.zeros((500, 2)), valid=np.ones(500, bool), dt_s=dt,
+                       body_speeds=twist)
+    np.testing.assert_array_equal(twist_counts(src, k), counts)
