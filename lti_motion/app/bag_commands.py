@@ -46,10 +46,11 @@ from fusion.monitoring.monitored_filter import FrameResult
 from fusion.monitoring.residual import AlarmEvent
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
-from lti_motion.app.replay import ReplayResult, run_replay
+from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
 from lti_motion.app.replay_sources import source_from_frame_log, source_from_grid
 from lti_motion.calibration import speeds_from_log
 from lti_motion.clocks import median_period_s
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx
 from lti_motion.recording import Recording
@@ -274,6 +275,38 @@ def _bag_ns(start_ns: int, t_s: np.ndarray | float) -> np.ndarray:
     return start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
 
 
+def _twist_log(path: str | os.PathLike, model: MotionModel,
+               options: BagOptions | None) -> FrameLog | None:
+    """For a bag with an odometry twist and no wheel angles: the drive as a log of the counts
+    the twist stands for (:func:`~lti_motion.app.replay.twist_counts`, never wrapping) on
+    the model's period; ``None`` for a bag with wheel angles.
+
+    Raises
+    ------
+    MissingEncoderScaleError
+        If the model has no encoder scale to count the twist's travel in.
+    """
+    opt = options or BagOptions()
+    rec = odometry_recording(path, options=replace(opt, dt_s=opt.dt_s or model.dt_s),
+                             reference=True)
+    if rec is None:
+        return None
+    if model.encoder_intrinsics is None:
+        raise MissingEncoderScaleError(
+            f"{Path(path).name} has an odometry twist and no wheel angles; monitoring it "
+            "needs a model with an encoder scale to count the twist's travel in, and this "
+            "one has none: calibrate with the rotation in place or from wheel angles")
+    grid = on_grid(rec, wheel_base_m=model.wheel_base_m, max_wheel_speed_m_s=opt.max_wheel_m_s)
+    src = source_from_grid(grid, Path(path).name, dt_s=rec.dt_s)
+    n = len(src)
+    return FrameLog(t_s=src.t_s, ticks=twist_counts(src, model.encoder_intrinsics),
+                    cmd_m_s=src.cmd_m_s, light_bump=np.zeros((n, 6), np.int64),
+                    bumps=np.zeros((n, 2), bool), valid=src.valid, dt_s=rec.dt_s,
+                    yaw_rate_rad_s=src.yaw_rate_rad_s,
+                    meta={**rec.meta, "counter_bits": 64,
+                          "lost_frames": int(np.count_nonzero(~src.valid))})
+
+
 def _model_log(path: str | os.PathLike, model: MotionModel,
                options: BagOptions | None) -> FrameLog:
     """The bag's drive on the model's period (unless a period is given), with the Imu's yaw
@@ -395,7 +428,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    log = _model_log(path, model, options)
+    log = _twist_log(path, model, options) or _model_log(path, model, options)
     n = len(log)
     poses, covs = np.zeros((n, 3)), np.zeros((n, 3, 3))
     step = iter(range(n))

@@ -106,6 +106,31 @@ def test_monitor_stamps_the_alarms_with_bag_time(bags, model_file, tmp_path):
     assert np.all(np.linalg.eigvalsh(run.pose_covs[1:]) > 0)
 
 
+def test_monitor_of_an_odometry_only_bag_finds_the_spikes_in_the_twist(bags, model_file,
+                                                                        tmp_path):
+    """The spikes drive with ``/odom`` and no wheel angles: the twist counted in the model's
+    ticks (:func:`~lti_motion.app.replay.twist_counts`) raises the same glitch burst, at
+    the same frame, as the wheel angles do; a model with no encoder scale cannot count it."""
+    model = MotionModel.load(model_file)
+    odom_bag = write_drive_bag(tmp_path / "odom_spikes.bag", bags["spikes_log"],
+                               start_ns=START_NS, joint_states=False)
+    runs = {name: monitor_bag(bag, model, print_fn=lambda _line: None)
+            for name, bag in (("wheels", bags["spikes"]), ("twist", odom_bag))}
+    first = {name: next(ns for e, ns in zip(run.events, run.alarm_ns, strict=True)
+                        if e.kind == "glitch_burst") for name, run in runs.items()}
+    assert 8.0 <= (first["twist"] - START_NS) / 1e9 <= 9.5
+    assert abs(first["twist"] - first["wheels"]) <= 2 * 15_000_000          # two periods
+    assert [e.kind for e in runs["twist"].events] == [e.kind for e in runs["wheels"].events]
+    # measured: the same three alarms, final poses 2e-6 m apart
+    np.testing.assert_allclose(runs["twist"].poses[-1], runs["wheels"].poses[-1], atol=1e-3)
+    from dataclasses import replace
+
+    from lti_motion.exceptions import MissingEncoderScaleError
+    with pytest.raises(MissingEncoderScaleError, match="no wheel angles; monitoring it"):
+        monitor_bag(odom_bag, replace(model, m_per_tick=None, intrinsics=None),
+                    print_fn=lambda _line: None)
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["calibrate", "--bag", "{spikes}", "--cmd-topic", "/odom"],
      "topic /odom holds nav_msgs/msg/Odometry, but --cmd-topic needs geometry_msgs/Twist"),
