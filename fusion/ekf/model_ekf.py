@@ -66,8 +66,7 @@ from fusion.ekf.functions import (
     initial_state,
     pose_jacobian,
     pose_residual,
-    predict_terms,
-    propagate_covariance,
+    predict_step,
     span_verdict,
     state_transition,
 )
@@ -385,8 +384,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """Advance one sensor period with wheel commands ``u = (L, R)`` [m/s], shape (2,).
 
         Sets ``x``, ``P``, ``F``, ``Q``, ``x_prior``, ``P_prior`` and adds
-        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_terms`,
-        :func:`~fusion.ekf.functions.propagate_covariance`).
+        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_step`: the
+        arithmetic of :func:`~fusion.ekf.functions.predict_terms` and
+        :func:`~fusion.ekf.functions.propagate_covariance`, compiled).
 
         Raises
         ------
@@ -397,12 +397,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         # after a gated or missing encoder reading the speed state sums the periods since the
         # last fused counts (fusion.ekf.functions, "Gated readings")
         accumulate = self._have_ref and self._periods_since_ref > 0
-        x, F, Q = predict_terms(self.x, cmd_m_s, self.fm, accumulate=accumulate, out_F=f_buf,
-                                out_Q=q_buf)
-        P = propagate_covariance(self.P, F, Q)
+        x, P = predict_step(self.x, self.P, cmd_m_s, self.fm, accumulate=accumulate,
+                            out_F=f_buf, out_Q=q_buf)
         # swap buffers so self.F / self.Q keep this step's matrices
         self._buffers = (self.F, self.Q)
-        self.F, self.Q = F, Q
+        self.F, self.Q = f_buf, q_buf
         # the filter never modifies x or P in place: prior/post alias them (no copies)
         self.x = self.x_prior = x
         self.P = self.P_prior = P
