@@ -482,8 +482,7 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     cmd_m_s = kernel_array(_check_command(cmd_m_s))
     F = np.array(fm.F_template) if out_F is None else out_F
     Q = np.empty((fm.n, fm.n)) if out_Q is None else out_Q
-    x_new = predict_terms_kernel(x, cmd_m_s, bool(accumulate), fm.z0, fm.nz,
-                                 *fm.kernel_constants, F, Q)
+    x_new = predict_terms_kernel(x, cmd_m_s, bool(accumulate), *fm.kernel_constants, F, Q)
     return x_new, F, Q
 
 
@@ -531,8 +530,8 @@ def predict_step(x: np.ndarray, P: np.ndarray, cmd_m_s: np.ndarray, fm: FilterMo
     if P.shape != (fm.n, fm.n):
         raise MeasurementShapeError(f"expected a covariance of shape ({fm.n}, {fm.n}), got "
                                     f"{P.shape}")
-    return predict_kernel(x, kernel_array(P), cmd_m_s, bool(accumulate), fm.z0, fm.nz,
-                          *fm.kernel_constants, out_F, out_Q)
+    return predict_kernel(x, kernel_array(P), cmd_m_s, bool(accumulate), *fm.kernel_constants,
+                          out_F, out_Q)
 
 
 def state_transition(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel) -> np.ndarray:

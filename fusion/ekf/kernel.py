@@ -25,8 +25,11 @@ only, and halves the work.
 
 Numba compiles each kernel on its first call and caches the machine code
 beside this file (``cache=True``); importing the module compiles nothing.
-The layout (``z0``, ``nz``) and the constants come from
-:class:`~fusion.ekf.functions.FilterModel` (``kernel_constants``).
+The constants come from :class:`~fusion.ekf.functions.FilterModel`
+(``kernel_constants``; ``nz`` and the layout follow from their shapes). A
+kernel is compiled once per combination of argument types: the library passes
+C-contiguous, writable float64 arrays (:func:`kernel_array` makes one of
+anything else), so one compilation serves every layout.
 
 References
 ----------
@@ -83,7 +86,7 @@ def _set_row(F, i, f0, f1, f2, f3, f4, f5):
 
 
 @njit(cache=True)
-def predict_terms_kernel(x, cmd, accumulate, z0, nz, scalars, ABo, G_template, Q_const, F, Q):
+def predict_terms_kernel(x, cmd, accumulate, scalars, ABo, G_template, Q_const, F, Q):
     """``x' = f(x, u)``; writes ``F``'s pose rows and speed diagonal, and all of ``Q``.
 
     ``scalars`` holds ``dt_s``, the slip parameters and ``R`` (columns
@@ -95,6 +98,8 @@ def predict_terms_kernel(x, cmd, accumulate, z0, nz, scalars, ABo, G_template, Q
     in chord form, ``F``, ``G2``, ``Q``).
     """
     n = x.shape[0]
+    nz = ABo.shape[0] - 2
+    z0 = n - nz - 2
     dt = scalars[DT]
     x_new = np.empty(n)
     for i in range(nz + 2):                       # (A z + B u, C z + D u) + offset
@@ -161,42 +166,36 @@ def predict_terms_kernel(x, cmd, accumulate, z0, nz, scalars, ABo, G_template, Q
 def _propagate(P, F, Q):
     """``F P F^T + Q``, symmetrised (eq. 5.2.3-5), over ``F``'s non-zero entries only.
 
-    The lower triangle is computed and mirrored (``P`` symmetric: ``F P F^T`` is,
-    to rounding).
+    With ``P`` symmetric, ``(F P F^T)_ij = sum_k F_ik (F P)_jk``: the lower
+    triangle is computed that way and mirrored.
     """
     n = P.shape[0]
-    cols = np.empty((n, n), dtype=np.int64)         # non-zero columns of each row of F
-    counts = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        for k in range(n):
-            if F[i, k] != 0.0:
-                cols[i, counts[i]] = k
-                counts[i] += 1
     fp = np.zeros((n, n))                           # F P
     for i in range(n):
-        for t in range(counts[i]):
-            k = cols[i, t]
+        for k in range(n):
             f = F[i, k]
-            for j in range(n):
-                fp[i, j] += f * P[k, j]
-    out = np.empty((n, n))                          # (F P) F^T + Q
+            if f != 0.0:
+                for j in range(n):
+                    fp[i, j] += f * P[k, j]
+    out = np.zeros((n, n))                          # F (F P)^T, lower triangle
     for i in range(n):
+        for k in range(n):
+            f = F[i, k]
+            if f != 0.0:
+                for j in range(i + 1):
+                    out[i, j] += f * fp[j, k]
+    for i in range(n):                              # + Q, mirrored
         for j in range(i + 1):
-            acc = 0.0
-            for t in range(counts[j]):
-                k = cols[j, t]
-                acc += fp[i, k] * F[j, k]
-            acc += Q[i, j]
-            out[i, j] = acc
-            out[j, i] = acc
+            v = out[i, j] + Q[i, j]
+            out[i, j] = v
+            out[j, i] = v
     return out
 
 
 @njit(cache=True)
-def predict_kernel(x, P, cmd, accumulate, z0, nz, scalars, ABo, G_template, Q_const, F, Q):
+def predict_kernel(x, P, cmd, accumulate, scalars, ABo, G_template, Q_const, F, Q):
     """:func:`predict_terms_kernel`, then ``P' = F P F^T + Q`` symmetrised; returns ``(x', P')``."""
-    x_new = predict_terms_kernel(x, cmd, accumulate, z0, nz, scalars, ABo, G_template, Q_const,
-                                 F, Q)
+    x_new = predict_terms_kernel(x, cmd, accumulate, scalars, ABo, G_template, Q_const, F, Q)
     return x_new, _propagate(P, F, Q)
 
 
@@ -207,7 +206,7 @@ def selector_update_kernel(x, P, innovation, R, gate, force):
     Returns ``(ok, S, SI, nis, accepted, K, x', P')``. ``ok`` is False when ``S``
     has no positive finite determinant (the caller then takes the generic numpy
     path, ``np.linalg.inv``); when the reading is not accepted, ``K`` is zeros
-    and ``x'``, ``P'`` are the inputs themselves.
+    and ``x'``, ``P'`` are empty (the state stays as it is).
     """
     n = x.shape[0]
     m0 = n - 2
@@ -220,14 +219,14 @@ def selector_update_kernel(x, P, innovation, R, gate, force):
     K = np.zeros((n, 2))
     det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
     if not (det > 0.0 and math.isfinite(det)):
-        return False, S, SI, math.nan, False, K, x, P
+        return False, S, SI, math.nan, False, K, np.empty(0), np.empty((0, 0))
     f = 1.0 / det                                   # closed-form 2 x 2 inverse
     SI[0, 0], SI[0, 1], SI[1, 0], SI[1, 1] = S[1, 1] * f, -S[0, 1] * f, -S[1, 0] * f, S[0, 0] * f
     n0, n1 = innovation[0], innovation[1]
     nis = SI[0, 0] * n0 * n0 + (SI[0, 1] + SI[1, 0]) * n0 * n1 + SI[1, 1] * n1 * n1
     accepted = nis <= gate or force
     if not accepted:
-        return True, S, SI, nis, False, K, x, P
+        return True, S, SI, nis, False, K, np.empty(0), np.empty((0, 0))
     x_new = np.empty(n)
     for i in range(n):                              # K = P H^T S^-1, x + K y
         K[i, 0] = P[i, m0] * SI[0, 0] + P[i, m0 + 1] * SI[1, 0]

@@ -355,8 +355,10 @@ class GatedUpdates:
         """:meth:`_gated` for a 2-D reading of the last two states, in one compiled call
         (:func:`fusion.ekf.kernel.selector_update_kernel`); None if ``S`` has no positive
         determinant (the numpy path then decides)."""
+        # innovation: a fresh float array; x, P, R: the filter's own (kernel_array copies
+        # anything else a user assigned)
         ok, S, SI, value, accepted, K, x, P = selector_update_kernel(
-            kernel_array(self.x), kernel_array(self.P), kernel_array(innovation), kernel_array(R),
+            kernel_array(self.x), kernel_array(self.P), innovation, kernel_array(R),
             self._gates[2], bool(force))
         if not ok:
             return None
