@@ -80,12 +80,6 @@ def _sinc_and_derivative(h):
 
 
 @njit(cache=True)
-def _set_row(F, i, f0, f1, f2, f3, f4, f5):
-    """``F[i, :6] = (f0, ..., f5)``."""
-    F[i, 0], F[i, 1], F[i, 2], F[i, 3], F[i, 4], F[i, 5] = f0, f1, f2, f3, f4, f5
-
-
-@njit(cache=True)
 def predict_terms_kernel(x, cmd, accumulate, scalars, ABo, G_template, Q_const, F, Q):
     """``x' = f(x, u)``; writes ``F``'s pose rows and speed diagonal, and all of ``Q``.
 
@@ -133,9 +127,12 @@ def predict_terms_kernel(x, cmd, accumulate, scalars, ABo, G_template, Q_const, 
     g2[0, 0], g2[0, 1], g2[0, 2], g2[0, 3] = a * c_v + b * kappa, b * c_w, a, b
     g2[1, 0], g2[1, 1], g2[1, 2], g2[1, 3] = c * c_v + d * kappa, d * c_w, c, d
     g2[2, 0], g2[2, 1], g2[2, 2], g2[2, 3] = dt * kappa, dt * c_w, 0.0, dt
-    _set_row(F, 0, 1.0, 0.0, -chord * sm, a * v, b * w, b * v)    # [F_p, F_s D_s]
-    _set_row(F, 1, 0.0, 1.0, chord * cm, c * v, d * w, d * v)
-    _set_row(F, 2, 0.0, 0.0, 1.0, 0.0, dt * w, dt * v)
+    F[0, 0], F[0, 1], F[0, 2] = 1.0, 0.0, -chord * sm      # [F_p, F_s D_s]
+    F[0, 3], F[0, 4], F[0, 5] = a * v, b * w, b * v
+    F[1, 0], F[1, 1], F[1, 2] = 0.0, 1.0, chord * cm
+    F[1, 3], F[1, 4], F[1, 5] = c * v, d * w, d * v
+    F[2, 0], F[2, 1], F[2, 2] = 0.0, 0.0, 1.0
+    F[2, 3], F[2, 4], F[2, 5] = 0.0, dt * w, dt * v
     for i in range(3):                              # F_s D_c C
         for j in range(nz):
             F[i, z0 + j] = g2[i, 0] * ABo[nz, j] + g2[i, 1] * ABo[nz + 1, j]

@@ -544,7 +544,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._t2s is None:
             return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
         (l0, r0), (l1, r1) = self._tick_pair.tolist()
-        dl, dr = self._step(l1 - l0), self._step(r1 - r0)
+        dl, dr = l1 - l0, r1 - r0
+        if self._modulus:                   # self._step, inline (it runs at every reading)
+            half, modulus = self._half, self._modulus
+            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
         (a, b), (c, d) = self._t2s
         return np.array((a * dl + b * dr, c * dl + d * dr))
 
@@ -557,9 +560,13 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
         increment differs from the last frame's (a wheel's speed changes by about a tick per
         period). Scalar arithmetic: it runs at every reading."""
-        left, right = int(ticks[0]), int(ticks[1])
-        dl = abs(self._step(left - self._last_frame[0]))
-        dr = abs(self._step(right - self._last_frame[1]))
+        left, right = ticks.tolist()
+        left, right = int(left), int(right)
+        dl, dr = left - self._last_frame[0], right - self._last_frame[1]
+        if self._modulus:                   # self._step, inline
+            half, modulus = self._half, self._modulus
+            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
+        dl, dr = abs(dl), abs(dr)
         jump = 0.0
         if self._have_last_delta:
             jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))
