@@ -3,10 +3,11 @@
 One :meth:`fusion.ekf.ModelEKF.predict` and one encoder update are a few
 thousand multiply-adds on ``n = nz + 8`` (``+ 2`` with a gyro) states; done as
 numpy calls they cost many times their arithmetic in per-call overhead
-(``docs/ekf.md``, *The compiled step*). These kernels do the same arithmetic as
-explicit loops, in the same order of operations as the numpy expressions they
-replace, so they agree with them to rounding. The maths, its derivation and
-its references are in :mod:`fusion.ekf.functions`; this module only evaluates:
+(``docs/ekf.md``, *The compiled step*). These kernels evaluate the same
+expressions as explicit loops; their sums run in another order than numpy's
+(BLAS) products, so they agree with them to rounding
+(``tests/fusion/ekf/test_kernel.py``). The maths, its derivation and its
+references are in :mod:`fusion.ekf.functions`; this module only evaluates:
 
 - :func:`predict_terms_kernel`: ``x' = f(x, u)``, the pose rows of ``F`` and
   ``Q = G2 blkdiag(R, R_slip) G2^T + Q_c`` (:func:`~fusion.ekf.functions.predict_terms`);
@@ -29,7 +30,10 @@ The constants come from :class:`~fusion.ekf.functions.FilterModel`
 (``kernel_constants``; ``nz`` and the layout follow from their shapes). A
 kernel is compiled once per combination of argument types: the library passes
 C-contiguous, writable float64 arrays (:func:`kernel_array` makes one of
-anything else), so one compilation serves every layout.
+anything else), so one compilation serves every layout. Numba's cache tracks
+this file only: the series of ``sin(h)/h`` imported from
+:mod:`lti_motion.kinematics` is frozen into the cached code (the test against
+the numpy reference would catch a stale one).
 
 References
 ----------
