@@ -301,7 +301,8 @@ class FilterModel:
     Raises
     ------
     FilterOptionError
-        For non-positive encoder noise or scale.
+        For non-positive encoder noise or scale, or a ``slip`` whose class overrides
+        :meth:`SlipNoise.stds` (the compiled step evaluates ``SlipNoise``'s own law).
     """
 
     model: MotionModel
@@ -338,6 +339,10 @@ class FilterModel:
         std = tuple(float(s) for s in self.encoder_std)
         if len(std) != 2 or not all(math.isfinite(s) and s > 0 for s in std):
             raise FilterOptionError(f"encoder_std must be two positive numbers, got {std}")
+        if type(self.slip).stds is not SlipNoise.stds:   # the compiled step reads the fields
+            raise FilterOptionError(f"{type(self.slip).__name__} overrides SlipNoise.stds; the "
+                                    "filter's compiled step evaluates SlipNoise's own law "
+                                    "from its fields: give a SlipNoise with those fields")
         if self.m_per_tick is None:
             intrinsics = m.encoder_intrinsics
         else:

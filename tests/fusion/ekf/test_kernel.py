@@ -288,3 +288,20 @@ def test_importing_the_ekf_compiles_nothing():
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "0"
+
+
+def test_a_slip_noise_with_its_own_law_is_refused_not_ignored(models):
+    """The compiled step evaluates SlipNoise's law from its fields; a subclass overriding
+    ``stds`` would be silently ignored, so the filter layout refuses it in one line."""
+    from dataclasses import dataclass
+
+    from fusion.exceptions import FilterOptionError
+
+    @dataclass(frozen=True)
+    class Quadratic(SlipNoise):
+        def stds(self, v_m_s, w_rad_s):
+            return (1e-3 + v_m_s * v_m_s, 1e-2)
+
+    with pytest.raises(FilterOptionError, match=r"Quadratic overrides SlipNoise\.stds"):
+        ef.FilterModel(models["arx"], slip=Quadratic())
+    ef.FilterModel(models["arx"], slip=SlipNoise(v_frac=0.03))   # fields: fine
