@@ -7,8 +7,8 @@ the pose (Thrun, Burgard & Fox 2005, table 7.2, lines 3-7), and range-bearing
 landmark updates (table 7.2, lines 10-21). It is the reference the model-driven
 filter is measured against on real data (``lti_motion.app.mrclam``).
 
-The arc and its Jacobians are :func:`lti_motion.kinematics.pose_step` and
-:func:`lti_motion.kinematics.pose_step_jacobians` (chord form, eq. 11 of the
+The arc and its Jacobians are those of :func:`lti_motion.kinematics.pose_step` and
+:func:`lti_motion.kinematics.pose_step_jacobians`, in scalar arithmetic (chord form, eq. 11 of the
 paper; the same exact arc as Thrun's table 5.3, without its ``1/w``
 singularity); the measurement is :mod:`fusion.range_bearing`. The landmark
 updates, their gate and their records are the model filter's
@@ -31,7 +31,8 @@ from fusion.ekf.updates import GatedUpdates
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
-from lti_motion.kinematics import pose_step, pose_step_jacobians
+from lti_motion.exceptions import NonFiniteError
+from lti_motion.kinematics import pose_step, sinc_and_derivative
 
 __all__ = ["VelocityModelEKF"]
 
@@ -122,10 +123,34 @@ class VelocityModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """One period at body speeds ``speeds = (v [m/s], w [rad/s])``; adds ``dt_s`` to ``t_s``.
 
         ``F = d pose' / d pose`` and ``Q = V M V^T`` with ``V = d pose' / d (v, w)``
-        (Thrun et al. 2005, table 7.2, lines 3-7).
+        (Thrun et al. 2005, table 7.2, lines 3-7), then filterpy's ``P = F P F^T + Q`` and
+        its prior copies. The arc (paper eq. 11, chord form: ``h = w dt / 2``,
+        ``c = v dt sin(h) / h``, ``x' = x + c cos(theta + h)``, ``y' = y + c sin(theta +
+        h)``, ``theta' = theta + 2 h``) and its Jacobians are those of
+        :func:`lti_motion.kinematics.pose_step_jacobians`, in scalar arithmetic (it runs
+        at every period).
+
+        Raises
+        ------
+        lti_motion.exceptions.NonFiniteError
+            If a speed is not finite (as :func:`~lti_motion.kinematics.pose_step`).
         """
-        f_pose, f_speed = pose_step_jacobians(self.x, speeds[0], speeds[1], self.dt_s)
-        self.F = f_pose
+        v, w = float(speeds[0]), float(speeds[1])
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise NonFiniteError(f"body speeds must be finite, got {[v, w]}")
+        px, py, theta = self.x.tolist()
+        dt = self.dt_s
+        h = 0.5 * w * dt
+        sinc, dsinc = sinc_and_derivative(h)
+        cm, sm = math.cos(theta + h), math.sin(theta + h)
+        chord = v * dt * sinc
+        k = 0.5 * v * dt * dt
+        self.F = np.array(((1.0, 0.0, -chord * sm), (0.0, 1.0, chord * cm), (0.0, 0.0, 1.0)))
+        f_speed = np.array(((dt * sinc * cm, k * (dsinc * cm - sinc * sm)),
+                            (dt * sinc * sm, k * (dsinc * sm + sinc * cm)),
+                            (0.0, dt)))
         self.Q = f_speed @ self.speed_cov @ f_speed.T
-        super().predict(u=speeds)
+        self.x = np.array((px + chord * cm, py + chord * sm, theta + 2.0 * h))
+        self.P = self.F @ self.P @ self.F.T + self.Q
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()     # as filterpy's predict
         self.t_s += self.dt_s
