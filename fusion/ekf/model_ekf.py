@@ -71,7 +71,15 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
-from fusion.ekf.gyro import clone_heading, gyro_cov, gyro_jacobian, gyro_measurement
+from fusion.ekf.gyro import (
+    clone_heading,
+    gyro_cov,
+    gyro_jacobian,
+    gyro_measurement,
+    rest_cov,
+    rest_jacobian,
+    rest_measurement,
+)
 from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
@@ -184,6 +192,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         The latest resets (up to 1,000), oldest first.
     n_resets : int
         Resets so far.
+    n_rest_updates : int
+        Gyro windows fused as zero-angular-rate updates (the robot still).
 
     Raises
     ------
@@ -295,6 +305,14 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._n_predicts = 0
         self._gyro_read_at = -1         # the prediction of the last gyro reading
         self._gyro_window = (0.0, 0, 0)     # (sum of y dt [rad], predictions at start, count)
+        # the robot standing still (fusion.ekf.gyro, "At rest"): periods in a row with zero
+        # commands and unchanged counts, the prediction of the last one, and those needed
+        # before a window to settle; windows fused as zero-angular-rate updates
+        self._cmd_zero = False
+        self._still_run, self._still_at = 0, -1
+        self._settle_periods = 0 if gyro is None else math.ceil(
+            gyro.rest_settle_s / fm.dt_s - 1e-9)
+        self.n_rest_updates = 0
         # the previous frame's counts and increment, for the single-frame jump test
         self._last_frame = (0, 0)
         self._last_delta = (0, 0)
@@ -409,6 +427,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s += self._dt_s
         self._periods_since_ref += 1
         self._n_predicts += 1
+        u0, u1 = np.asarray(cmd_m_s, dtype=float).tolist()      # checked by predict_terms
+        self._cmd_zero = u0 == 0.0 and u1 == 0.0
 
     def predict_update(self, *args: object, **kwargs: object) -> None:
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
@@ -508,7 +528,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         if ticks.dtype.kind not in "iu":
             if not (math.isfinite(ticks[0]) and math.isfinite(ticks[1])):
+                self._mark_still(still=False)
                 return self._skip("encoders", t, "non_finite", 2)
+        self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
+                         and int(ticks[1]) == self._last_frame[1])
         pair = self._tick_pair
         periods = self._periods_since_ref
         if not self._have_ref or periods == 0 or periods > self.max_periods:
@@ -537,6 +560,17 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         else:
             self._span_jump = max(self._span_jump, jump)
         return record
+
+    def _mark_still(self, *, still: bool) -> None:
+        """Count the periods in a row in which the robot stood still: zero commands and a
+        wheel reading that did not change (the first reading of a period counts)."""
+        if self._still_at == self._n_predicts:
+            return
+        if still and self._cmd_zero:
+            self._still_run = self._still_run + 1 if self._still_at == self._n_predicts - 1 else 1
+        else:
+            self._still_run = 0
+        self._still_at = self._n_predicts
 
     def _span_speeds(self) -> np.ndarray:
         """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
@@ -594,7 +628,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         y0, y1 = y.tolist()
         if not (math.isfinite(y0) and math.isfinite(y1)):
+            self._mark_still(still=False)
             return self._skip("encoders", t, "non_finite", 2)
+        self._mark_still(still=y0 == 0.0 and y1 == 0.0)
         # H = [0 0 I] selects the speed state: P H^T is a slice, no product
         return self._gated("encoders", t, y, y - self.x[self._speed_at:], self.fm.H_encoders,
                            self.R, None, PHt=self.P[:, self._speed_at:])
@@ -633,8 +669,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         theta_c``, plus the bias times the window (:mod:`fusion.ekf.gyro`):
         gated with 1 degree of freedom, Joseph form, then the bias clipped to
         ``+-gyro.max_bias_rad_s`` and a new window started (the heading
-        cloned). Call it once per :meth:`predict`, after :meth:`update_encoders`
-        (or :meth:`update_speeds`) of the same frame.
+        cloned). A window in which the robot stood still (commands exactly zero
+        and counts unchanged in each of its periods and ``gyro.rest_settle_s``
+        before) measures the bias alone, ``T b`` (a zero-angular-rate update,
+        Groves 2013, section 15.3.2; counted in :attr:`n_rest_updates`). Call it
+        once per :meth:`predict`, after :meth:`update_encoders` (or
+        :meth:`update_speeds`) of the same frame.
 
         Parameters
         ----------
@@ -684,10 +724,22 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if window < gyro.window_s - 0.5 * self._dt_s:
             self._gyro_window = (turn, self._gyro_window[1], count)
             return self._skip("gyro", t, "pending", 1)
-        H = gyro_jacobian(self.x, self.fm, window)
-        predicted = gyro_measurement(self.x, self.fm, window)
-        record = self._gated("gyro", t, np.array([turn]), np.array([turn]) - predicted, H,
-                             gyro_cov(self.fm, window), None)
+        return self._close_gyro_window(turn, count, t)
+
+    def _close_gyro_window(self, turn: float, count: int, t: float) -> UpdateRecord:
+        """Fuse a full window: the heading change, or the bias alone while still."""
+        gyro, window = self.fm.gyro, count * self._dt_s
+        still = (gyro.rest_update and self._still_at == self._n_predicts
+                 and self._still_run >= count + self._settle_periods)
+        if still:                                   # fusion.ekf.gyro, "At rest"
+            H, R = rest_jacobian(self.x, self.fm, window), rest_cov(self.fm, window)
+            predicted = rest_measurement(self.x, self.fm, window)
+        else:
+            H, R = gyro_jacobian(self.x, self.fm, window), gyro_cov(self.fm, window)
+            predicted = gyro_measurement(self.x, self.fm, window)
+        record = self._gated("gyro", t, np.array([turn]), np.array([turn]) - predicted, H, R,
+                             None)
+        self.n_rest_updates += int(still and record.accepted)
         if record.accepted and abs(self.x[GYRO_BIAS]) > gyro.max_bias_rad_s:
             x = self.x.copy()
             x[GYRO_BIAS] = math.copysign(gyro.max_bias_rad_s, x[GYRO_BIAS])
