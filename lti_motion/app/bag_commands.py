@@ -292,6 +292,8 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
     log = _model_log(path, model, options)
+    if "imu_noise" in log.meta:
+        print_fn(log.meta["imu_noise"]["summary"])
     src = source_from_frame_log(log, Path(path).name, start_s=start_s, duration_s=duration_s)
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
                         rpe_s=rpe_s, gyro=(options or BagOptions()).gyro, print_fn=print_fn)
@@ -389,9 +391,13 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
 
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
              f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
-    gyro = None if log.yaw_rate_rad_s is None else GyroNoise()
-    if gyro is not None:
-        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro")
+    gyro = None
+    if log.yaw_rate_rad_s is not None:
+        noise = log.meta["imu_noise"]
+        density = noise["density_rad_s_sqrt_hz"]
+        gyro = GyroNoise() if density is None else GyroNoise(noise_density_rad_s_sqrt_hz=density)
+        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro: "
+                 f"{noise['summary']}")
     run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
                          on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits,
                          gyro=gyro)

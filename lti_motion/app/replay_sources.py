@@ -81,6 +81,10 @@ class ReplaySource:
     yaw_rate_rad_s : ndarray, shape (n,), or None
         A gyro's reading over the period each frame closes [rad/s] (the log's
         :attr:`~lti_motion.frames.FrameLog.yaw_rate_rad_s`); ``None`` without a gyro.
+    gyro_density_rad_s_sqrt_hz : float or None
+        The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
+        bag Imu's ``angular_velocity_covariance``, :mod:`drivers.imu_noise`);
+        ``None``: not stated.
     truth : ndarray, shape (n, 3), or None
         Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
@@ -104,6 +108,7 @@ class ReplaySource:
     landmark_noise: LandmarkNoise | None = None
     counter_bits: int = 16
     yaw_rate_rad_s: np.ndarray | None = None
+    gyro_density_rad_s_sqrt_hz: float | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -236,7 +241,9 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
                         sightings=sightings, landmarks=landmarks,
                         counter_bits=log.counter_bits,
                         yaw_rate_rad_s=(None if log.yaw_rate_rad_s is None else np.where(
-                            log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)))
+                            log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)),
+                        gyro_density_rad_s_sqrt_hz=(meta.get("imu_noise") or {}).get(
+                            "density_rad_s_sqrt_hz"))
 
 
 def _key(value: object) -> Hashable:
