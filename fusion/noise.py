@@ -190,6 +190,11 @@ class GyroNoise:
         period of the window and for this long before it [s], so a robot that
         still coasts on delayed commands with its encoders stuck is not taken as
         still; default 0.5 s (a Create 2 step settles within 15 periods, 0.23 s).
+    drop_settling : bool
+        A window in which the robot settles after a stop (from the period its
+        commands go to zero until its counts have stood still for a whole
+        window) is not fused (:mod:`fusion.ekf.gyro`, *Settling after a stop*);
+        default ``True``.
 
     Raises
     ------
@@ -217,6 +222,7 @@ class GyroNoise:
     window_s: float = 0.5
     rest_update: bool = True
     rest_settle_s: float = 0.5
+    drop_settling: bool = True
 
     def __post_init__(self) -> None:
         pos = (self.noise_density_rad_s_sqrt_hz, self.bias_prior_std_rad_s, self.max_bias_rad_s,

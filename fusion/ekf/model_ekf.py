@@ -308,10 +308,14 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         # the robot standing still (fusion.ekf.gyro, "At rest"): periods in a row with zero
         # commands and unchanged counts, the prediction of the last one, and those needed
         # before a window to settle; windows fused as zero-angular-rate updates
-        self._cmd_zero = False
+        self._cmd_zero = True           # a filter starting with zero commands: settled
         self._still_run, self._still_at = 0, -1
         self._settle_periods = 0 if gyro is None else math.ceil(
             gyro.rest_settle_s / fm.dt_s - 1e-9)
+        # settling after a stop (fusion.ekf.gyro): on, and the prediction it was last on at
+        self._window_periods = 1 if gyro is None else max(1, math.ceil(
+            gyro.window_s / fm.dt_s - 0.5 - 1e-9))
+        self._settling, self._settling_at = False, -(1 << 62)
         self.n_rest_updates = 0
         # the previous frame's counts and increment, for the single-frame jump test
         self._last_frame = (0, 0)
@@ -428,7 +432,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._periods_since_ref += 1
         self._n_predicts += 1
         u0, u1 = np.asarray(cmd_m_s, dtype=float).tolist()      # checked by predict_terms
-        self._cmd_zero = u0 == 0.0 and u1 == 0.0
+        zero = u0 == 0.0 and u1 == 0.0
+        self._settling = zero and (self._settling or not self._cmd_zero)   # a stop settles
+        if self._settling:
+            self._settling_at = self._n_predicts
+        self._cmd_zero = zero
 
     def predict_update(self, *args: object, **kwargs: object) -> None:
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
@@ -571,6 +579,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         else:
             self._still_run = 0
         self._still_at = self._n_predicts
+        if self._settling and self._still_run >= self._window_periods:
+            self._settling = False          # a whole window still: the stop has settled
 
     def _span_speeds(self) -> np.ndarray:
         """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
@@ -729,6 +739,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     def _close_gyro_window(self, turn: float, count: int, t: float) -> UpdateRecord:
         """Fuse a full window: the heading change, or the bias alone while still."""
         gyro, window = self.fm.gyro, count * self._dt_s
+        if gyro.drop_settling and self._n_predicts - self._settling_at < count:
+            self._start_gyro_window()               # fusion.ekf.gyro, "Settling after a stop"
+            return self._skip("gyro", t, "settling", 1)
         still = (gyro.rest_update and self._still_at == self._n_predicts
                  and self._still_run >= count + self._settle_periods)
         if still:                                   # fusion.ekf.gyro, "At rest"

@@ -141,18 +141,46 @@ def test_pushed_with_zero_commands_is_not_rest(model):
 
 def test_coasting_with_stuck_encoders_waits_for_the_settling_time(model):
     """Commands just went to zero and the counters are frozen: the robot may still roll.
-    The first window and the settling time before a rest update are heading updates."""
-    ekf = _ekf(model)
+    The first still window settles the stop (dropped, ``"settling"``); a rest update needs
+    the settling time before its window (the second is one); without dropping the settling
+    window it is a heading update."""
+    for drop, expected in ((True, (["settling", "fused", "fused"], [0, 1, 2])),
+                           (False, (["fused", "fused", "fused"], [0, 1, 2]))):
+        ekf = _ekf(model, drop_settling=drop)
+        n = _periods(model, WINDOW_S)
+        for k in range(1, 3 * n + 1):
+            _step(ekf, (0.2, 0.2), (100 + 7 * k, 200 + 7 * k), 0.0)
+        frozen = (100 + 21 * n, 200 + 21 * n)
+        reasons, rest = [], []
+        for _ in range(3):
+            recs = [_step(ekf, (0, 0), frozen, 0.0) for _ in range(n)]
+            reasons.append(recs[-1].reason)
+            rest.append(ekf.n_rest_updates)
+        assert (reasons, rest) == expected, drop
+
+
+def test_windows_settling_after_a_stop_are_dropped(model):
+    """Stopped, the wheels count on (braking, creeping) for 2.5 windows: the windows
+    overlapping the stop and the settling are dropped (``"settling"``) until a whole
+    window stood still; the same counts with non-zero commands are fused; a filter that
+    starts with zero commands and creeping counts (carpet at rest) is settled."""
     n = _periods(model, WINDOW_S)
-    for k in range(1, 3 * n + 1):
-        _step(ekf, (0.2, 0.2), (100 + 7 * k, 200 + 7 * k), 0.0)
-    frozen = (100 + 21 * n, 200 + 21 * n)
-    rest = []
-    for _ in range(3):
-        recs = [_step(ekf, (0, 0), frozen, 0.0) for _ in range(n)]
-        assert recs[-1].reason == "fused"
-        rest.append(ekf.n_rest_updates)
-    assert rest == [0, 1, 2]            # the first still window is the settling time
+    ekf = _ekf(model)
+    k, reasons = 0, []
+    for _ in range(2 * n):                                      # driving
+        k += 7
+        reasons.append(_step(ekf, (0.2, 0.2), (100 + k, 200 + k), 0.0).reason)
+    for i in range(6 * n):                                      # stopped: creep 2.5 windows
+        k += 1 if i < 2.5 * n and i % 3 == 0 else 0
+        reasons.append(_step(ekf, (0, 0), (100 + k, 200 + k), 0.0).reason)
+    closed = [r for r in reasons if r != "pending"]
+    assert closed == ["fused", "fused", "settling", "settling", "settling", "settling",
+                      "fused", "fused"], closed
+    assert ekf.stats.count("gyro", "settling") == 4
+    # a start with zero commands and creeping counts: never settling
+    ekf = _ekf(model)
+    recs = [_step(ekf, (0, 0), (100 + i // 7, 200 + i // 7), 0.0) for i in range(4 * n)]
+    assert [r.reason for r in recs if r.reason != "pending"] == ["fused"] * 4
 
 
 def test_a_lost_frame_breaks_the_rest(model):
