@@ -682,7 +682,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         cloned). A window in which the robot stood still (commands exactly zero
         and counts unchanged in each of its periods and ``gyro.rest_settle_s``
         before) measures the bias alone, ``T b`` (a zero-angular-rate update,
-        Groves 2013, section 15.3.2; counted in :attr:`n_rest_updates`). Call it
+        Groves 2013, section 15.3.2; counted in :attr:`n_rest_updates`). A window
+        overlapping the settling after a stop (commands gone to zero, the counts
+        not yet still for a whole window) is dropped (``gyro.drop_settling``;
+        :mod:`fusion.ekf.gyro`, *Settling after a stop*). Call it
         once per :meth:`predict`, after :meth:`update_encoders` (or
         :meth:`update_speeds`) of the same frame.
 
@@ -700,7 +703,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             ``kind="gyro"``: ``reason`` ``"pending"`` while the window fills,
             ``"fused"`` or ``"gated"`` when it closes (innovation in rad),
             ``"gap"`` for a second reading without a :meth:`predict` between
-            (ignored).
+            (ignored), ``"settling"`` for a window dropped while the robot
+            settles after a stop.
 
         Raises
         ------
