@@ -158,3 +158,24 @@ def test_an_imu_without_any_rate_is_refused(tmp_path):
     with pytest.raises(BagError, match=r"^topic /imu: every message's angular_velocity_"
                                        r"covariance\[0\] is -1"):
         bag_to_log(read_bag(path), wheel_base_m=0.235)
+
+
+@pytest.mark.parametrize("command", ["replay", "monitor"])
+def test_the_cli_refuses_an_imu_without_rate_with_gyro(tmp_path, capsys, ekf_example_model,
+                                                      command):
+    """``--gyro`` on a bag whose Imu has no angular velocity: one line, exit 2, nothing
+    written; without ``--gyro`` the Imu is not read."""
+    from lti_motion.app.cli import main
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = _raw_bag(tmp_path / "n.bag", store, 10**9 + np.arange(100) * 20_000_000,
+                   10**9 + np.arange(100) * 20_000_000, [-1.0] * 100)
+    model = ekf_example_model.save(tmp_path / "model_arx.json")
+    argv = [command, "--bag", str(bag), "--model", str(model)]
+    if command == "replay":
+        argv += ["--out", str(tmp_path / "out")]
+    assert main([*argv, "--gyro"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "angular_velocity_covariance[0] is -1" in err, err
+    assert not (tmp_path / "out").exists()
+    assert main(argv) == 0, capsys.readouterr().err
