@@ -308,6 +308,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         # the robot standing still (fusion.ekf.gyro, "At rest"): periods in a row with zero
         # commands and unchanged counts, the prediction of the last one, and those needed
         # before a window to settle; windows fused as zero-angular-rate updates
+        self._gyro_rules = gyro is not None and (gyro.rest_update or gyro.drop_settling)
         self._cmd_zero = True           # a filter starting with zero commands: settled
         self._still_run, self._still_at = 0, -1
         self._settle_periods = 0 if gyro is None else math.ceil(
@@ -431,12 +432,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s += self._dt_s
         self._periods_since_ref += 1
         self._n_predicts += 1
-        u0, u1 = np.asarray(cmd_m_s, dtype=float).tolist()      # checked by predict_terms
-        zero = u0 == 0.0 and u1 == 0.0
-        self._settling = zero and (self._settling or not self._cmd_zero)   # a stop settles
-        if self._settling:
-            self._settling_at = self._n_predicts
-        self._cmd_zero = zero
+        if self._gyro_rules:                    # rest and settling (fusion.ekf.gyro)
+            zero = bool(cmd_m_s[0] == 0.0 and cmd_m_s[1] == 0.0)   # checked by predict_terms
+            self._settling = zero and (self._settling or not self._cmd_zero)   # a stop settles
+            if self._settling:
+                self._settling_at = self._n_predicts
+            self._cmd_zero = zero
 
     def predict_update(self, *args: object, **kwargs: object) -> None:
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
@@ -536,10 +537,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         if ticks.dtype.kind not in "iu":
             if not (math.isfinite(ticks[0]) and math.isfinite(ticks[1])):
-                self._mark_still(still=False)
+                if self._gyro_rules:
+                    self._mark_still(still=False)
                 return self._skip("encoders", t, "non_finite", 2)
-        self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
-                         and int(ticks[1]) == self._last_frame[1])
+        if self._gyro_rules:
+            self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
+                             and int(ticks[1]) == self._last_frame[1])
         pair = self._tick_pair
         periods = self._periods_since_ref
         if not self._have_ref or periods == 0 or periods > self.max_periods:
@@ -638,9 +641,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         y0, y1 = y.tolist()
         if not (math.isfinite(y0) and math.isfinite(y1)):
-            self._mark_still(still=False)
+            if self._gyro_rules:
+                self._mark_still(still=False)
             return self._skip("encoders", t, "non_finite", 2)
-        self._mark_still(still=y0 == 0.0 and y1 == 0.0)
+        if self._gyro_rules:
+            self._mark_still(still=y0 == 0.0 and y1 == 0.0)
         # H = [0 0 I] selects the speed state: P H^T is a slice, no product
         return self._gated("encoders", t, y, y - self.x[self._speed_at:], self.fm.H_encoders,
                            self.R, None, PHt=self.P[:, self._speed_at:])
