@@ -146,6 +146,11 @@ class Recording:
         ``(n, 2)`` of each wheel frame.
     meta : dict
         Free-form JSON-serialisable description.
+    rates : {"samples", "since_last"}
+        For wheel speeds and body speeds: ``"samples"``, readings of the rate at their
+        stamps (a wheel-speed sensor); ``"since_last"``, each the mean rate over the
+        time since the previous frame (an odometry twist, as ``diff_drive_controller``
+        publishes it: travel over the update interval divided by it).
     """
 
     dt_s: float
@@ -163,6 +168,7 @@ class Recording:
     light_bump: np.ndarray | None = None
     bumps: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
+    rates: Literal["samples", "since_last"] = "samples"
 
     def __len__(self) -> int:
         """Number of wheel frames."""
@@ -181,6 +187,7 @@ class Recording:
         true_pose_t_s: np.ndarray | None = None, true_pose: np.ndarray | None = None,
         sightings_t_s: np.ndarray | None = None, sightings: np.ndarray | None = None,
         sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0), meta: dict | None = None,
+        rates: Literal["samples", "since_last"] = "samples",
     ) -> Recording:
         """A recording from timestamped arrays, one wheel kind and one command kind.
 
@@ -216,6 +223,9 @@ array_like, shape (n, 2)
             The sighting sensor's pose on the robot (x [m], y [m], heading [rad]).
         meta : dict, optional
             Free-form JSON-serialisable description.
+        rates : {"samples", "since_last"}
+            What a speed kind's values are (:attr:`rates`; default readings at their
+            stamps).
 
         Returns
         -------
@@ -262,6 +272,8 @@ array_like, shape (n, 2)
         if bad.size:
             raise ValueError(f"{cmd_kind}: command {int(bad[0])} is not finite "
                              f"({cmd.values[bad[0]].tolist()})")
+        if rates not in ("samples", "since_last"):
+            raise ValueError(f"rates must be 'samples' or 'since_last', got {rates!r}")
         ok = np.ones(wheel.t_s.size, bool) if valid is None else np.asarray(valid, bool)
         if ok.shape != wheel.t_s.shape:
             raise ShapeError(f"valid must have shape {wheel.t_s.shape}, got {ok.shape}")
@@ -276,7 +288,7 @@ array_like, shape (n, 2)
                    cmd_kind=cmd_kind, cmd_per_frame=cmd_t_s is None,
                    counter_bits=counter_bits if kind == "counts" else None,
                    sensor_pose=tuple(float(x) for x in sensor_pose), meta=dict(meta or {}),
-                   **optional)
+                   rates=rates, **optional)
 
     @classmethod
     def from_frame_log(cls, log: FrameLog) -> Recording:

@@ -17,7 +17,10 @@ measured stream:
    scaled by ``wheel_radius_m`` (unwrapped first when every angle lies in
    ``[-pi, pi]``, i.e. the source wraps them; otherwise taken as continuous,
    as ``JointState.position`` of a continuous joint is); speeds (wheel, body, IMU yaw
-   rate) are integrated with the trapezoid rule over their own times.
+   rate) are integrated with the trapezoid rule over their own times, or, for a
+   recording whose speeds are means since the previous frame (``Recording.rates ==
+   "since_last"``, an odometry twist), each times the time since the previous frame
+   (the backward rectangle, exact for such means).
 2. Interpolate the cumulative value linearly at the period boundaries (wheel
    frames sit at the end of the period they were assigned to; other streams
    at their stamps), difference, and divide by the period: the mean rate over
@@ -129,8 +132,10 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
             v = np.unwrap(v, axis=0)
         return (v - v[0]) * wheel_radius_m
     rate = v * wheel_radius_m if kind == "wheel_speeds_rad_s" else v
-    # trapezoid rule over the frames' own times
-    inc = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t_used)[:, None]
+    if rec.rates == "since_last":       # a mean since the previous frame: backward rectangle
+        inc = rate[1:] * np.diff(t_used)[:, None]
+    else:                               # readings at their stamps: trapezoid rule
+        inc = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t_used)[:, None]
     return np.vstack([np.zeros((1, 2)), np.cumsum(inc, axis=0)])
 
 

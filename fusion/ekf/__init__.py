@@ -3,6 +3,8 @@
 - :class:`ModelEKF` (:mod:`fusion.ekf.model_ekf`): the filterpy subclass;
 - :mod:`fusion.ekf.functions`: the same maths as plain functions, for a user's own
   filterpy EKF or UKF (:class:`FilterModel` lays a model out for a filter);
+- :mod:`fusion.ekf.kernel`: the per-step arithmetic of the prediction and the encoder
+  update, compiled with numba (on first use; cached on disk);
 - :class:`VelocityModelEKF` (:mod:`fusion.ekf.velocity_ekf`): the textbook
   velocity-model EKF, the baseline;
 - :mod:`fusion.ekf.updates`: what both filters share, the chi-square gate,

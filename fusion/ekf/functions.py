@@ -170,6 +170,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fusion.ekf.kernel import kernel_array, predict_kernel, predict_terms_kernel
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
 from fusion.noise import GyroNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import (
@@ -181,7 +182,7 @@ from fusion.range_bearing import (
 from fusion.sensor_pose import SensorPose
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.kinematics import sinc_and_derivative, wrap_angle
+from lti_motion.kinematics import wrap_angle
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
 
@@ -206,6 +207,7 @@ __all__ = [
     "pose_jacobian",
     "pose_measurement",
     "pose_residual",
+    "predict_step",
     "predict_terms",
     "process_noise",
     "propagate_covariance",
@@ -291,11 +293,16 @@ class FilterModel:
     F_template, G_template, W_template, Q_const : ndarray
         Constant parts of ``F`` (n, n), ``G2`` (n, 4), ``blkdiag(R, 0)`` (4, 4)
         and ``Q_c`` (n, n) (module notes).
+    kernel_constants : tuple
+        What the compiled step (:mod:`fusion.ekf.kernel`) reads, read-only: the
+        scalars ``(dt_s, the slip parameters, R)``, ``[[A, B, 0], [C, D, offset]]``,
+        ``G_template`` and ``Q_const``.
 
     Raises
     ------
     FilterOptionError
-        For non-positive encoder noise or scale.
+        For non-positive encoder noise or scale, or a ``slip`` whose class overrides
+        :meth:`SlipNoise.stds` (the compiled step evaluates ``SlipNoise``'s own law).
     """
 
     model: MotionModel
@@ -320,6 +327,7 @@ class FilterModel:
     G_template: np.ndarray = field(init=False, repr=False)
     W_template: np.ndarray = field(init=False, repr=False)
     Q_const: np.ndarray = field(init=False, repr=False)
+    kernel_constants: tuple = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
@@ -331,6 +339,10 @@ class FilterModel:
         std = tuple(float(s) for s in self.encoder_std)
         if len(std) != 2 or not all(math.isfinite(s) and s > 0 for s in std):
             raise FilterOptionError(f"encoder_std must be two positive numbers, got {std}")
+        if type(self.slip).stds is not SlipNoise.stds:   # the compiled step reads the fields
+            raise FilterOptionError(f"{type(self.slip).__name__} overrides SlipNoise.stds; the "
+                                    "filter's compiled step evaluates SlipNoise's own law "
+                                    "from its fields: give a SlipNoise with those fields")
         if self.m_per_tick is None:
             intrinsics = m.encoder_intrinsics
         else:
@@ -374,7 +386,7 @@ class FilterModel:
         extra = m.Q - m.K @ m.R @ m.K.T              # model error beyond K e
         extra = 0.5 * (extra + extra.T)
         evals, evecs = np.linalg.eigh(extra)
-        if evals.min() < -1e-9 * max(1.0, float(np.abs(evals).max())):
+        if evals.size and evals.min() < -1e-9 * max(1.0, float(np.abs(evals).max())):
             _log.warning("model Q is not >= K R K^T (smallest eigenvalue of the difference "
                          "%.3g); negative part clipped", evals.min())
         extra = (evecs * np.clip(evals, 0.0, None)) @ evecs.T
@@ -384,6 +396,13 @@ class FilterModel:
         if self.gyro is not None:
             q[GYRO_BIAS, GYRO_BIAS] = self.gyro.bias_walk_rad_s_per_sqrt_s ** 2 * m.dt_s
         setf(self, "Q_const", _readonly(q))
+        sl = self.slip
+        abo = np.zeros((nz + 2, nz + 3))
+        abo[:, :nz], abo[:, nz:nz + 2], abo[nz:, nz + 2] = self.ACD, self.BD, m.offset_speeds
+        setf(self, "kernel_constants", (
+            _readonly((m.dt_s, sl.v_floor_m_s, sl.v_frac, sl.w_floor_rad_s, sl.w_frac,
+                       sl.w_per_v_rad_m, *np.ravel(m.R))),
+            _readonly(abo), self.G_template, self.Q_const))
 
     @property
     def model_slice(self) -> slice:
@@ -462,51 +481,62 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     ``c = v dt sin(h)/h``: ``x' = x + c cos(theta + h)``,
     ``y' = y + c sin(theta + h)``, ``theta' = theta + 2 h``; its Jacobians are
     those of :func:`lti_motion.kinematics.pose_step_jacobians`, in scalar
-    arithmetic (per-step cost).
+    arithmetic, compiled (:func:`fusion.ekf.kernel.predict_terms_kernel`: per-step cost).
     """
-    x = _check_state(x, fm)
-    cmd_m_s = _check_command(cmd_m_s)
-    nz, n, dt, z0 = fm.nz, fm.n, fm.dt_s, fm.z0
-    x_new = np.empty(n)
-    tail = fm.ACD @ x[z0:z0 + nz]
-    tail += fm.BD @ cmd_m_s                       # (A z + B u, C z + D u)
-    tail[nz:] += fm.model.offset_speeds           # + c, the model's affine offset
-    x_new[z0:] = tail
-    v, w = tail[nz:].tolist()
-    if accumulate:
-        x_new[z0 + nz:] += x[z0 + nz:]
-    if z0 != _Z0:                                 # gyro bias and heading clone kept
-        x_new[_Z0:z0] = x[_Z0:z0]
-    px, py, theta, k_v, k_w, kappa = x[:_Z0].tolist()
-    c_v, c_w = 1.0 + k_v, 1.0 + k_w
-    vg, wg = c_v * v, c_w * w + kappa * v   # ground speeds g = D_c s (module notes)
-    h = 0.5 * wg * dt
-    sinc, dsinc = sinc_and_derivative(h)
-    mid = theta + h
-    cm, sm = math.cos(mid), math.sin(mid)
-    chord = vg * dt * sinc                  # paper eq. 11, chord form
-    x_new[:_Z0] = (px + chord * cm, py + chord * sm, theta + 2.0 * h, k_v, k_w, kappa)
-    k = 0.5 * vg * dt * dt
-    a, b = dt * sinc * cm, k * (dsinc * cm - sinc * sm)      # F_s = d pose / d g
-    c, d = dt * sinc * sm, k * (dsinc * sm + sinc * cm)
-    g2 = np.array(fm.G_template)
-    g2[:3] = ((a * c_v + b * kappa, b * c_w, a, b),          # [F_s D_c, F_s]
-              (c * c_v + d * kappa, d * c_w, c, d),
-              (dt * kappa, dt * c_w, 0.0, dt))
+    x = kernel_array(_check_state(x, fm))
+    cmd_m_s = kernel_array(_check_command(cmd_m_s))
     F = np.array(fm.F_template) if out_F is None else out_F
-    F[:3, :_Z0] = ((1.0, 0.0, -chord * sm, a * v, b * w, b * v),  # [F_p, F_s D_s]
-                   (0.0, 1.0, chord * cm, c * v, d * w, d * v),
-                   (0.0, 0.0, 1.0, 0.0, dt * w, dt * v))
-    F[:3, z0:z0 + nz] = g2[:3, :2] @ fm.model.C               # F_s D_c C
-    F[n - 2, n - 2] = F[n - 1, n - 1] = 1.0 if accumulate else 0.0
-    sv, sw = fm.slip.stds(v, w)
-    w4 = np.array(fm.W_template)
-    w4[2, 2] = sv * sv
-    w4[3, 3] = sw * sw
-    Q = np.empty((n, n)) if out_Q is None else out_Q
-    np.matmul(g2 @ w4, g2.T, out=Q)         # G R G^T + F_s R_slip F_s^T in one product
-    Q += fm.Q_const
+    Q = np.empty((fm.n, fm.n)) if out_Q is None else out_Q
+    x_new = predict_terms_kernel(x, cmd_m_s, bool(accumulate), *fm.kernel_constants, F, Q)
     return x_new, F, Q
+
+
+def predict_step(x: np.ndarray, P: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *,
+                 accumulate: bool = False, out_F: np.ndarray, out_Q: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`predict_terms` and :func:`propagate_covariance` in one compiled call.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        State after period ``k-1``.
+    P : ndarray, shape (n, n)
+        Its covariance.
+    cmd_m_s : ndarray, shape (2,)
+        Wheel commands ``(left, right)`` [m/s] of period ``k``.
+    fm : FilterModel
+        The model's filter layout.
+    accumulate : bool
+        As :func:`predict_terms`.
+    out_F, out_Q : ndarray, shape (n, n)
+        Buffers that receive ``F`` and ``Q``, as :func:`predict_terms`'s
+        (``out_F`` holding an earlier ``F`` of ``fm`` or ``fm.F_template``).
+
+    Returns
+    -------
+    x_next : ndarray, shape (n,)
+        As :func:`predict_terms`.
+    P_next : ndarray, shape (n, n)
+        ``F P F^T + Q``, symmetrised (Bar-Shalom et al. 2001, eq. 5.2.3-5).
+
+    Raises
+    ------
+    MeasurementShapeError, NonFiniteInputError
+        As :func:`predict_terms`.
+
+    Notes
+    -----
+    :func:`fusion.ekf.kernel.predict_kernel`: the same arithmetic as the two
+    functions, skipping the zeros of ``F``; equal to them to rounding.
+    """
+    x = kernel_array(_check_state(x, fm))
+    cmd_m_s = kernel_array(_check_command(cmd_m_s))
+    P = np.asarray(P, dtype=float)
+    if P.shape != (fm.n, fm.n):
+        raise MeasurementShapeError(f"expected a covariance of shape ({fm.n}, {fm.n}), got "
+                                    f"{P.shape}")
+    return predict_kernel(x, kernel_array(P), cmd_m_s, bool(accumulate), *fm.kernel_constants,
+                          out_F, out_Q)
 
 
 def state_transition(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel) -> np.ndarray:
@@ -823,7 +853,7 @@ def initial_covariance(fm: FilterModel, *, pose_std: tuple[float, float, float] 
     pz = fm.model.Q if z_cov is None else np.asarray(z_cov, dtype=float)
     if pz.shape != (fm.nz, fm.nz):
         raise MeasurementShapeError(f"expected z_cov of shape ({fm.nz}, {fm.nz}), got {pz.shape}")
-    if not np.allclose(pz, pz.T) or np.linalg.eigvalsh(0.5 * (pz + pz.T)).min() <= 0:
+    if not np.allclose(pz, pz.T) or np.linalg.eigvalsh(0.5 * (pz + pz.T)).min(initial=1.0) <= 0:
         raise FilterOptionError("z_cov must be symmetric positive definite")
     c = fm.model.C
     zs, ss = fm.model_slice, fm.speed_slice

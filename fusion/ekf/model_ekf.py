@@ -66,8 +66,7 @@ from fusion.ekf.functions import (
     initial_state,
     pose_jacobian,
     pose_residual,
-    predict_terms,
-    propagate_covariance,
+    predict_step,
     span_verdict,
     state_transition,
 )
@@ -408,8 +407,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """Advance one sensor period with wheel commands ``u = (L, R)`` [m/s], shape (2,).
 
         Sets ``x``, ``P``, ``F``, ``Q``, ``x_prior``, ``P_prior`` and adds
-        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_terms`,
-        :func:`~fusion.ekf.functions.propagate_covariance`).
+        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_step`: the
+        arithmetic of :func:`~fusion.ekf.functions.predict_terms` and
+        :func:`~fusion.ekf.functions.propagate_covariance`, compiled).
 
         Raises
         ------
@@ -420,12 +420,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         # after a gated or missing encoder reading the speed state sums the periods since the
         # last fused counts (fusion.ekf.functions, "Gated readings")
         accumulate = self._have_ref and self._periods_since_ref > 0
-        x, F, Q = predict_terms(self.x, cmd_m_s, self.fm, accumulate=accumulate, out_F=f_buf,
-                                out_Q=q_buf)
-        P = propagate_covariance(self.P, F, Q)
+        x, P = predict_step(self.x, self.P, cmd_m_s, self.fm, accumulate=accumulate,
+                            out_F=f_buf, out_Q=q_buf)
         # swap buffers so self.F / self.Q keep this step's matrices
         self._buffers = (self.F, self.Q)
-        self.F, self.Q = F, Q
+        self.F, self.Q = f_buf, q_buf
         # the filter never modifies x or P in place: prior/post alias them (no copies)
         self.x = self.x_prior = x
         self.P = self.P_prior = P
@@ -433,7 +432,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._periods_since_ref += 1
         self._n_predicts += 1
         if self._gyro_rules:                    # rest and settling (fusion.ekf.gyro)
-            zero = bool(cmd_m_s[0] == 0.0 and cmd_m_s[1] == 0.0)   # checked by predict_terms
+            zero = bool(cmd_m_s[0] == 0.0 and cmd_m_s[1] == 0.0)   # checked by predict_step
             self._settling = zero and (self._settling or not self._cmd_zero)   # a stop settles
             if self._settling:
                 self._settling_at = self._n_predicts
@@ -592,7 +591,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._t2s is None:
             return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
         (l0, r0), (l1, r1) = self._tick_pair.tolist()
-        dl, dr = self._step(l1 - l0), self._step(r1 - r0)
+        dl, dr = l1 - l0, r1 - r0
+        if self._modulus:                   # self._step, inline (it runs at every reading)
+            half, modulus = self._half, self._modulus
+            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
         (a, b), (c, d) = self._t2s
         return np.array((a * dl + b * dr, c * dl + d * dr))
 
@@ -605,9 +607,13 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
         increment differs from the last frame's (a wheel's speed changes by about a tick per
         period). Scalar arithmetic: it runs at every reading."""
-        left, right = int(ticks[0]), int(ticks[1])
-        dl = abs(self._step(left - self._last_frame[0]))
-        dr = abs(self._step(right - self._last_frame[1]))
+        left, right = ticks.tolist()
+        left, right = int(left), int(right)
+        dl, dr = left - self._last_frame[0], right - self._last_frame[1]
+        if self._modulus:                   # self._step, inline
+            half, modulus = self._half, self._modulus
+            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
+        dl, dr = abs(dl), abs(dr)
         jump = 0.0
         if self._have_last_delta:
             jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))

@@ -44,6 +44,7 @@ from fusion.ekf.functions import (
     landmark_residual,
     landmark_terms,
 )
+from fusion.ekf.kernel import kernel_array, selector_update_kernel
 from fusion.exceptions import (
     CovarianceNotPositiveDefiniteError,
     FilterOptionError,
@@ -318,6 +319,10 @@ class GatedUpdates:
         is ``P H^T`` of a selector ``H`` on the last rows of the state."""
         P = self.P
         m = innovation.shape[0]
+        if PHt is not None and m == 2:          # the speed state's reading: compiled
+            record = self._gated_selector(kind, t, zmeas, innovation, R, landmark_id, force)
+            if record is not None:
+                return record
         if PHt is None:
             PHt = P @ H.T
             S = H @ PHt + R
@@ -340,6 +345,36 @@ class GatedUpdates:
         else:
             self.K = np.zeros((len(self.x), m))
             self.x_post, self.P_post = self.x, P
+            reason = "gated"
+        record = UpdateRecord(kind, t, innovation, S, value, accepted, reason, landmark_id)
+        self._counts[kind, reason] += 1
+        self.records.append(record)
+        return record
+
+    def _gated_selector(self, kind: UpdateKind, t: float, zmeas: np.ndarray,
+                        innovation: np.ndarray, R: np.ndarray, landmark_id: Hashable | None,
+                        force: bool) -> UpdateRecord | None:
+        """:meth:`_gated` for a 2-D reading of the last two states, in one compiled call
+        (:func:`fusion.ekf.kernel.selector_update_kernel`); None if ``S`` has no positive
+        determinant (the numpy path then decides)."""
+        # innovation: a fresh float array; x, P, R: the filter's own (kernel_array copies
+        # anything else a user assigned)
+        ok, S, SI, value, accepted, K, x, P = selector_update_kernel(
+            kernel_array(self.x), kernel_array(self.P), innovation, kernel_array(R),
+            self._gates[2], bool(force))
+        if not ok:
+            return None
+        innovation.flags.writeable = False
+        S.flags.writeable = False
+        self.y, self.S, self.SI, self.z = innovation, S, SI, zmeas
+        self.K = K
+        if accepted:
+            self.x = self.x_post = x
+            self.P = self.P_post = P
+            self._log_likelihood = self._likelihood = self._mahalanobis = None
+            reason: UpdateReason = "fused" if value <= self._gates[2] else "forced"
+        else:
+            self.x_post, self.P_post = self.x, self.P
             reason = "gated"
         record = UpdateRecord(kind, t, innovation, S, value, accepted, reason, landmark_id)
         self._counts[kind, reason] += 1

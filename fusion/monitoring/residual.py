@@ -360,6 +360,10 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
                                     f"{nu.shape} and {S.shape}")
     if not _symmetric(S):
         raise CovarianceNotPositiveDefiniteError(f"innovation covariance is not symmetric: {S}")
+    if nu.size == 2:                        # scalar arithmetic: it runs at every reading
+        w = _whiten_2(nu, S)
+        if w is not None:
+            return w
     try:
         L = np.linalg.cholesky(S)
     except np.linalg.LinAlgError:
@@ -368,6 +372,23 @@ def whiten(innovation: np.ndarray, innovation_cov: np.ndarray) -> np.ndarray:
             f"{np.linalg.eigvalsh(0.5 * (S + S.T))}); check the filter's P and R") from None
     # forward substitution with the lower-triangular factor
     return np.linalg.solve(L, nu)
+
+
+def _whiten_2(nu: np.ndarray, S: np.ndarray) -> np.ndarray | None:
+    """:func:`whiten` for m = 2: the Cholesky factor in closed form (Golub & Van Loan 2013,
+    alg. 4.2.1, lower triangle of ``S``) and forward substitution; None if ``S`` is not
+    positive definite (the caller raises with the eigenvalues)."""
+    (a, _), (c, d) = S.tolist()
+    if not a > 0.0:
+        return None
+    l11 = math.sqrt(a)
+    l21 = c / l11
+    e = d - l21 * l21
+    if not e > 0.0:
+        return None
+    n0, n1 = nu.tolist()
+    w0 = n0 / l11
+    return np.array((w0, (n1 - l21 * w0) / math.sqrt(e)))
 
 
 def _symmetric(S: np.ndarray) -> bool:

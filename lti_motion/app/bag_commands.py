@@ -40,19 +40,21 @@ import numpy as np
 
 from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
 from drivers.bag_writer import BagAlarm, write_estimates_bag
-from drivers.bags import TOPIC_TYPES, bag_topics, read_bag
+from drivers.bags import TOPIC_TYPES, StampedSeries, bag_topics, read_bag
 from drivers.exceptions import BagError
 from fusion.monitoring.monitored_filter import FrameResult
 from fusion.monitoring.residual import AlarmEvent
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
-from lti_motion.app.replay import ReplayResult, run_replay
-from lti_motion.app.replay_sources import source_from_frame_log
+from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
+from lti_motion.app.replay_sources import source_from_frame_log, source_from_grid
 from lti_motion.calibration import speeds_from_log
 from lti_motion.clocks import median_period_s
+from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.frames import FrameLog, SensorFrame
 from lti_motion.model import MotionModel, fit_arx
 from lti_motion.recording import Recording
+from lti_motion.resample import on_grid
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_log", "monitor_bag",
            "odometry_recording", "plot_bag_fit", "replay_bag"]
@@ -171,8 +173,8 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     return model, log
 
 
-def odometry_recording(path: str | os.PathLike, *,
-                       options: BagOptions | None = None) -> Recording | None:
+def odometry_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
+                       reference: bool = False) -> Recording | None:
     """The drive as body speeds from the bag's ``nav_msgs/Odometry`` twist, for a bag that
     has no ``sensor_msgs/JointState`` wheel angles; ``None`` when it has them (or no
     Odometry: :func:`calibrate_from_bag` then says what is missing).
@@ -181,7 +183,9 @@ def odometry_recording(path: str | os.PathLike, *,
     estimate of its body speeds over the time since its last message
     (``diff_drive_controller``'s ``/odom``); the commands are the bag's Twist topic. Both
     keep their stamps; :func:`lti_motion.resample.on_grid` puts them on the sensor
-    period's grid, as for any recording.
+    period's grid, as for any recording. With ``reference`` (replay), the reference poses
+    (``PoseStamped`` or tf) and, with ``options.gyro``, the Imu's yaw rate come along;
+    ``meta["bag_start_ns"]`` is the bag's first stamp.
 
     Raises
     ------
@@ -193,17 +197,28 @@ def odometry_recording(path: str | os.PathLike, *,
     if (opt.topics.get("wheels") or TOPIC_TYPES["wheels"][0] in types
             or not any(t in TOPIC_TYPES["odom"] for t in types)):
         return None
-    rec = read_bag(path, kinds=("cmd", "odom"), cmd_topic=opt.topics.get("cmd"),
-                   odom_topic=opt.topics.get("odom"))
+    kinds = ("cmd", "odom") + (("truth",) + (("imu",) if opt.gyro else ()) if reference else ())
+    rec = read_bag(path, kinds=kinds, truth_parent=opt.truth_parent,
+                   truth_child=opt.truth_child,
+                   **{f"{kind}_topic": opt.topics.get(kind) for kind in kinds})
     if rec.cmd is None:
         raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
                        "commands; calibration needs what was commanded (record /cmd_vel)")
-    t_s = (rec.odom.t_ns - rec.start_ns) * 1e-9
+
+    def seconds(series: StampedSeries) -> np.ndarray:
+        return (series.t_ns - rec.start_ns) * 1e-9
+
+    t_s = seconds(rec.odom)
+    extra = {}
+    if rec.truth is not None:
+        extra.update(true_pose_t_s=seconds(rec.truth), true_pose=rec.truth.values)
+    if rec.imu is not None:
+        extra.update(yaw_rate_t_s=seconds(rec.imu), yaw_rate_rad_s=rec.imu.values[:, 0])
     return Recording.from_streams(
         wheel_t_s=t_s, body_speeds=rec.odom.values[:, 3:5],
         dt_s=opt.dt_s if opt.dt_s is not None else median_period_s(t_s),
-        cmd_t_s=(rec.cmd.t_ns - rec.start_ns) * 1e-9, cmd_body=rec.cmd.values,
-        meta={"source": "ROS bag", "bag": str(Path(path)),
+        cmd_t_s=seconds(rec.cmd), cmd_body=rec.cmd.values, rates="since_last", **extra,
+        meta={"source": "ROS bag", "bag": str(Path(path)), "bag_start_ns": int(rec.start_ns),
               "topics": {"cmd": rec.cmd.topic, "odom": rec.odom.topic}})
 
 
@@ -255,9 +270,41 @@ def plot_bag_fit(model: MotionModel, log: FrameLog, path: str | os.PathLike, *,
     return fit
 
 
-def _bag_ns(log: FrameLog, t_s: np.ndarray | float) -> np.ndarray:
-    """Bag times [ns] of log times [s]."""
-    return log.meta["bag_start_ns"] + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
+def _bag_ns(start_ns: int, t_s: np.ndarray | float) -> np.ndarray:
+    """Bag times [ns] of times [s] from the bag's first stamp ``start_ns`` [ns]."""
+    return start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
+
+
+def _twist_log(path: str | os.PathLike, model: MotionModel,
+               options: BagOptions | None) -> FrameLog | None:
+    """For a bag with an odometry twist and no wheel angles: the drive as a log of the counts
+    the twist stands for (:func:`~lti_motion.app.replay.twist_counts`, never wrapping) on
+    the model's period; ``None`` for a bag with wheel angles.
+
+    Raises
+    ------
+    MissingEncoderScaleError
+        If the model has no encoder scale to count the twist's travel in.
+    """
+    opt = options or BagOptions()
+    rec = odometry_recording(path, options=replace(opt, dt_s=opt.dt_s or model.dt_s),
+                             reference=True)
+    if rec is None:
+        return None
+    if model.encoder_intrinsics is None:
+        raise MissingEncoderScaleError(
+            f"{Path(path).name} has an odometry twist and no wheel angles; monitoring it "
+            "needs a model with an encoder scale to count the twist's travel in, and this "
+            "one has none: calibrate with the rotation in place or from wheel angles")
+    grid = on_grid(rec, wheel_base_m=model.wheel_base_m, max_wheel_speed_m_s=opt.max_wheel_m_s)
+    src = source_from_grid(grid, Path(path).name, dt_s=rec.dt_s)
+    n = len(src)
+    return FrameLog(t_s=src.t_s, ticks=twist_counts(src, model.encoder_intrinsics),
+                    cmd_m_s=src.cmd_m_s, light_bump=np.zeros((n, 6), np.int64),
+                    bumps=np.zeros((n, 2), bool), valid=src.valid, dt_s=rec.dt_s,
+                    yaw_rate_rad_s=src.yaw_rate_rad_s,
+                    meta={**rec.meta, "counter_bits": 64,
+                          "lost_frames": int(np.count_nonzero(~src.valid))})
 
 
 def _model_log(path: str | os.PathLike, model: MotionModel,
@@ -291,17 +338,29 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    log = _model_log(path, model, options)
-    if "imu_noise" in log.meta:
-        print_fn(log.meta["imu_noise"]["summary"])
-    src = source_from_frame_log(log, Path(path).name, start_s=start_s, duration_s=duration_s)
+    opt = options or BagOptions()
+    odometry = odometry_recording(path, options=replace(opt, dt_s=opt.dt_s or model.dt_s),
+                                  reference=True)
+    if odometry is not None:            # the robot's own odometry twist, no wheel angles
+        grid = on_grid(odometry, wheel_base_m=model.wheel_base_m,
+                       max_wheel_speed_m_s=opt.max_wheel_m_s)
+        src = source_from_grid(grid, Path(path).name, dt_s=odometry.dt_s, start_s=start_s,
+                               duration_s=duration_s)
+        start_ns = odometry.meta["bag_start_ns"]
+    else:
+        log = _model_log(path, model, options)
+        if "imu_noise" in log.meta:
+            print_fn(log.meta["imu_noise"]["summary"])
+        src = source_from_frame_log(log, Path(path).name, start_s=start_s,
+                                    duration_s=duration_s)
+        start_ns = log.meta["bag_start_ns"]
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
                         rpe_s=rpe_s, gyro=(options or BagOptions()).gyro, print_fn=print_fn)
     if out_bag is not None:
         name = "ekf" if "ekf" in result.pose_covs else next(iter(result.pose_covs), None)
         if name is None:
             raise BagError("--out-bag writes the EKF's estimates; run the ekf estimator")
-        written = write_estimates_bag(out_bag, _bag_ns(log, src.t_s),
+        written = write_estimates_bag(out_bag, _bag_ns(start_ns, src.t_s),
                                       result.poses[name], result.pose_covs[name])
         print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance) to {written}")
     return result
@@ -371,7 +430,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    log = _model_log(path, model, options)
+    log = _twist_log(path, model, options) or _model_log(path, model, options)
     n = len(log)
     poses, covs = np.zeros((n, 3)), np.zeros((n, 3, 3))
     step = iter(range(n))
@@ -386,7 +445,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
         print_fn(text)
 
     def on_alarm(event: AlarmEvent) -> None:
-        ns = int(_bag_ns(log, t0 + event.t_s))
+        ns = int(_bag_ns(log.meta["bag_start_ns"], t0 + event.t_s))
         print_fn(f"      bag time {ns // 10**9}.{ns % 10**9:09d}")
 
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
@@ -403,8 +462,9 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
                          gyro=gyro)
     for text in run.summary():
         print_fn(text)
-    alarm_ns = np.array([int(_bag_ns(log, t0 + e.t_s)) for e in run.events], np.int64)
-    t_ns = _bag_ns(log, log.t_s)
+    start_ns = log.meta["bag_start_ns"]
+    alarm_ns = np.array([int(_bag_ns(start_ns, t0 + e.t_s)) for e in run.events], np.int64)
+    t_ns = _bag_ns(start_ns, log.t_s)
     written = None
     if out_bag is not None:
         alarms = [BagAlarm(int(ns), f"lti_motion/{e.kind}", format_alarm(e),

@@ -44,7 +44,8 @@ from lti_motion.app.replay_sources import (
     source_from_mrclam,
 )
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, rpe
 from lti_motion.model import MotionModel
 from lti_motion.odometry import tick_deltas
@@ -63,6 +64,7 @@ __all__ = [
     "run_replay",
     "source_from_log",
     "source_from_mrclam",
+    "twist_counts",
 ]
 
 
@@ -74,6 +76,9 @@ def _expand(src: ReplaySource) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _odometry(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.ndarray:
+    if src.ticks is None:                    # the robot's own odometry twist, integrated
+        speeds = np.repeat(src.body_speeds[1:], src.periods[1:], axis=0)
+        return integrate_poses(speeds, src.dt_s, initial_pose=pose0)[np.cumsum(src.periods)]
     k = model.encoder_intrinsics             # each wheel's scale, else the one m_per_tick
     if k is None:
         raise MissingEncoderScaleError.needed_by("encoder odometry")
@@ -98,15 +103,39 @@ def _sensorless(src: ReplaySource, model: MotionModel, pose0: np.ndarray) -> np.
     return model.predict_poses(u, initial_pose=pose0)[at]
 
 
+def twist_counts(src: ReplaySource, intrinsics: OdometryIntrinsics) -> np.ndarray:
+    """The counts an encoder of ``intrinsics`` would have read under a source's odometry
+    twist, shape (n, 2), int64, never wrapping.
+
+    The twist's body travel over each period (``body_speeds`` times the periods times
+    ``dt_s``), turned into wheel travel through ``intrinsics.wheel_base_m`` and summed, is
+    rounded to whole ticks of each wheel's scale: the cumulative travel to half a tick,
+    the resolution the EKF's encoder noise assumes (``docs/ekf.md``). Fused as counts, a
+    reading the gate rejects keeps its motion (the next counts span it), which a per-period
+    speed update loses.
+    """
+    body = src.body_speeds * (src.periods * src.dt_s)[:, None]
+    body[0] = 0.0                                   # frame 0 closes no period
+    wheel = np.cumsum(wheel_from_body(body, wheel_base_m=intrinsics.wheel_base_m), axis=0)
+    scale = np.array([intrinsics.m_per_tick_left, intrinsics.m_per_tick_right])
+    return np.rint(wheel / scale).astype(np.int64)
+
+
 def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
          landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray]:
-    encoders = src.ticks is not None
+    ticks, bits, twist = src.ticks, src.counter_bits, None
+    if ticks is None and src.body_speeds is not None:   # the robot's own odometry twist
+        if model.encoder_intrinsics is not None:        # as the counts it stands for
+            ticks, bits = twist_counts(src, model.encoder_intrinsics), 64
+        else:                                           # as speeds, one period at a time
+            twist = src.body_speeds
+    encoders = ticks is not None
     first = int(np.argmax(src.valid)) if encoders else 0
     gyro = src.yaw_rate_rad_s           # a gyro's readings: fused (fusion.ekf.gyro)
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=src.ticks[first] if encoders else None,
+                   initial_ticks=ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
-                   landmark_noise=src.landmark_noise, history=0, counter_bits=src.counter_bits,
+                   landmark_noise=src.landmark_noise, history=0, counter_bits=bits,
                    gyro=None if gyro is None else gyro_noise(src))
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
@@ -117,7 +146,9 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
         for _ in range(int(src.periods[k])):
             ekf.predict(src.cmd_m_s[k])
         if encoders and src.valid[k] and k > first:
-            ekf.update_encoders(src.ticks[k])
+            ekf.update_encoders(ticks[k])
+        elif twist is not None and src.valid[k] and src.periods[k] == 1:
+            ekf.update_speeds(twist[k])           # NaN: skipped by the filter
         if gyro is not None:
             ekf.update_gyro(gyro[k])    # NaN (a lost frame) starts a new window
         ekf.update_landmarks(sightings.get(k, none))
@@ -182,7 +213,7 @@ def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
         if name not in ESTIMATORS:
             raise ValueError(f"unknown estimator {name!r}; known: {', '.join(ESTIMATORS)}")
         if name not in src.available():
-            why = ("encoder counts" if name in ("odometry", "ekf")
+            why = ("encoder counts or an odometry twist" if name in ("odometry", "ekf")
                    else "landmark sightings")
             raise ValueError(f"estimator {name!r} needs {why}, which {src.name} does not have; "
                              f"available: {', '.join(src.available())}")
@@ -351,7 +382,7 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
     names = list(estimators) if estimators else src.available()
     n_sight = len(src.sightings)
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
-             f"{'encoder counts' if src.ticks is not None else 'no encoders'}, "
+             f"{src.wheel_readings or 'no encoders'}, "
              f"{n_sight} landmark sightings, "
              f"{'ground truth' if src.has_truth else 'no ground truth'}")
     if src.yaw_rate_rad_s is not None:
@@ -374,8 +405,8 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
         print_fn("  no ground truth in this recording: no ATE or RPE. Start-to-end distance "
                  "is the closure offset if the drive ended where it began")
     for name, counts in extra.items():
-        enc = (f"{counts['encoders_gated']} encoder readings gated, "
-               if src.ticks is not None else "")
+        enc = (f"{counts['encoders_gated']} {'encoder' if src.ticks is not None else 'twist'}"
+               f" readings gated, " if src.wheel_readings else "")
         gyro = (f"; gyro: {counts['gyro_windows_fused']} windows fused, "
                 f"{counts['gyro_windows_gated']} gated" if "gyro_windows_fused" in counts
                 else "")

@@ -25,6 +25,7 @@ from lti_motion.kinematics import wheel_from_body
 from lti_motion.logfile import load_log
 from lti_motion.model import MotionModel
 from lti_motion.odometry import stream_clock
+from lti_motion.resample import GridSignals
 
 __all__ = [
     "ESTIMATORS",
@@ -33,6 +34,7 @@ __all__ = [
     "fit_mrclam_model",
     "load_source",
     "source_from_frame_log",
+    "source_from_grid",
     "source_from_log",
     "source_from_mrclam",
 ]
@@ -85,6 +87,10 @@ class ReplaySource:
         The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
         bag Imu's ``angular_velocity_covariance``, :mod:`drivers.imu_noise`);
         ``None``: not stated.
+    body_speeds : ndarray, shape (n, 2), or None
+        Measured body speeds (v [m/s], w [rad/s]) of the period each frame closes, for a
+        robot that records its own odometry's twist and no wheel readings
+        (:func:`source_from_grid`); ``None`` otherwise.
     truth : ndarray, shape (n, 3), or None
         Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
@@ -109,6 +115,7 @@ class ReplaySource:
     counter_bits: int = 16
     yaw_rate_rad_s: np.ndarray | None = None
     gyro_density_rad_s_sqrt_hz: float | None = None
+    body_speeds: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -121,17 +128,28 @@ class ReplaySource:
     def label(self, name: str) -> str:
         """What estimator ``name`` is on this source, for tables and plots."""
         gyro = self.yaw_rate_rad_s is not None          # both EKFs fuse it
+        wheels = {"encoder counts": "encoders", "odometry twist": "odometry twist",
+                  None: None}[self.wheel_readings]
         if name == "ekf_landmarks":
-            return (("EKF, model, encoders, landmarks" if self.ticks is not None
+            return ((f"EKF, model, {wheels}, landmarks" if wheels
                      else "EKF, model and landmarks") + (", gyro" if gyro else ""))
-        if name == "ekf" and gyro:
-            return "EKF, model, encoders and gyro"
+        if name == "ekf":
+            return f"EKF, model, {wheels} and gyro" if gyro else f"EKF, model and {wheels}"
+        if name == "odometry" and self.ticks is None:
+            return "the robot's odometry (twist)"
         return ESTIMATORS[name]
+
+    @property
+    def wheel_readings(self) -> str | None:
+        """What the source measured of the wheels: ``"encoder counts"``, ``"odometry
+        twist"`` or ``None``."""
+        return ("encoder counts" if self.ticks is not None else
+                "odometry twist" if self.body_speeds is not None else None)
 
     def available(self) -> list[str]:
         """The estimators this source can feed."""
         names = ["commands", "sensorless"]
-        if self.ticks is not None:
+        if self.wheel_readings is not None:
             names = ["odometry", *names, "ekf"]
         if self.landmarks is not None and self.sightings:
             names.append("ekf_landmarks")
@@ -244,6 +262,43 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
                             log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)),
                         gyro_density_rad_s_sqrt_hz=(meta.get("imu_noise") or {}).get(
                             "density_rad_s_sqrt_hz"))
+
+
+def source_from_grid(grid: GridSignals, name: str, *, dt_s: float, start_s: float = 0.0,
+                     duration_s: float | None = None) -> ReplaySource:
+    """A recording of body speeds on the model's grid (:func:`lti_motion.resample.on_grid`)
+    as a :class:`ReplaySource`: one frame per period, the measured body speeds in
+    :attr:`ReplaySource.body_speeds`.
+
+    For a robot that records its own odometry's twist and no wheel readings
+    (``diff_drive_controller``'s ``/odom``). The first period's end is the first frame
+    (the estimators' start); a period inside a gap of the odometry keeps the gap's
+    mean speed and is marked not valid (the EKF does not fuse it, odometry integrates it).
+
+    Parameters
+    ----------
+    grid : GridSignals
+        The recording on the grid.
+    name : str
+        What it is, for people.
+    dt_s : float
+        The nominal sensor period the grid was built on [s] (the model's).
+    start_s, duration_s : float
+        The stretch to replay, from the first frame [s].
+
+    Raises
+    ------
+    ValueError
+        For an empty stretch.
+    """
+    keep = _window(grid.t_s, start_s, duration_s)
+    periods = np.ones(len(keep), np.int64)
+    periods[0] = 0
+    truth = None if grid.true_pose is None else grid.true_pose[keep]
+    yaw = None if grid.yaw_rate_rad_s is None else grid.yaw_rate_rad_s[keep]
+    return ReplaySource(name=name, t_s=grid.t_s[keep], periods=periods,
+                        cmd_m_s=grid.cmd_m_s[keep], valid=grid.measured[keep], dt_s=dt_s,
+                        truth=truth, yaw_rate_rad_s=yaw, body_speeds=grid.speeds[keep])
 
 
 def _key(value: object) -> Hashable:

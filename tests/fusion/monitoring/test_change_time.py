@@ -90,6 +90,8 @@ def first_alarms(route_model, route_null):
             for a in mon.update(t, cmd[:, k], deltas[:, k]):
                 if hits[a.robot] is None and t >= onsets[a.robot]:
                     hits[a.robot] = (t, a)
+            if all(hits):                   # every robot's first alarm is in
+                break
         out[mix] = [(onsets[i], *(hits[i] or (math.inf, None))) for i in range(N)]
     return out
 
