@@ -50,8 +50,9 @@ an innovation ``T`` times the turn rate: gated at 1 degree of freedom.
 **Settling after a stop.** When the commands drop to zero the robot brakes, and
 then creeps: its encoders count on for seconds (2.3-2.9 s after a stop from 0.2-0.3
 m/s on the simulator's hard floor) while its ground heading moves unlike them
-(ground minus encoder turn -0.002 to -0.011 rad per 0.5 s window over the first 1.5
-s, every stop the same sign, against the window's standard deviation of 0.0037 rad).
+(ground minus encoder turn -0.0015 to -0.011 rad in the first 0.5 s window after
+the stop, 12 stops of 4 drives all negative, mostly negative in the next two windows;
+the window's standard deviation is 0.0037 rad).
 The slip noise the pose carries is white and proportional to the encoder speeds
 (:mod:`fusion.ekf.functions`, *Pose noise*), so such a window's error is neither
 small nor independent of the state, as the update needs (Bar-Shalom et al. 2001,
