@@ -34,7 +34,10 @@ each with its own stamps) and go the way of every recording
   divided by the period. An Imu faster than the wheels is averaged over each period,
   a slower one interpolated linearly between its messages. A period reaching
   outside the Imu's messages, or over a gap between two of them longer than
-  ``max_gap_s``, has no reading (NaN: the EKF starts a new gyro window).
+  ``max_gap_s``, has no reading (NaN: the EKF starts a new gyro window). Messages whose
+  ``angular_velocity_covariance[0]`` is -1 have no rate and are left out; the yaw
+  rate's noise the covariance gives (:mod:`drivers.imu_noise`) goes into
+  ``meta["imu_noise"]``.
 
 Times in the log count from the bag's first stamp (``meta["bag_start_ns"]``).
 """
@@ -47,6 +50,7 @@ import numpy as np
 
 from drivers.bags import BagRecording, StampedSeries
 from drivers.exceptions import BagError
+from drivers.imu_noise import imu_rate_noise, with_rate_data
 from lti_motion.clocks import median_period_s, snap_period_s
 from lti_motion.frames import N_LIGHT_BUMPS, FrameLog
 from lti_motion.kinematics import wheel_from_body
@@ -110,14 +114,18 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
     FrameLog
         One robot (``yaw_rate_rad_s`` when the recording has an Imu); ``meta``
         holds ``m_per_tick``, ``ticks_per_rad``, ``bag_start_ns``, the topics and
-        joints used, ``has_commands``, ``lost_frames`` and ``clock`` (the period
-        assignment's summary line).
+        joints used, ``has_commands``, ``lost_frames``, ``clock`` (the period
+        assignment's summary line) and, with an Imu, ``imu_noise`` (its yaw-rate
+        ``variance_rad2_s2`` or ``None`` if unknown, ``period_s``,
+        ``density_rad_s_sqrt_hz``, message counts known / unknown / without a rate,
+        and a ``summary`` line; :mod:`drivers.imu_noise`).
 
     Raises
     ------
     BagError
         No wheel angles (the bag's topics listed); fewer than 2 messages; stamps
-        all equal and no ``dt_s``; a wheel or command faster than ``max_wheel_m_s``.
+        all equal and no ``dt_s``; a wheel or command faster than ``max_wheel_m_s``;
+        an Imu none of whose messages has an angular velocity.
         (A non-finite Imu value or Imu stamps going backwards are refused by
         :func:`drivers.bags.read_bag`.)
     ValueError
@@ -170,9 +178,15 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
     at_s = t_s.copy()
     at_s[k] = t[got]                         # a pose belongs to its frame's own stamp
     truth = None if rec.truth is None else _reference(rec.truth, rec.start_ns, at_s, max_gap_s)
-    yaw = None
+    yaw, imu_noise = None, None
     if rec.imu is not None:
-        yaw = _mean_rate(rec.imu, rec.start_ns, clock.times_s(np.arange(-1, n)), max_gap_s)
+        noise = imu_rate_noise(rec.imu)
+        imu_noise = {"variance_rad2_s2": noise.variance_rad2_s2, "period_s": noise.period_s,
+                     "density_rad_s_sqrt_hz": noise.density_rad_s_sqrt_hz,
+                     "messages": [noise.n_known, noise.n_unknown, noise.n_no_data],
+                     "summary": noise.describe(rec.imu.topic)}
+        yaw = _mean_rate(with_rate_data(rec.imu), rec.start_ns,
+                         clock.times_s(np.arange(-1, n)), max_gap_s)
     dt_s = snap_period_s(clock.period_s) if dt_s is None else float(dt_s)
     meta = {"source": "ROS bag", "bag": str(rec.path), "bag_start_ns": int(rec.start_ns),
             "ticks_per_rad": float(ticks_per_rad), "wheel_radius_m": float(wheel_radius_m),
@@ -181,7 +195,8 @@ def bag_to_log(rec: BagRecording, *, wheel_base_m: float,
                        ("cmd", "wheels", "odom", "imu", "truth")
                        if getattr(rec, kind) is not None},
             "joints": list(rec.joints), "has_commands": rec.cmd is not None,
-            "lost_frames": int(n - len(k)), "clock": a.summary()}
+            "lost_frames": int(n - len(k)), "clock": a.summary(),
+            **({} if imu_noise is None else {"imu_noise": imu_noise})}
     return FrameLog(t_s=t_s, ticks=ticks, light_bump=np.zeros((n, N_LIGHT_BUMPS), np.int64),
                     bumps=np.zeros((n, 2), bool), cmd_m_s=wheel_cmd, valid=valid, dt_s=dt_s,
                     true_pose=truth, yaw_rate_rad_s=yaw, meta=meta)

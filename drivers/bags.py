@@ -14,7 +14,8 @@ bag holds one topic of that kind, or named by the caller when it holds several:
   ``left`` / ``right``, as ``wheel_left_joint`` of the TurtleBot and Create
   descriptions or ``left_wheel_joint`` of diff_drive_controller's examples);
 - ``odom``: ``nav_msgs/Odometry`` (pose x, y, yaw; twist v, w);
-- ``imu``: ``sensor_msgs/Imu`` (yaw rate);
+- ``imu``: ``sensor_msgs/Imu`` (yaw rate, and element 0 and ``zz`` of its
+  ``angular_velocity_covariance``: :mod:`drivers.imu_noise`);
 - ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture), or,
   when the bag has no such topic or a tf frame pair is named, the transform of the
   robot's frame in ``tf2_msgs/TFMessage`` topics (``/tf``, ``/tf_static``;
@@ -92,7 +93,8 @@ _FIELDS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "geometry_msgs/msg/TwistStamped": ("twist.linear.x", "twist.angular.z"),
     "nav_msgs/msg/Odometry": (*(f"pose.pose.{p}" for p in _POSE), "twist.twist.linear.x",
                               "twist.twist.angular.z"),
-    "sensor_msgs/msg/Imu": ("angular_velocity.z",),
+    "sensor_msgs/msg/Imu": ("angular_velocity.z", "angular_velocity_covariance[0]",
+                            "angular_velocity_covariance[8]"),
     "geometry_msgs/msg/PoseStamped": tuple(f"pose.{p}" for p in _POSE),
 })
 #: What each kind's ``values`` columns hold, for people.
@@ -100,7 +102,7 @@ COLUMNS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "cmd": ("v [m/s]", "w [rad/s]"),
     "wheels": ("left [rad]", "right [rad]"),
     "odom": ("x [m]", "y [m]", "theta [rad]", "v [m/s]", "w [rad/s]"),
-    "imu": ("w [rad/s]",),
+    "imu": ("w [rad/s]", "angular_velocity_covariance[0]", "yaw-rate variance [rad^2/s^2]"),
     "truth": ("x [m]", "y [m]", "theta [rad]"),
 })
 

@@ -180,17 +180,34 @@ class GyroNoise:
         heading change once per window (:mod:`fusion.ekf.gyro`: the encoders'
         quantisation is about 0.07 rad/s on one 15 ms period of a Create 2, a
         fixed 0.0011 rad on the heading change of any window); default 0.5 s.
+    rest_update : bool
+        A window during which the robot stood still fuses the bias alone, a
+        zero-angular-rate update (:mod:`fusion.ekf.gyro`, *At rest*; Groves
+        2013, section 15.3.2); default ``True``. ``False``: every window is the
+        heading-change update.
+    rest_settle_s : float
+        Still means: commands exactly zero and encoder counts unchanged in every
+        period of the window and for this long before it [s], so a robot that
+        still coasts on delayed commands with its encoders stuck is not taken as
+        still; default 0.5 s (a Create 2 step settles within 15 periods, 0.23 s).
+    drop_settling : bool
+        A window in which the robot settles after a stop (from the period its
+        commands go to zero until its counts have stood still for a whole
+        window) is not fused (:mod:`fusion.ekf.gyro`, *Settling after a stop*);
+        default ``True``.
 
     Raises
     ------
     FilterOptionError
-        For a non-positive density, prior or bound, a negative walk rate, or a
-        bound within 3 prior standard deviations.
+        For a non-positive density, prior or bound, a negative walk rate or
+        settling time, or a bound within 3 prior standard deviations.
 
     References
     ----------
     O. J. Woodman, "An introduction to inertial navigation", University of
-    Cambridge, UCAM-CL-TR-696, 2007, sections 3.2.1-3.2.3.
+    Cambridge, UCAM-CL-TR-696, 2007, sections 3.2.1-3.2.3. P. D. Groves,
+    *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
+    Systems*, 2nd ed., Artech House 2013, section 15.3.2.
 
     Examples
     --------
@@ -203,15 +220,19 @@ class GyroNoise:
     bias_walk_rad_s_per_sqrt_s: float = 1e-4
     max_bias_rad_s: float = 0.05
     window_s: float = 0.5
+    rest_update: bool = True
+    rest_settle_s: float = 0.5
+    drop_settling: bool = True
 
     def __post_init__(self) -> None:
         pos = (self.noise_density_rad_s_sqrt_hz, self.bias_prior_std_rad_s, self.max_bias_rad_s,
                self.window_s)
-        walk = self.bias_walk_rad_s_per_sqrt_s
+        walk, settle = self.bias_walk_rad_s_per_sqrt_s, self.rest_settle_s
         if not (all(math.isfinite(v) and v > 0 for v in pos) and math.isfinite(walk)
-                and walk >= 0):
+                and walk >= 0 and math.isfinite(settle) and settle >= 0):
             raise FilterOptionError(f"GyroNoise needs a positive density, bias prior, bias "
-                                    f"bound and window and a non-negative walk rate, got {self}")
+                                    f"bound and window and a non-negative walk rate and "
+                                    f"settling time, got {self}")
         if self.max_bias_rad_s < 3.0 * self.bias_prior_std_rad_s:
             raise FilterOptionError(f"GyroNoise.max_bias_rad_s ({self.max_bias_rad_s}) must be at "
                                     f"least 3 bias prior standard deviations "

@@ -34,6 +34,35 @@ Create 2), so the window's heading change carries ``2 sigma_q^2``: a fixed term,
 4% of the gyro's ``density^2 T`` over 0.5 s. (Adjacent windows share one instant,
 a correlation of -2%, neglected.)
 
+**At rest: a zero-angular-rate update.** While the robot stands still (commands
+zero and encoder counts unchanged over the window and a settling time before it)
+the ground yaw rate is zero, so the summed reading measures the bias alone
+(Groves 2013, section 15.3.2, the zero-angular-rate update)::
+
+    Y = T b + n,   n ~ N(0, density^2 T),   H = [0 ... 0 | T | 0 ... 0]
+
+No heading difference and no encoder rounding enter it (unchanged counts round the
+same at both ends): ``2 sigma_q^2`` leaves ``R``, and the update cannot move the
+heading through ``theta - theta_c``. Nothing but the bias is asked of the reading, so a
+robot turned by hand with its wheels still (the one way to fool the rest test) gives
+an innovation ``T`` times the turn rate: gated at 1 degree of freedom.
+
+**Settling after a stop.** When the commands drop to zero the robot brakes, and
+then creeps: its encoders count on for seconds (2.3-2.9 s after a stop from 0.2-0.3
+m/s on the simulator's hard floor) while its ground heading moves unlike them
+(ground minus encoder turn -0.0015 to -0.011 rad in the first 0.5 s window after
+the stop, 12 stops of 4 drives all negative, mostly negative in the next two windows;
+the window's standard deviation is 0.0037 rad).
+The slip noise the pose carries is white and proportional to the encoder speeds
+(:mod:`fusion.ekf.functions`, *Pose noise*), so such a window's error is neither
+small nor independent of the state, as the update needs (Bar-Shalom et al. 2001,
+section 5.2.1): fused, its skid went into the bias (a mean bias error of -0.0011
+rad/s after three 3 s stops, 10 drives, heading NEES 3.1). So a window that overlaps
+the settling, from the period the commands go to zero until the counts have stood
+still for a whole window (or the commands resume), is dropped (reason
+``"settling"``); the robot starting the filter with zero commands counts as settled.
+The heading keeps the encoders' account of the stop.
+
 References
 ----------
 Y. Bar-Shalom, X. R. Li, T. Kirubarajan, *Estimation with Applications to
@@ -42,7 +71,9 @@ Burdick, "Stochastic cloning: a generalized framework for processing relative
 state measurements", ICRA 2002, section III. A. I. Mourikis, S. I. Roumeliotis,
 "A multi-state constraint Kalman filter for vision-aided inertial navigation",
 ICRA 2007, section III-A. O. J. Woodman, "An introduction to inertial
-navigation", UCAM-CL-TR-696, 2007, section 3.2.
+navigation", UCAM-CL-TR-696, 2007, section 3.2. P. D. Groves, *Principles of GNSS,
+Inertial, and Multisensor Integrated Navigation Systems*, 2nd ed., Artech House 2013,
+section 15.3.2 (zero-angular-rate update).
 """
 
 from __future__ import annotations
@@ -53,7 +84,7 @@ from fusion.ekf.functions import GYRO_BIAS, HEADING_CLONE, FilterModel
 from fusion.exceptions import FilterOptionError
 
 __all__ = ["clone_heading", "gyro_cov", "gyro_jacobian", "gyro_measurement",
-           "heading_quantization_var"]
+           "heading_quantization_var", "rest_cov", "rest_jacobian", "rest_measurement"]
 
 
 def _check_gyro(fm: FilterModel) -> None:
@@ -111,6 +142,40 @@ def gyro_cov(fm: FilterModel, window_s: float) -> np.ndarray:
     _check_gyro(fm)
     return np.array([[fm.gyro.noise_density_rad_s_sqrt_hz ** 2 * window_s
                       + 2.0 * heading_quantization_var(fm)]])
+
+
+def rest_measurement(x: np.ndarray, fm: FilterModel, window_s: float) -> np.ndarray:
+    """Predicted integrated reading at rest, ``T b`` [rad], shape (1,) (module notes,
+    *At rest*; Groves 2013, section 15.3.2).
+
+    Raises
+    ------
+    FilterOptionError
+        If ``fm`` has no gyro.
+    """
+    _check_gyro(fm)
+    return np.array([window_s * x[GYRO_BIAS]])
+
+
+def rest_jacobian(x: np.ndarray, fm: FilterModel, window_s: float) -> np.ndarray:
+    """``H = d h / d x`` of :func:`rest_measurement`: ``T`` at the bias, shape (1, n)."""
+    _check_gyro(fm)
+    H = np.zeros((1, fm.n))
+    H[0, GYRO_BIAS] = window_s
+    return H
+
+
+def rest_cov(fm: FilterModel, window_s: float) -> np.ndarray:
+    """The integrated reading's noise at rest, ``[[density^2 T]]`` [rad^2], (1, 1): white
+    rate noise summed over ``T`` (Woodman 2007, section 3.2.1), no encoder rounding.
+
+    Raises
+    ------
+    FilterOptionError
+        If ``fm`` has no gyro.
+    """
+    _check_gyro(fm)
+    return np.array([[fm.gyro.noise_density_rad_s_sqrt_hz ** 2 * window_s]])
 
 
 def clone_heading(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -70,7 +70,15 @@ from fusion.ekf.functions import (
     span_verdict,
     state_transition,
 )
-from fusion.ekf.gyro import clone_heading, gyro_cov, gyro_jacobian, gyro_measurement
+from fusion.ekf.gyro import (
+    clone_heading,
+    gyro_cov,
+    gyro_jacobian,
+    gyro_measurement,
+    rest_cov,
+    rest_jacobian,
+    rest_measurement,
+)
 from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
@@ -183,6 +191,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         The latest resets (up to 1,000), oldest first.
     n_resets : int
         Resets so far.
+    n_rest_updates : int
+        Gyro windows fused as zero-angular-rate updates (the robot still).
 
     Raises
     ------
@@ -294,6 +304,19 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._n_predicts = 0
         self._gyro_read_at = -1         # the prediction of the last gyro reading
         self._gyro_window = (0.0, 0, 0)     # (sum of y dt [rad], predictions at start, count)
+        # the robot standing still (fusion.ekf.gyro, "At rest"): periods in a row with zero
+        # commands and unchanged counts, the prediction of the last one, and those needed
+        # before a window to settle; windows fused as zero-angular-rate updates
+        self._gyro_rules = gyro is not None and (gyro.rest_update or gyro.drop_settling)
+        self._cmd_zero = True           # a filter starting with zero commands: settled
+        self._still_run, self._still_at = 0, -1
+        self._settle_periods = 0 if gyro is None else math.ceil(
+            gyro.rest_settle_s / fm.dt_s - 1e-9)
+        # settling after a stop (fusion.ekf.gyro): on, and the prediction it was last on at
+        self._window_periods = 1 if gyro is None else max(1, math.ceil(
+            gyro.window_s / fm.dt_s - 0.5 - 1e-9))
+        self._settling, self._settling_at = False, -(1 << 62)
+        self.n_rest_updates = 0
         # the previous frame's counts and increment, for the single-frame jump test
         self._last_frame = (0, 0)
         self._last_delta = (0, 0)
@@ -408,6 +431,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.t_s += self._dt_s
         self._periods_since_ref += 1
         self._n_predicts += 1
+        if self._gyro_rules:                    # rest and settling (fusion.ekf.gyro)
+            zero = bool(cmd_m_s[0] == 0.0 and cmd_m_s[1] == 0.0)   # checked by predict_step
+            self._settling = zero and (self._settling or not self._cmd_zero)   # a stop settles
+            if self._settling:
+                self._settling_at = self._n_predicts
+            self._cmd_zero = zero
 
     def predict_update(self, *args: object, **kwargs: object) -> None:
         """Disabled: filterpy's combined step uses a linear ``F x``; call predict, then update."""
@@ -507,7 +536,12 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         if ticks.dtype.kind not in "iu":
             if not (math.isfinite(ticks[0]) and math.isfinite(ticks[1])):
+                if self._gyro_rules:
+                    self._mark_still(still=False)
                 return self._skip("encoders", t, "non_finite", 2)
+        if self._gyro_rules:
+            self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
+                             and int(ticks[1]) == self._last_frame[1])
         pair = self._tick_pair
         periods = self._periods_since_ref
         if not self._have_ref or periods == 0 or periods > self.max_periods:
@@ -536,6 +570,19 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         else:
             self._span_jump = max(self._span_jump, jump)
         return record
+
+    def _mark_still(self, *, still: bool) -> None:
+        """Count the periods in a row in which the robot stood still: zero commands and a
+        wheel reading that did not change (the first reading of a period counts)."""
+        if self._still_at == self._n_predicts:
+            return
+        if still and self._cmd_zero:
+            self._still_run = self._still_run + 1 if self._still_at == self._n_predicts - 1 else 1
+        else:
+            self._still_run = 0
+        self._still_at = self._n_predicts
+        if self._settling and self._still_run >= self._window_periods:
+            self._settling = False          # a whole window still: the stop has settled
 
     def _span_speeds(self) -> np.ndarray:
         """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
@@ -600,7 +647,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         t = self.t_s if t_s is None else float(t_s)
         y0, y1 = y.tolist()
         if not (math.isfinite(y0) and math.isfinite(y1)):
+            if self._gyro_rules:
+                self._mark_still(still=False)
             return self._skip("encoders", t, "non_finite", 2)
+        if self._gyro_rules:
+            self._mark_still(still=y0 == 0.0 and y1 == 0.0)
         # H = [0 0 I] selects the speed state: P H^T is a slice, no product
         return self._gated("encoders", t, y, y - self.x[self._speed_at:], self.fm.H_encoders,
                            self.R, None, PHt=self.P[:, self._speed_at:])
@@ -639,8 +690,15 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         theta_c``, plus the bias times the window (:mod:`fusion.ekf.gyro`):
         gated with 1 degree of freedom, Joseph form, then the bias clipped to
         ``+-gyro.max_bias_rad_s`` and a new window started (the heading
-        cloned). Call it once per :meth:`predict`, after :meth:`update_encoders`
-        (or :meth:`update_speeds`) of the same frame.
+        cloned). A window in which the robot stood still (commands exactly zero
+        and counts unchanged in each of its periods and ``gyro.rest_settle_s``
+        before) measures the bias alone, ``T b`` (a zero-angular-rate update,
+        Groves 2013, section 15.3.2; counted in :attr:`n_rest_updates`). A window
+        overlapping the settling after a stop (commands gone to zero, the counts
+        not yet still for a whole window) is dropped (``gyro.drop_settling``;
+        :mod:`fusion.ekf.gyro`, *Settling after a stop*). Call it
+        once per :meth:`predict`, after :meth:`update_encoders` (or
+        :meth:`update_speeds`) of the same frame.
 
         Parameters
         ----------
@@ -656,7 +714,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             ``kind="gyro"``: ``reason`` ``"pending"`` while the window fills,
             ``"fused"`` or ``"gated"`` when it closes (innovation in rad),
             ``"gap"`` for a second reading without a :meth:`predict` between
-            (ignored).
+            (ignored), ``"settling"`` for a window dropped while the robot
+            settles after a stop.
 
         Raises
         ------
@@ -690,10 +749,25 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if window < gyro.window_s - 0.5 * self._dt_s:
             self._gyro_window = (turn, self._gyro_window[1], count)
             return self._skip("gyro", t, "pending", 1)
-        H = gyro_jacobian(self.x, self.fm, window)
-        predicted = gyro_measurement(self.x, self.fm, window)
-        record = self._gated("gyro", t, np.array([turn]), np.array([turn]) - predicted, H,
-                             gyro_cov(self.fm, window), None)
+        return self._close_gyro_window(turn, count, t)
+
+    def _close_gyro_window(self, turn: float, count: int, t: float) -> UpdateRecord:
+        """Fuse a full window: the heading change, or the bias alone while still."""
+        gyro, window = self.fm.gyro, count * self._dt_s
+        if gyro.drop_settling and self._n_predicts - self._settling_at < count:
+            self._start_gyro_window()               # fusion.ekf.gyro, "Settling after a stop"
+            return self._skip("gyro", t, "settling", 1)
+        still = (gyro.rest_update and self._still_at == self._n_predicts
+                 and self._still_run >= count + self._settle_periods)
+        if still:                                   # fusion.ekf.gyro, "At rest"
+            H, R = rest_jacobian(self.x, self.fm, window), rest_cov(self.fm, window)
+            predicted = rest_measurement(self.x, self.fm, window)
+        else:
+            H, R = gyro_jacobian(self.x, self.fm, window), gyro_cov(self.fm, window)
+            predicted = gyro_measurement(self.x, self.fm, window)
+        record = self._gated("gyro", t, np.array([turn]), np.array([turn]) - predicted, H, R,
+                             None)
+        self.n_rest_updates += int(still and record.accepted)
         if record.accepted and abs(self.x[GYRO_BIAS]) > gyro.max_bias_rad_s:
             x = self.x.copy()
             x[GYRO_BIAS] = math.copysign(gyro.max_bias_rad_s, x[GYRO_BIAS])

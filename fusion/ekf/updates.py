@@ -62,7 +62,7 @@ _log = logging.getLogger(__name__)
 
 UpdateKind = Literal["encoders", "landmark", "pose", "gyro"]
 UpdateReason = Literal["fused", "forced", "gated", "non_finite", "unknown_landmark", "anchor",
-                       "gap", "degenerate", "pending"]
+                       "gap", "degenerate", "pending", "settling"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,8 +96,10 @@ class UpdateRecord:
         ``max_periods`` periods after the last fused ones: the reference is
         renewed; for a gyro: a second reading after one :meth:`predict`, or a
         period without a reading, which restarts the window), ``"degenerate"``
-        (robot on the landmark), or ``"pending"`` (a gyro reading summed into
-        its window, compared when the window closes). An encoder
+        (robot on the landmark), ``"pending"`` (a gyro reading summed into
+        its window, compared when the window closes), or ``"settling"`` (a
+        gyro window in which the robot settled after a stop, not fused:
+        :mod:`fusion.ekf.gyro`, *Settling after a stop*). An encoder
         reading after gated, NaN or lost ones spans all the periods since the
         last fused counts (its innovation is the summed speed residual).
     landmark_id : hashable or None

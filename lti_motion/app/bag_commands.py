@@ -349,6 +349,8 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         start_ns = odometry.meta["bag_start_ns"]
     else:
         log = _model_log(path, model, options)
+        if "imu_noise" in log.meta:
+            print_fn(log.meta["imu_noise"]["summary"])
         src = source_from_frame_log(log, Path(path).name, start_s=start_s,
                                     duration_s=duration_s)
         start_ns = log.meta["bag_start_ns"]
@@ -448,9 +450,13 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
 
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
              f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
-    gyro = None if log.yaw_rate_rad_s is None else GyroNoise()
-    if gyro is not None:
-        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro")
+    gyro = None
+    if log.yaw_rate_rad_s is not None:
+        noise = log.meta["imu_noise"]
+        density = noise["density_rad_s_sqrt_hz"]
+        gyro = GyroNoise() if density is None else GyroNoise(noise_density_rad_s_sqrt_hz=density)
+        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro: "
+                 f"{noise['summary']}")
     run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
                          on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits,
                          gyro=gyro)

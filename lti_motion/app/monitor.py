@@ -486,14 +486,17 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                                    wheel_overcurrent=full.wheel_overcurrent,
                                    yaw_rate_rad_s=full.yaw_rate_rad_s), seen)
 
-    has_gyro = params.gyro_noise_density_rad_s_sqrt_hz is not None
-    if has_gyro:
-        print_fn("the robot has a gyro: the EKF fuses its yaw rate (bias estimated)" if gyro
+    density = params.gyro_noise_density_rad_s_sqrt_hz
+    noise = GyroNoise(noise_density_rad_s_sqrt_hz=density) if density else GyroNoise()
+    if density is not None:
+        print_fn(f"the robot has a gyro: the EKF fuses its yaw rate (bias estimated; noise "
+                 f"density {noise.noise_density_rad_s_sqrt_hz:.3g} rad/s/sqrt(Hz), "
+                 f"{'the robot file' if density else 'the default'}'s)" if gyro
                  else "the robot has a gyro; --gyro fuses its yaw rate")
     run = monitor_frames(model, frames(), nominal=nominal,
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
                          on_alarm_line=print_fn, counter_bits=params.counter_bits,
-                         gyro=GyroNoise() if gyro and has_gyro else None)
+                         gyro=noise if gyro and density is not None else None)
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
     if record:
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")

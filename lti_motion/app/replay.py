@@ -59,6 +59,7 @@ __all__ = [
     "estimate",
     "evaluate",
     "fit_mrclam_model",
+    "gyro_noise",
     "load_source",
     "run_replay",
     "source_from_log",
@@ -135,7 +136,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
                    initial_ticks=ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
                    landmark_noise=src.landmark_noise, history=0, counter_bits=bits,
-                   gyro=None if gyro is None else GyroNoise())
+                   gyro=None if gyro is None else gyro_noise(src))
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
     poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]
@@ -330,6 +331,13 @@ def _table(src: ReplaySource, metrics: dict[str, dict]) -> list[str]:
         fmt.format(*r) for r in rows]
 
 
+def gyro_noise(src: ReplaySource) -> GyroNoise:
+    """The EKF's gyro noise: the density the recording states (a bag Imu's covariance),
+    else :class:`~fusion.noise.GyroNoise`'s default."""
+    density = src.gyro_density_rad_s_sqrt_hz
+    return GyroNoise() if density is None else GyroNoise(noise_density_rad_s_sqrt_hz=density)
+
+
 def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel,
                out_dir: str | os.PathLike,
                *, estimators: Sequence[str] | None = None, robot: int | None = None,
@@ -377,6 +385,11 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
              f"{src.wheel_readings or 'no encoders'}, "
              f"{n_sight} landmark sightings, "
              f"{'ground truth' if src.has_truth else 'no ground truth'}")
+    if src.yaw_rate_rad_s is not None:
+        noise = gyro_noise(src).noise_density_rad_s_sqrt_hz
+        print_fn(f"gyro noise density {noise:.3g} rad/s/sqrt(Hz), "
+                 + ("the recording's" if src.gyro_density_rad_s_sqrt_hz is not None
+                    else "the default (the recording states none)"))
     started = ("the first ground-truth pose" if initial_pose is None and src.has_truth
                and np.all(np.isfinite(src.truth[0])) else "the given pose" if initial_pose
                is not None else "the origin")

@@ -83,6 +83,10 @@ class ReplaySource:
     yaw_rate_rad_s : ndarray, shape (n,), or None
         A gyro's reading over the period each frame closes [rad/s] (the log's
         :attr:`~lti_motion.frames.FrameLog.yaw_rate_rad_s`); ``None`` without a gyro.
+    gyro_density_rad_s_sqrt_hz : float or None
+        The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
+        bag Imu's ``angular_velocity_covariance``, :mod:`drivers.imu_noise`);
+        ``None``: not stated.
     body_speeds : ndarray, shape (n, 2), or None
         Measured body speeds (v [m/s], w [rad/s]) of the period each frame closes, for a
         robot that records its own odometry's twist and no wheel readings
@@ -110,6 +114,7 @@ class ReplaySource:
     landmark_noise: LandmarkNoise | None = None
     counter_bits: int = 16
     yaw_rate_rad_s: np.ndarray | None = None
+    gyro_density_rad_s_sqrt_hz: float | None = None
     body_speeds: np.ndarray | None = None
 
     def __len__(self) -> int:
@@ -254,7 +259,9 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
                         sightings=sightings, landmarks=landmarks,
                         counter_bits=log.counter_bits,
                         yaw_rate_rad_s=(None if log.yaw_rate_rad_s is None else np.where(
-                            log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)))
+                            log.valid[keep], log.yaw_rate_rad_s[keep], np.nan)),
+                        gyro_density_rad_s_sqrt_hz=(meta.get("imu_noise") or {}).get(
+                            "density_rad_s_sqrt_hz"))
 
 
 def source_from_grid(grid: GridSignals, name: str, *, dt_s: float, start_s: float = 0.0,

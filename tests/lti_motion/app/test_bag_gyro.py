@@ -90,6 +90,10 @@ def test_replay_bag_fuses_the_imu_with_gyro_and_leaves_it_out_by_default(carpet,
     assert re.search(r"EKF, model, encoders and gyro: .*; gyro: \d+ windows fused, \d+ gated",
                      said), said
     assert "EKF, model and encoders: " in said          # the default replay's label
+    # the Imu's covariance (density^2 / dt, written by the bag writer) is the gyro's noise
+    assert re.search(r"/imu/data's angular_velocity_covariance zz 0\.00167 rad\^2/s\^2 at "
+                     r"6\d\.\d+ Hz: gyro noise density 0\.005 rad/s/sqrt\(Hz\)", said), said
+    assert "gyro noise density 0.005 rad/s/sqrt(Hz), the recording's" in said
     memory = source_from_frame_log(log, "memory")
     poses, extra = estimate(memory, model, ["ekf"])
     assert abs(err["gyro"] - _heading_error(poses["ekf"], memory.truth)) < 0.01
@@ -107,7 +111,8 @@ def test_monitor_bag_fuses_the_imu(carpet, model):
         err[name] = _heading_error(run.poses, log.true_pose)
         said[name] = "\n".join(lines)
     assert err["gyro"] < err["plain"] / 3, err
-    assert "fuses the yaw rate of /imu/data as a gyro" in said["gyro"]
+    assert "fuses the yaw rate of /imu/data as a gyro: /imu/data's angular_velocity_" \
+        "covariance zz 0.00167" in said["gyro"]
     assert int(re.search(r"^gyro: (\d+) windows fused", said["gyro"], re.M)[1]) >= 20
     assert "gyro" not in said["plain"]
 
@@ -159,7 +164,8 @@ def test_monitor_sim_with_a_robot_file_that_has_a_gyro(model_file, tmp_path, cap
             "--nominal-drives", "0"]
     assert main([*argv, "--gyro"]) == 0
     out = capsys.readouterr().out
-    assert "the robot has a gyro: the EKF fuses its yaw rate" in out
+    assert ("the robot has a gyro: the EKF fuses its yaw rate (bias estimated; noise density "
+            "0.005 rad/s/sqrt(Hz), the robot file's)") in out
     assert int(re.search(r"^gyro: (\d+) windows fused", out, re.M)[1]) >= 10, out
     assert main([*argv, "--duration", "1"]) == 0
     out = capsys.readouterr().out
