@@ -41,3 +41,10 @@ def fitted_model() -> MotionModel:
     fit = estimate_arx([(u, y)], na=2, nb=1, delay=1)
     return MotionModel.from_arx(fit, dt_s=DT, wheel_base_m=B, m_per_tick=M_PER_TICK,
                                 q_scale=1.3, calibrated_at="2026-01-01T00:00:00+00:00")
+
+
+def numerical_jacobian(f, x, eps=1e-6):
+    """Central differences of ``f`` at ``x``, one column per state (the check every analytic
+    Jacobian of the filters gets)."""
+    cols = [(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(len(x))]
+    return np.stack(cols, axis=1)

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import DT, M_PER_TICK, B, fitted_model, held_commands
+from synthetic_ekf_model import DT, M_PER_TICK, B, fitted_model, held_commands, numerical_jacobian
 
 from fusion.ekf import functions as ef
 from fusion.ekf.intrinsics_estimate import corrected_jacobian, intrinsics_estimate
@@ -29,8 +29,6 @@ LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4
 KAPPA_TRUE = -0.01 / B
 
 
-
-
 @pytest.fixture(scope="module")
 def model():
     return fitted_model()
@@ -42,11 +40,6 @@ def _state(fm, rng, *, kappa=0.03, w=0.4):
     x[fm.speed_slice] = (0.2, w)
     x[fm.model_slice.start:fm.model_slice.start + 2] = (0.2, w)
     return x
-
-
-def _numerical_jacobian(f, x, eps=1e-5):
-    cols = [(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(len(x))]
-    return np.stack(cols, axis=1)
 
 
 # -- the encoder mapping ------------------------------------------------------------------------
@@ -97,7 +90,7 @@ def test_the_scale_columns_of_F_match_a_numerical_derivative(model, rng, w, kapp
     fm = ef.FilterModel(model)
     x, u = _state(fm, rng, kappa=kappa, w=w), np.array([0.15, 0.3])
     F = ef.predict_terms(x, u, fm)[1]
-    num = _numerical_jacobian(lambda xx: ef.predict_terms(xx, u, fm)[0], x)
+    num = numerical_jacobian(lambda xx: ef.predict_terms(xx, u, fm)[0], x, eps=1e-5)
     np.testing.assert_allclose(F[:, ef.SCALES], num[:, ef.SCALES], rtol=1e-6, atol=1e-10)
     np.testing.assert_allclose(F, num, rtol=1e-6, atol=1e-9)
 
@@ -115,7 +108,7 @@ def test_the_pose_rows_of_Q_match_a_numerical_noise_jacobian(model, rng, kappa):
         g = d_c @ (s_hat + noise[:2]) + noise[2:]
         return pose_step(x[:3], g[0], g[1], DT)
 
-    G_pose = _numerical_jacobian(pose_of, np.zeros(4), eps=1e-4)
+    G_pose = numerical_jacobian(pose_of, np.zeros(4), eps=1e-4)
     sv, sw = fm.slip.stds(*s_hat)
     W = np.diag([0.0, 0.0, sv ** 2, sw ** 2])
     W[:2, :2] = model.R
@@ -139,11 +132,11 @@ def test_the_intrinsics_jacobian_and_ratio_spread_match_numerical_derivatives(er
         new = k.corrected(*cc)
         return np.array([new.m_per_tick_left, new.m_per_tick_right, new.wheel_base_m])
 
-    np.testing.assert_allclose(corrected_jacobian(k, *c), _numerical_jacobian(flat, c, eps=1e-6),
+    np.testing.assert_allclose(corrected_jacobian(k, *c), numerical_jacobian(flat, c, eps=1e-6),
                                rtol=1e-7, atol=1e-13)
     P = np.diag([1e-4, 4e-4, 0.01 ** 2]) + 1e-5
     est = intrinsics_estimate(k, c, P)
-    g = _numerical_jacobian(lambda cc: np.array([k.corrected(*cc).diameter_ratio]), c, eps=1e-6)
+    g = numerical_jacobian(lambda cc: np.array([k.corrected(*cc).diameter_ratio]), c, eps=1e-6)
     assert est.diameter_ratio_std == pytest.approx(math.sqrt((g @ P @ g.T).item()), rel=1e-6)
     assert est.intrinsics == k.corrected(*c)
     assert k.scale_errors_to(est.intrinsics) == pytest.approx(tuple(c), abs=1e-12)

@@ -3,7 +3,7 @@ the records, and what it does on the simulator (fusion.ekf.gyro)."""
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import fitted_model
+from synthetic_ekf_model import fitted_model, numerical_jacobian
 
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
@@ -38,11 +38,6 @@ def rng():
     return np.random.default_rng(41)
 
 
-def _numerical_jacobian(f, x, eps=1e-6):
-    cols = [(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(len(x))]
-    return np.stack(cols, axis=1)
-
-
 def _state(fm, rng):
     x = ef.initial_state(fm, (1.0, 2.0, 0.7), z=0.05 * rng.standard_normal(fm.nz))
     x[ef.SCALES] = (0.004, -0.003, 0.03)
@@ -66,7 +61,7 @@ def test_layout_with_a_gyro(model, fm):
 @pytest.mark.parametrize("window_s", [0.015, 0.5, 2.0])
 def test_the_gyro_jacobian_matches_a_numerical_derivative(fm, rng, window_s):
     x = _state(fm, rng)
-    num = _numerical_jacobian(lambda xx: gyro_measurement(xx, fm, window_s), x)
+    num = numerical_jacobian(lambda xx: gyro_measurement(xx, fm, window_s), x)
     np.testing.assert_allclose(gyro_jacobian(x, fm, window_s), num, atol=1e-9)
     assert gyro_measurement(x, fm, window_s)[0] == pytest.approx(
         0.7 - 0.55 + window_s * 0.007)
@@ -76,7 +71,7 @@ def test_the_gyro_jacobian_matches_a_numerical_derivative(fm, rng, window_s):
 def test_F_with_a_gyro_matches_a_numerical_derivative(fm, rng, accumulate):
     x = _state(fm, rng)
     u = np.array([0.25, 0.15])
-    num = _numerical_jacobian(lambda xx: ef.predict_terms(xx, u, fm, accumulate=accumulate)[0],
+    num = numerical_jacobian(lambda xx: ef.predict_terms(xx, u, fm, accumulate=accumulate)[0],
                               x)
     np.testing.assert_allclose(ef.predict_terms(x, u, fm, accumulate=accumulate)[1], num,
                                atol=1e-8)

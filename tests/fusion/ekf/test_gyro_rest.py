@@ -3,7 +3,7 @@ measurement and its Jacobian, when the rest test fires and what cannot fool it."
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import fitted_model
+from synthetic_ekf_model import fitted_model, numerical_jacobian
 
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
@@ -31,16 +31,11 @@ def rng():
     return np.random.default_rng(43)
 
 
-def _numerical_jacobian(f, x, eps=1e-6):
-    cols = [(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(len(x))]
-    return np.stack(cols, axis=1)
-
-
 @pytest.mark.parametrize("window_s", [0.015, 0.5, 2.0])
 def test_the_rest_jacobian_matches_a_numerical_derivative(fm, rng, window_s):
     x = ef.initial_state(fm, (1.0, 2.0, 0.7), z=0.05 * rng.standard_normal(fm.nz))
     x[ef.GYRO_BIAS], x[ef.HEADING_CLONE] = 0.007, 0.55
-    num = _numerical_jacobian(lambda xx: rest_measurement(xx, fm, window_s), x)
+    num = numerical_jacobian(lambda xx: rest_measurement(xx, fm, window_s), x)
     np.testing.assert_allclose(rest_jacobian(x, fm, window_s), num, atol=1e-9)
     assert rest_measurement(x, fm, window_s)[0] == pytest.approx(window_s * 0.007)
     # no heading difference and no encoder rounding: the white rate noise over T only

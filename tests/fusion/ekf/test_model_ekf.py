@@ -11,7 +11,15 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from scipy.stats import chi2
-from synthetic_ekf_model import DT, M_PER_TICK, B, arx_data, fitted_model, held_commands
+from synthetic_ekf_model import (
+    DT,
+    M_PER_TICK,
+    B,
+    arx_data,
+    fitted_model,
+    held_commands,
+    numerical_jacobian,
+)
 
 from fusion.ekf import functions as ef
 from fusion.ekf.model_ekf import ModelEKF
@@ -40,8 +48,6 @@ from lti_motion.model import MotionModel
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 
 
-
-
 @pytest.fixture(scope="module")
 def model():
     """A fitted ARX model, q_scale 1.3 (so Q > K R K^T), D = 0, K != 0, nz = 4."""
@@ -58,11 +64,6 @@ def _state(fm, rng, *, w=0.4):
     x[ef.SCALES] = (0.004, -0.003, 0.03)        # kappa 0.03 rad/m: a 0.7% diameter ratio
     x[fm.speed_slice] = (0.2, w)
     return x
-
-
-def _numerical_jacobian(f, x, eps=1e-7):
-    cols = [(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(len(x))]
-    return np.stack(cols, axis=1)
 
 
 # -- prediction -----------------------------------------------------------------------------------
@@ -88,7 +89,7 @@ def test_transition_jacobian_matches_a_numerical_derivative(fm, rng, w, accumula
     F = ef.predict_terms(x, u, fm, accumulate=accumulate)[1]
     # a step of 1e-5: central differences err by ~eps^2 f''' ~ 1e-11 here, while 1e-7 left
     # rounding errors of ~1e-16 |x| / eps ~ 2e-9 in the pose rows (|x| ~ 2 m)
-    np.testing.assert_allclose(F, _numerical_jacobian(f, x, eps=1e-5), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(F, numerical_jacobian(f, x, eps=1e-5), rtol=1e-6, atol=1e-9)
 
 
 def test_pose_step_and_its_jacobians_agree_with_kinematics(fm, rng):
@@ -438,7 +439,7 @@ def test_range_bearing_and_its_jacobian(rng):
         pytest.approx([5.0, math.atan2(4.0, 3.0)])
     for _ in range(20):
         pose, lxy = rng.uniform(-3, 3, 3), rng.uniform(-3, 3, 2)
-        num = _numerical_jacobian(lambda p, lxy=lxy: range_bearing(p, lxy), pose)
+        num = numerical_jacobian(lambda p, lxy=lxy: range_bearing(p, lxy), pose, eps=1e-7)
         np.testing.assert_allclose(range_bearing_jacobian(pose, lxy), num, rtol=1e-6,
                                    atol=1e-8)
 
