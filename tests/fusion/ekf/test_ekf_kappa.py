@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import DT, M_PER_TICK, B, fitted_model, held_commands, numerical_jacobian
+from synthetic_ekf_model import DT, M_PER_TICK, B, held_commands, numerical_jacobian
 
 from fusion.ekf import functions as ef
 from fusion.ekf.intrinsics_estimate import corrected_jacobian, intrinsics_estimate
@@ -27,11 +27,6 @@ from lti_motion.model import MotionModel
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 #: A left wheel 1% larger than the right: ground curvature of equal counts [rad/m]
 KAPPA_TRUE = -0.01 / B
-
-
-@pytest.fixture(scope="module")
-def model():
-    return fitted_model()
 
 
 def _state(fm, rng, *, kappa=0.03, w=0.4):

@@ -3,7 +3,7 @@ the records, and what it does on the simulator (fusion.ekf.gyro)."""
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import fitted_model, numerical_jacobian
+from synthetic_ekf_model import numerical_jacobian
 
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
@@ -21,11 +21,6 @@ from fusion.noise import GyroNoise
 from lti_motion.kinematics import wrap_angle
 
 START = (2.5, 1.3, 0.0)
-
-
-@pytest.fixture(scope="module")
-def model():
-    return fitted_model()
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,7 @@ measurement and its Jacobian, when the rest test fires and what cannot fool it."
 
 import numpy as np
 import pytest
-from synthetic_ekf_model import fitted_model, numerical_jacobian
+from synthetic_ekf_model import numerical_jacobian
 
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
@@ -14,11 +14,6 @@ from fusion.exceptions import FilterOptionError
 from fusion.noise import GyroNoise
 
 WINDOW_S = 0.15
-
-
-@pytest.fixture(scope="module")
-def model():
-    return fitted_model()
 
 
 @pytest.fixture(scope="module")

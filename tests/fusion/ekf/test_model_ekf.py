@@ -16,7 +16,6 @@ from synthetic_ekf_model import (
     M_PER_TICK,
     B,
     arx_data,
-    fitted_model,
     held_commands,
     numerical_jacobian,
 )
@@ -46,12 +45,6 @@ from lti_motion.kinematics import (
 from lti_motion.model import MotionModel
 
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
-
-
-@pytest.fixture(scope="module")
-def model():
-    """A fitted ARX model, q_scale 1.3 (so Q > K R K^T), D = 0, K != 0, nz = 4."""
-    return fitted_model()
 
 
 @pytest.fixture(scope="module")
