@@ -641,6 +641,10 @@ def _no_encoder_scale(args: argparse.Namespace) -> str:
                 "--estimators commands sensorless")
     elif getattr(args, "sim", None):
         tail = "; or leave out --model: --robot then calibrates the simulated robot first"
+    elif args.command == "monitor" and getattr(args, "bag", None):
+        tail = ("; a bag's odometry twist is monitored in the model's encoder ticks, and a "
+                "model calibrated on the twist alone has none: calibrate from wheel angles "
+                "or on the robot")
     return (f"{what} has no encoder scale, which turns encoder counts into distances; "
             f"calibrate the robot with {calibrate} (its rotation in place measures "
             f"the scale) and give the model_arx.json it writes with --model{tail}")

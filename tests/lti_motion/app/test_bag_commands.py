@@ -131,6 +131,18 @@ def test_monitor_of_an_odometry_only_bag_finds_the_spikes_in_the_twist(bags, mod
                     print_fn=lambda _line: None)
 
 
+def test_monitoring_a_twist_bag_with_an_unscaled_model_is_one_line_with_advice(
+        bags, model_file, tmp_path, capsys):
+    bag = write_drive_bag(tmp_path / "odom_only.bag", bags["spikes_log"], start_ns=START_NS,
+                          joint_states=False)
+    unscaled = MotionModel.load(model_file).updated(m_per_tick=None).save(
+        tmp_path / "unscaled.json")
+    assert main(["monitor", "--bag", str(bag), "--model", str(unscaled)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "has no encoder scale" in err
+    assert "a model calibrated on the twist alone has none" in err
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["calibrate", "--bag", "{spikes}", "--cmd-topic", "/odom"],
      "topic /odom holds nav_msgs/msg/Odometry, but --cmd-topic needs geometry_msgs/Twist"),
