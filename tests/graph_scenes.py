@@ -62,3 +62,17 @@ def factor_values(pre, k: int, rng: np.random.Generator, *, cal) -> gtsam.Values
     values.insert(pose_key(1), wTj)
     values.insert(calibration_key(0), np.asarray(cal, dtype=float))
     return values
+
+
+def feed_online(sm, pre, obs: RangeBearing, *, after_update=None):
+    """Feed an incremental smoother keyframe by keyframe as a robot would: the motion
+    closing keyframe ``k``, its sightings (``obs.index == k``), an update; then
+    ``after_update(k)`` if given. Returns the smoother."""
+    for k in range(len(pre) + 1):
+        if k > 0:
+            sm.add_motion(pre[k - 1])
+        sm.add_observations(obs.select(obs.index == k))
+        sm.update()
+        if after_update is not None:
+            after_update(k)
+    return sm

@@ -5,7 +5,7 @@ import gtsam
 import numpy as np
 import pytest
 import scipy.linalg
-from graph_scenes import DT, PHI, factor_values, group_values, ring_sightings
+from graph_scenes import DT, PHI, factor_values, feed_online, group_values, ring_sightings
 from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
@@ -229,12 +229,8 @@ def test_smoothers_recover_a_diameter_ratio_online_and_in_batch():
     cal = (1.02, 1.0, 0.01 / B)
     pre, obs, lm, truth = _ratio_drive(30, cal)
     opts = SmootherOptions(calibration_walk_sigmas=(1e-4, 1e-4)).with_curvature(wheel_base_m=B)
-    sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm, options=opts)
-    for k in range(len(pre) + 1):
-        if k > 0:
-            sm.add_motion(pre[k - 1])
-        sm.add_observations(obs.select(obs.index == k))
-        sm.update()
+    sm = feed_online(IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm, options=opts),
+                     pre, obs)
     online = sm.result()
     batch = smooth_batch(pre, initial_pose=np.zeros(3), observations=obs, landmarks=lm,
                          options=opts)
@@ -287,13 +283,9 @@ def test_a_smoothers_intrinsics_write_back_into_the_model(rng):
     """The online estimate of the ratio drive gives intrinsics 1% apart, left over right."""
     cal = (1.0, 1.0, 0.01 / B)
     pre, obs, lm, _ = _ratio_drive(20, cal)
-    sm = IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm,
-                             options=SmootherOptions().with_curvature(wheel_base_m=B))
-    for k in range(len(pre) + 1):
-        if k > 0:
-            sm.add_motion(pre[k - 1])
-        sm.add_observations(obs.select(obs.index == k))
-        sm.update()
+    sm = feed_online(IncrementalSmoother(initial_pose=np.zeros(3), landmarks=lm,
+                                         options=SmootherOptions().with_curvature(wheel_base_m=B)),
+                     pre, obs)
     k = OdometryIntrinsics.symmetric(m_per_tick=4.4e-4, wheel_base_m=B)
     est = sm.intrinsics_estimate(k)
     # kappa = (m_R' - m_L') / (m b') to first order: a 1% ratio, right over left
