@@ -47,15 +47,17 @@ N_RUNS, SEED0 = 10, 21
 DENSITY = 0.005                   # rad/s/sqrt(Hz)
 
 
-def carpet_drive(seed: int) -> FrameLog:
-    """The module docstring's drive."""
+def carpet_drive(seed: int, *, rest_s: float = 5.0, curves_s: float = 20.0,
+                 wave_s: float = 10.0, lost_from_s: float = 6.0) -> FrameLog:
+    """The module docstring's drive: ``rest_s`` at rest, then ``curves_s`` of curves turning
+    left (the turn a sine of period ``wave_s`` [s]), 5% of frames lost from ``lost_from_s``."""
     robot = get_preset("create2").replace(floor="carpet", gyro_noise_density_rad_s_sqrt_hz=DENSITY,
                                           gyro_bias_rad_s=0.006)
     sim = Simulator(robot, seed=seed, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0),
-                    faults=[Fault("lost_frames", t_s=6.0, probability=0.05)])
-    k = np.arange(round(20.0 / sim.dt_s))
-    turn = 0.04 + 0.04 * np.sin(k * sim.dt_s * 2 * np.pi / 10.0)
-    cmd = np.concatenate([np.zeros((round(5.0 / sim.dt_s), 2)),
+                    faults=[Fault("lost_frames", t_s=lost_from_s, probability=0.05)])
+    k = np.arange(round(curves_s / sim.dt_s))
+    turn = 0.04 + 0.04 * np.sin(k * sim.dt_s * 2 * np.pi / wave_s)
+    cmd = np.concatenate([np.zeros((round(rest_s / sim.dt_s), 2)),
                           np.stack([0.2 - turn, 0.2 + turn], axis=1)])
     return sim.run(cmd)
 

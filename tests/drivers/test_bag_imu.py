@@ -13,28 +13,21 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.typesys import Stores, get_typestore
 
+from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
 from drivers.bag_log import bag_to_log
 from drivers.bag_writer import UNESTIMATED_VARIANCE, write_drive_bag
 from drivers.bags import read_bag
 from drivers.exceptions import BagError
-from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 
 FORMATS = [("drive.bag", "mcap"), ("drive_db3", "sqlite3"), ("drive_mcap", "mcap")]
 START_NS = 1_700_000_000 * 1_000_000_000
-DENSITY = 0.005                                  # rad/s/sqrt(Hz)
 
 
 @pytest.fixture(scope="module")
 def drive():
     """4 s of curves on carpet with a gyro, 5% of frames lost after 1 s."""
-    robot = get_preset("create2").replace(floor="carpet", gyro_noise_density_rad_s_sqrt_hz=DENSITY,
-                                          gyro_bias_rad_s=0.006)
-    sim = Simulator(robot, seed=21, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0),
-                    faults=[Fault("lost_frames", t_s=1.0, probability=0.05)])
-    k = np.arange(round(4.0 / sim.dt_s))
-    turn = 0.04 + 0.04 * np.sin(k * sim.dt_s * 2 * np.pi / 2.0)
-    return sim.run(np.stack([0.2 - turn, 0.2 + turn], axis=1))
+    return carpet_drive(21, rest_s=0.0, curves_s=4.0, wave_s=2.0, lost_from_s=1.0)
 
 
 @pytest.mark.parametrize(("name", "storage"), FORMATS, ids=["ros1", "db3", "mcap"])

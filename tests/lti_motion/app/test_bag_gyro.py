@@ -22,10 +22,9 @@ import numpy as np
 import pytest
 
 import drivers.sim
+from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
 from drivers.bag_writer import write_drive_bag
 from drivers.sim.calibration import calibrate_simulator
-from drivers.sim.config import Fault, Room, get_preset
-from drivers.sim.simulator import Simulator
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.noise import GyroNoise
@@ -35,8 +34,6 @@ from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_frame_log
 from lti_motion.calibration import CalibrationPlan
 from lti_motion.kinematics import wrap_angle
-
-DENSITY = 0.005                     # rad/s/sqrt(Hz)
 
 
 @pytest.fixture(scope="module")
@@ -53,15 +50,7 @@ def model_file(model, tmp_path_factory):
 @pytest.fixture(scope="module")
 def carpet(tmp_path_factory):
     """The module docstring's drive, seed 21, and its bag."""
-    robot = get_preset("create2").replace(floor="carpet", gyro_noise_density_rad_s_sqrt_hz=DENSITY,
-                                          gyro_bias_rad_s=0.006)
-    sim = Simulator(robot, seed=21, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0),
-                    faults=[Fault("lost_frames", t_s=6.0, probability=0.05)])
-    k = np.arange(round(20.0 / sim.dt_s))
-    turn = 0.04 + 0.04 * np.sin(k * sim.dt_s * 2 * np.pi / 10.0)
-    cmd = np.concatenate([np.zeros((round(5.0 / sim.dt_s), 2)),
-                          np.stack([0.2 - turn, 0.2 + turn], axis=1)])
-    log = sim.run(cmd)
+    log = carpet_drive(21)
     bag = write_drive_bag(tmp_path_factory.mktemp("bags") / "carpet.bag", log,
                           gyro_noise_density_rad_s_sqrt_hz=DENSITY)
     return log, bag
