@@ -21,6 +21,7 @@ from synthetic_ekf_model import (
 )
 
 from fusion.ekf import functions as ef
+from fusion.ekf import kernel
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
@@ -31,7 +32,7 @@ from fusion.exceptions import (
 )
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
-from fusion.noise import LandmarkNoise
+from fusion.noise import LandmarkNoise, inverse_covariance
 from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
 from lti_motion.arx import estimate_arx
 from lti_motion.exceptions import ShapeError
@@ -487,39 +488,29 @@ def test_update_speeds_refuses_to_mix_with_counts(model):
 
 
 # -- covariance invariants ------------------------------------------------------------------------
-# The library's own covariance functions, compiled by numba (cached on disk after the first run).
-_propagate = numba.njit(ef.propagate_covariance, cache=True)
-_joseph = numba.njit(ef.joseph_covariance, cache=True)
-_gain = numba.njit(ef.kalman_gain, cache=True)
-
-
+# The EKF's own compiled step (fusion.ekf.kernel): F P F^T + Q and the encoder update.
 @numba.njit(cache=True)
-def _update(P, H, R):
-    """One Joseph-form update (2-D measurement) with the library's gain and covariance."""
-    PHt = np.ascontiguousarray(P @ H.T)
-    S = H @ PHt + R
-    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    SI = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
-    return _joseph(P, _gain(P, H, SI), H, R, PHt)
-
-
-@numba.njit(cache=True)
-def _covariance_run(P, n_steps, Fs, Qs, Hs, H_enc, R_enc, R_lm, every):
-    snapshots = np.empty((n_steps // every + 1, P.shape[0], P.shape[0]))
-    for k in range(n_steps):
+def _encoder_periods(P, k0, n_steps, Fs, Qs, R_enc):
+    """Periods ``k0 .. k0 + n_steps - 1``: the kernel's propagation and forced encoder update."""
+    x, innovation = np.zeros(P.shape[0]), np.zeros(2)
+    for k in range(k0, k0 + n_steps):
         j = k % Fs.shape[0]
-        P = _update(_propagate(P, Fs[j], Qs[j]), H_enc, R_enc)
-        if k % 16 == 0:
-            P = _update(P, Hs[j], R_lm)
-        if k % every == 0:
-            snapshots[k // every] = P
-    snapshots[-1] = P
-    return snapshots
+        P = kernel._propagate(P, Fs[j], Qs[j])
+        P = kernel.selector_update_kernel(x, P, innovation, R_enc, 0.0, True)[7]
+    return P
 
 
-@pytest.mark.filterwarnings("ignore::numba.core.errors.NumbaPerformanceWarning")
+def _landmark_update(P, H, R):
+    """The filter's numpy landmark update (GatedUpdates._gated): Joseph form, eq. 5.2.3-18."""
+    PHt = P @ H.T
+    K = PHt @ inverse_covariance(H @ PHt + R)
+    return ef.joseph_covariance(P, K, H, R, PHt)
+
+
 def test_covariance_stays_symmetric_positive_definite_over_a_million_steps(model, fm):
-    """10^6 periods of propagate + encoder update (+ a landmark every 16th), Joseph form.
+    """10^6 periods of propagate + encoder update (+ a landmark every 16th), Joseph form,
+    through the filter's own code: the compiled kernels of the EKF step and its numpy
+    landmark update.
 
     Jacobians and noise come from predict_terms along a drive (cycled).
     """
@@ -533,9 +524,14 @@ def test_covariance_stays_symmetric_positive_definite_over_a_million_steps(model
         Fs.append(F.copy())
         Qs.append(Q.copy())
         Hs.append(ef.landmark_jacobian(x, LANDMARKS.position(k % 4)))
-    snaps = _covariance_run(ef.initial_covariance(fm), 1_000_000, np.array(Fs), np.array(Qs),
-                            np.array(Hs), np.array(fm.H_encoders), np.array(fm.encoder_cov),
-                            LandmarkNoise().cov(2.5), 5000)
+    Fs, Qs, R_enc = np.array(Fs), np.array(Qs), np.array(fm.encoder_cov)
+    R_lm = LandmarkNoise().cov(2.5)
+    P, snaps = ef.initial_covariance(fm), []
+    for k0 in range(0, 1_000_000, 16):
+        P = _landmark_update(_encoder_periods(P, k0, 16, Fs, Qs, R_enc), Hs[k0 % len(Hs)], R_lm)
+        if k0 % 5120 == 0:
+            snaps.append(P)
+    snaps = np.array([*snaps, P])
     assert np.all(np.isfinite(snaps))
     scale = np.abs(snaps).max(axis=(1, 2))
     assert np.max(np.abs(snaps - snaps.transpose(0, 2, 1)).max(axis=(1, 2)) / scale) < 1e-12
