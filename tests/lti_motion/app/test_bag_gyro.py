@@ -24,7 +24,6 @@ import pytest
 import drivers.sim
 from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
 from drivers.bag_writer import write_drive_bag
-from drivers.sim.calibration import calibrate_simulator
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.noise import GyroNoise
@@ -32,14 +31,12 @@ from lti_motion.app.bag_commands import BagOptions, monitor_bag, replay_bag
 from lti_motion.app.cli import main
 from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_frame_log
-from lti_motion.calibration import CalibrationPlan
 from lti_motion.kinematics import wrap_angle
 
 
 @pytest.fixture(scope="module")
-def model():
-    plan = CalibrationPlan(seed=4, excitation_s=40.0)
-    return calibrate_simulator("create2", seed=4, plan=plan).arx
+def model(short_arx_model):
+    return short_arx_model(4)
 
 
 @pytest.fixture(scope="module")
