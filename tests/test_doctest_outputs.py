@@ -26,7 +26,10 @@ _ZERO = re.compile(r"(?<![\w.])(-?)0\.0*(?![\d])")
 
 
 def _docstrings(path: Path):
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    text = path.read_text(encoding="utf-8")
+    if ">>>" not in text:                       # no example: nothing to parse
+        return
+    tree = ast.parse(text)
     for node in ast.walk(tree):
         if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
             doc = ast.get_docstring(node, clean=True)
