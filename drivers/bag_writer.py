@@ -29,6 +29,7 @@ renamed into place when complete; an existing path is refused.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import shutil
@@ -43,6 +44,7 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
 
 from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
 from drivers.exceptions import BagError
@@ -80,12 +82,20 @@ class BagAlarm:
     values: tuple[tuple[str, str], ...] = ()
 
 
+@functools.cache
+def _typestore(ros1: bool) -> Typestore:
+    """The distro's typestore (ROS 1 Noetic or ROS 2 Humble), one per process: ``rosbags``
+    generates a message type's serializers once per store, which was most of the time of
+    writing a short bag. Bags only add ``tf2_msgs/msg/TFMessage`` to it, always the same."""
+    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+
+
 class _Bag:
     """An open bag: typestore, connections, one serializer, by format."""
 
     def __init__(self, writer: Writer1 | Writer2, ros1: bool) -> None:
         self.writer, self.ros1 = writer, ros1
-        self.store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        self.store = _typestore(ros1)
         self.types = self.store.types
         self.conns: dict[str, object] = {}
         self.seq = 0
