@@ -11,9 +11,7 @@ import pytest
 
 from benchmarks.bench_monitor import (
     DYNAMICS_FAULTS,
-    calibrated_model,
     excitation_speeds,
-    fit_route_null,
     recalibration_runs,
 )
 from fusion.exceptions import FilterOptionError
@@ -23,13 +21,15 @@ from lti_motion.kinematics import wheel_from_body
 
 
 @pytest.fixture(scope="module")
-def model():
-    return calibrated_model()
+def model(route_model):
+    """``calibrated_model()``: the session's one calibration (``tests/fusion/conftest.py``)."""
+    return route_model
 
 
 @pytest.fixture(scope="module")
-def null(model):
-    return fit_route_null(model)
+def null(route_null):
+    """``fit_route_null(model)``: the session's one nominal null."""
+    return route_null
 
 
 def _alarm(t_s=10.0, onset_s=0.0):
