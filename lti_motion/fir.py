@@ -424,14 +424,16 @@ def _block_operators(
     ctr = np.empty((length, nz, nu))  # A^i B
     obs[0], ctr[0] = c, b
     for i in range(1, length):
-        obs[i] = obs[i - 1] @ a
-        ctr[i] = a @ ctr[i - 1]
-    h = np.empty((length, ny, nu))
-    h[0] = d
-    h[1:] = np.einsum("yz,izu->iyu", c, ctr[:-1])
-    lag = np.arange(length)[None, :] - np.arange(length)[:, None]  # lag[m, i] = i - m
-    toep = h[np.clip(lag, 0, None)] * (lag >= 0)[:, :, None, None]  # (m, i, ny, nu)
-    toep = toep.transpose(0, 3, 1, 2).reshape(length * nu, length * ny)
+        np.matmul(obs[i - 1], a, out=obs[i])
+        np.matmul(a, ctr[i - 1], out=ctr[i])
+    # Markov parameters H[k] = C A^(k-1) B, stored transposed after length - 1 zeros:
+    # padded[length - 1 + k] = H[k]^T, so row block m of the Toeplitz matrix,
+    # H[i - m]^T for i >= m and zero before, is the window padded[length - 1 - m:][:length]
+    padded = np.zeros((2 * length - 1, nu, ny))
+    padded[length - 1] = d.T
+    padded[length:] = np.einsum("yz,izu->iuy", c, ctr[:-1])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, length, axis=0)  # (s, u, y, i)
+    toep = windows[::-1].transpose(0, 1, 3, 2).reshape(length * nu, length * ny)
     to_state = ctr[::-1].transpose(0, 2, 1).reshape(length * nu, nz)  # A^(L-1-m) B
     from_state = obs.transpose(2, 0, 1).reshape(nz, length * ny)
     return toep, to_state, from_state

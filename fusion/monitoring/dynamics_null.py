@@ -257,14 +257,15 @@ class WindowIntegrator:
             self._zf = self._z.copy()
             self._s_start = self._y_last.copy()
         c = m.offset_speeds                      # affine offset: the linear part runs on y - c
-        y_free = self._zf @ m.C.T + u @ m.D.T + c
-        y_one = self._z @ m.C.T + u @ m.D.T + c
+        feedthrough = u @ m.D.T
+        y_free = self._zf @ m.C.T + feedthrough + c
+        y_one = self._z @ m.C.T + feedthrough + c
         p_ticks = y_free @ self._to_ticks.T
         self._y_last = p_ticks
-        good = np.all(np.isfinite(d), axis=1)
+        good = np.isfinite(d).all(axis=1)
         one_ticks = y_one @ self._to_ticks.T
-        glitch = ~good | np.any(np.abs(np.where(good[:, None], d, 0.0) - one_ticks)
-                                > self.glitch_ticks, axis=1)
+        glitch = ~good | (np.abs(np.where(good[:, None], d, 0.0) - one_ticks)
+                          > self.glitch_ticks).any(axis=1)
         self._ok &= ~glitch
         d_use = np.where(glitch[:, None], one_ticks, d)         # keep the predictor sane
         self._acc[0] += d_use
