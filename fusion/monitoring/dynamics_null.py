@@ -449,15 +449,16 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
         lower = np.array([[math.exp(x[0]), 0.0], [x[1], math.exp(x[2])]])
         return lower @ lower.T, np.exp(2.0 * x[3:3 + n_terms]), np.exp(2.0 * x[3 + n_terms:])
 
-    # Sigma's three entries are linear in the variances: their coefficients once, here
+    # Sigma's three entries are linear in the variances: their coefficients once, here, as
+    # one (3 n, 10) matrix (one matrix-vector product per call, not n small ones)
     pairs = np.stack([phi[:, 0] * phi[:, 0], phi[:, 0] * phi[:, 1], phi[:, 1] * phi[:, 1]],
-                     axis=1)                                         # (n, 3, 10)
+                     axis=1).reshape(-1, n_terms)                    # (3 n, 10)
     s_up, s_dn = (np.square(a) for a in _up_down(s, p))
 
     def nll(x: np.ndarray, e: np.ndarray) -> float:
         """Gaussian negative log-likelihood of the errors ``e``, up to a constant."""
         base, term_var, wheel_var = unpack(x)
-        c = pairs @ term_var
+        c = (pairs @ term_var).reshape(-1, 3)
         wheels = wheel_var[0] * s_up + wheel_var[1] * s_dn
         s00, s01 = base[0, 0] + c[:, 0] + wheels[:, 0], base[0, 1] + c[:, 1]
         s11 = base[1, 1] + c[:, 2] + wheels[:, 1]
