@@ -254,9 +254,11 @@ class GraphBuilder:
                covariance: Callable[[int], np.ndarray] | None) -> SmootherResult:
         """Read poses, calibrations and landmarks; ``covariance(key)`` gives marginals."""
         n = self.n_poses
-        poses = np.array([[p.x(), p.y(), p.theta()]
-                          for p in (values.atPose2(pose_key(i)) for i in range(n))])
-        cal_idx = np.array([self.calibration_index(i) for i in range(n)])
+        poses = gtsam.utilities.extractPose2(values)    # X(0) .. X(n - 1): keys sort by index
+        if poses.shape != (n, 3):
+            raise RuntimeError(f"the solution holds {len(poses)} poses, the graph {n}")
+        # calibration_index of every pose
+        cal_idx = np.minimum(np.arange(n), max(n - 2, 0)) // self.opts.calibration_every
         cals = cal_cov = pose_cov = None
         if self.opts.calibrate:
             at = gtsam.Values.atPoint2 if self.opts.n_calibration == 2 else gtsam.Values.atPoint3
