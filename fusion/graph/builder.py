@@ -157,7 +157,7 @@ class GraphBuilder:
             key_i, key_j = pose_key(i), pose_key(i + 1)
             if not opts.calibrate:
                 self._add(motion_factor(pre, k, key_i=key_i, key_j=key_j))
-                delta = gtsam.Pose2(*pre.delta_pose[k])
+                delta = gtsam.Pose2(*pre.delta_pose[k].tolist())
             else:
                 group = i // opts.calibration_every
                 if i > 0 and i % opts.calibration_every == 0:
@@ -170,8 +170,9 @@ class GraphBuilder:
                 self.group_duration_s += float(pre.duration_s[k])
                 # the motion at the current calibration, first order (Forster et al. eq. 44)
                 correction = pre.calibration_jacobian[k] @ (self.cal_guess - pre.calibration)
-                delta = gtsam.Pose2(*pre.delta_pose[k]).compose(gtsam.Pose2.Expmap(correction))
-                self._open.append(pre[k])
+                delta = gtsam.Pose2(*pre.delta_pose[k].tolist()).compose(
+                    gtsam.Pose2.Expmap(correction))
+                self._open.append(pre if len(pre) == 1 else pre[k])
                 self._open_refs.append(self._add(gtsam.BetweenFactorPose2(
                     key_i, key_j, delta,
                     gtsam.noiseModel.Gaussian.Covariance(pre.covariance[k]))))
@@ -206,9 +207,7 @@ class GraphBuilder:
                 f"{self.n_poses - 1}; add the motion up to that keyframe first")
         factors = range_bearing_factors(obs, landmark_noise=self.opts.landmark_noise,
                                         huber_k=self.opts.landmark_huber_k)
-        prior = gtsam.noiseModel.Isotropic.Sigma(2, self.opts.landmark_sigma_m)
         mount = obs.sensor_pose
-        bTs = gtsam.Pose2(mount.x_m, mount.y_m, mount.yaw_rad)     # sensor in body
         for p, lid, r, b, factor in zip(obs.index.tolist(), obs.landmark_id.tolist(),
                                         obs.range_m.tolist(), obs.bearing_rad.tolist(), factors,
                                         strict=True):
@@ -216,8 +215,10 @@ class GraphBuilder:
                 key = landmark_key(lid)
                 if lid in self.known:
                     xy = self.known[lid]
-                    self._add(gtsam.PriorFactorPoint2(key, xy, prior))
+                    self._add(gtsam.PriorFactorPoint2(key, xy, gtsam.noiseModel.Isotropic.Sigma(
+                        2, self.opts.landmark_sigma_m)))
                 else:   # unknown landmark: where its first observation puts it
+                    bTs = gtsam.Pose2(mount.x_m, mount.y_m, mount.yaw_rad)     # sensor in body
                     xy = self.guess[p].compose(bTs).transformFrom(
                         np.array([r * np.cos(b), r * np.sin(b)]))
                 self._values.insert(key, np.asarray(xy, dtype=float))
@@ -254,9 +255,11 @@ class GraphBuilder:
                covariance: Callable[[int], np.ndarray] | None) -> SmootherResult:
         """Read poses, calibrations and landmarks; ``covariance(key)`` gives marginals."""
         n = self.n_poses
-        poses = np.array([[p.x(), p.y(), p.theta()]
-                          for p in (values.atPose2(pose_key(i)) for i in range(n))])
-        cal_idx = np.array([self.calibration_index(i) for i in range(n)])
+        poses = gtsam.utilities.extractPose2(values)    # X(0) .. X(n - 1): keys sort by index
+        if poses.shape != (n, 3):
+            raise RuntimeError(f"the solution holds {len(poses)} poses, the graph {n}")
+        # calibration_index of every pose
+        cal_idx = np.minimum(np.arange(n), max(n - 2, 0)) // self.opts.calibration_every
         cals = cal_cov = pose_cov = None
         if self.opts.calibrate:
             at = gtsam.Values.atPoint2 if self.opts.n_calibration == 2 else gtsam.Values.atPoint3

@@ -50,7 +50,6 @@ from collections.abc import Sequence
 
 import gtsam
 import numpy as np
-import scipy.linalg
 
 from fusion.graph.preintegration import Preintegrated
 from lti_motion.exceptions import ShapeError
@@ -296,8 +295,10 @@ def calibrated_motion_group_factor(pre: Preintegrated | Sequence[Preintegrated],
     jc = np.concatenate([p.calibration_jacobian for p in parts])
     offset = np.concatenate([np.einsum("kij,j->ki", p.calibration_jacobian, p.calibration)
                              for p in parts])
-    cov = scipy.linalg.block_diag(*np.concatenate([p.covariance for p in parts]))
     n, nc = len(jc), sizes[0]
+    cov = np.zeros((n, 3, n, 3))                      # block diagonal (scipy's block_diag,
+    cov[np.arange(n), :, np.arange(n), :] = np.concatenate([p.covariance for p in parts])
+    cov = cov.reshape(3 * n, 3 * n)                   # without its per-block Python loop)
     keys = [int(k) for k in pose_keys]
     if len(keys) != n + 1:
         raise ShapeError(f"{n} intervals need {n + 1} pose keys, got {len(keys)}")

@@ -71,6 +71,7 @@ from fusion.graph.preintegration import Preintegrated
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_terms
+from fusion.range_bearing import _wrap as _wrap_scalar
 from fusion.sensor_pose import CENTRED, SensorPose, as_sensor_pose
 from lti_motion.kinematics import wrap_angle
 
@@ -304,7 +305,7 @@ def mounted_range_bearing_factor(key_pose: int, key_landmark: int, range_m: floa
         mount it equals ``gtsam.BearingRangeFactor2D``'s error.
     """
     mount = as_sensor_pose(sensor_pose)
-    measured = np.array([float(bearing_rad), float(range_m)])
+    bearing, range_ = float(bearing_rad), float(range_m)
     key_pose, key_landmark = int(key_pose), int(key_landmark)
 
     def error(_: gtsam.CustomFactor, values: gtsam.Values,
@@ -318,7 +319,7 @@ def mounted_range_bearing_factor(key_pose: int, key_landmark: int, range_m: floa
             body = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # d wTb Exp(xi)/d xi
             jacobians[0] = (h_pose @ body)[::-1]
             jacobians[1] = h_landmark[::-1]
-        return np.array([wrap_angle(z[1] - measured[0]), z[0] - measured[1]])
+        return np.array([_wrap_scalar(float(z[1]) - bearing), float(z[0]) - range_])
 
     return gtsam.CustomFactor(noise, [key_pose, key_landmark], error)
 

@@ -136,6 +136,10 @@ SpeedMode = Literal["free_run", "one_step", "filtered"]
 
 
 
+_FIELDS = ("keyframes", "duration_s", "delta_pose", "covariance", "calibration_jacobian",
+           "calibration")
+
+
 @dataclass(frozen=True, eq=False)
 class Preintegrated:
     """Relative motions between consecutive keyframes, preintegrated (``m`` intervals).
@@ -170,8 +174,7 @@ class Preintegrated:
     calibration: np.ndarray
 
     def __post_init__(self) -> None:
-        for name in ("keyframes", "duration_s", "delta_pose", "covariance",
-                     "calibration_jacobian", "calibration"):
+        for name in _FIELDS:
             arr = np.array(getattr(self, name))
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
@@ -187,9 +190,19 @@ class Preintegrated:
         if rng.step != 1 or len(rng) == 0:
             raise IndexError(f"need a non-empty slice with step 1, got {index!r}")
         sl = slice(rng.start, rng.stop)
-        return Preintegrated(self.keyframes[rng.start:rng.stop + 1], self.duration_s[sl],
-                             self.delta_pose[sl], self.covariance[sl],
-                             self.calibration_jacobian[sl], self.calibration)
+        # read-only views of arrays __post_init__ already made: no copies, no checks
+        return Preintegrated._of_views(self.keyframes[rng.start:rng.stop + 1],
+                                       self.duration_s[sl], self.delta_pose[sl],
+                                       self.covariance[sl], self.calibration_jacobian[sl],
+                                       self.calibration)
+
+    @classmethod
+    def _of_views(cls, *arrays: np.ndarray) -> Preintegrated:
+        """An instance of read-only arrays (views of another instance's), in field order."""
+        out = object.__new__(cls)
+        for name, arr in zip(_FIELDS, arrays, strict=True):
+            object.__setattr__(out, name, arr)
+        return out
 
 
 def _scaled_speed_covariance(phi_cov: np.ndarray, cal: np.ndarray
