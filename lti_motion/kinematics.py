@@ -242,7 +242,10 @@ def _batch_shape(pose: np.ndarray, *speeds: np.ndarray) -> tuple[int, ...] | Non
     """``pose``'s batch shape when every other input is a scalar or has exactly that shape
     (the per-step case: no broadcasting to work out), else None."""
     batch = pose.shape[:-1]
-    return batch if all(a.shape == batch or a.ndim == 0 for a in speeds) else None
+    for a in speeds:
+        if a.ndim and a.shape != batch:
+            return None
+    return batch
 
 
 def _check_pose_inputs(

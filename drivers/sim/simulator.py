@@ -367,7 +367,7 @@ class Simulator:
                 f"wheel-speed command {worst:.4g} m/s exceeds the robot's limit of "
                 f"{float(self._vmax.min()):.4g} m/s; clip commands before sending"
             )
-        return np.round(cmd * 1000.0) / 1000.0      # the OI takes whole mm/s
+        return np.rint(cmd * 1000.0) / 1000.0       # the OI takes whole mm/s (np.round's rint)
 
     def _schedule(self, k0: int, n: int, events: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -424,7 +424,8 @@ class Simulator:
         period axis."""
         cmd = self._check_commands(cmd)
         k0, n = self._k, cmd.shape[1]
-        heading0 = self._state[:, 2].copy()        # true heading at the start, for the gyro
+        # true heading at the start, for the gyro
+        heading0 = self._state[:, 2].copy() if self._gyro_std is not None else None
         events = self._noise.draw(1, k0, n)
         per, spikes, valid = self._schedule(k0, n, events)
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
@@ -437,10 +438,12 @@ class Simulator:
         ticks = _wrap(ticks, self._modulus, self._ring)
         # host timestamps: end of each period plus a jittered, never negative latency
         latency = np.maximum(0.0, self._lat_mean + self._lat_std * events[..., 5])
-        t_s = (k0 + 1 + np.arange(n)) * self.dt_s + latency
-        t_s = np.maximum.accumulate(np.maximum(t_s, self._last_t[:, None] + 1e-6), axis=1)
+        t_s = np.maximum(np.arange(k0 + 1, k0 + 1 + n) * self.dt_s + latency,
+                         self._last_t[:, None] + 1e-6)
+        if n > 1:
+            t_s = np.maximum.accumulate(t_s, axis=1)
         self._last_t = t_s[:, -1].copy()
-        gyro = self._gyro(k0, heading0, pose[..., 2]) if self._gyro_std is not None else None
+        gyro = None if heading0 is None else self._gyro(k0, heading0, pose[..., 2])
         self._k += n
         return t_s, ticks, light, bumps, cmd, valid, pose, body, current, overcurrent, gyro
 

@@ -360,22 +360,24 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
         obs = None if landmarks is None else _observe(landmarks, frame.true_pose, k + 1,
                                                       stride=stride, noise=noise,
                                                       rng=sensor_rng)
-        est = estimator.step(seen, np.round(cmd * 1000.0) / 1000.0, obs)
+        est = estimator.step(seen, np.rint(cmd * 1000.0) / 1000.0, obs)   # whole mm/s
         true_log.append(frame.true_pose)
         est_log.append(est.copy())
         # phase transitions, on the estimate only
         hold = np.maximum(hold - 1, 0)
         stop_done = (phase == 0) & (hold == 0)
-        phase = np.where(stop_done, np.where(target >= len(ROUTE_M), 3, after_stop), phase)
+        if stop_done.any():         # most periods change no phase: skip the updates
+            phase = np.where(stop_done, np.where(target >= len(ROUTE_M), 3, after_stop), phase)
         turned = (phase == 1) & (np.abs(err) < 0.03)
         arrived = (phase == 2) & (dist < reach_m)
-        target = np.where(arrived, target + 1, target)
-        after_stop = np.where(turned, 2, np.where(arrived, 1, after_stop))
-        hold = np.where(turned | arrived, round(0.4 / dt), hold)
-        phase = np.where(turned | arrived, 0, phase)
+        if (turned | arrived).any():
+            target = np.where(arrived, target + 1, target)
+            after_stop = np.where(turned, 2, np.where(arrived, 1, after_stop))
+            hold = np.where(turned | arrived, round(0.4 / dt), hold)
+            phase = np.where(turned | arrived, 0, phase)
         if progress is not None and k % 200 == 0:
             progress(int((phase == 3).sum()), n)
-        if np.all(phase == 3):
+        if (phase == 3).all():
             break
     true = np.stack(true_log, axis=1)
     est_all = np.stack(est_log, axis=1)
