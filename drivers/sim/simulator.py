@@ -368,7 +368,7 @@ class Simulator:
                 f"wheel-speed command {worst:.4g} m/s exceeds the robot's limit of "
                 f"{float(self._vmax.min()):.4g} m/s; clip commands before sending"
             )
-        return np.rint(cmd * 1000.0) / 1000.0       # the OI takes whole mm/s (np.round's rint)
+        return np.rint(cmd * 1000.0) / 1000.0       # the OI takes whole mm/s (= np.round)
 
     def _schedule(self, k0: int, n: int, events: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:

@@ -59,6 +59,7 @@ ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4
 
 _HALF_RING = TICK_MODULUS // 2
 
+
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
 
