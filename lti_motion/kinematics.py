@@ -78,7 +78,7 @@ def wrap_angle(a_rad: np.ndarray | float) -> np.ndarray:
 
 def _check_wheel_base(wheel_base_m: float) -> float:
     b = float(wheel_base_m)
-    if not (np.isfinite(b) and b > 0.0):
+    if not (math.isfinite(b) and b > 0.0):
         raise ValueError(f"wheel_base_m must be a positive finite distance in metres, got {b}")
     return b
 
@@ -123,7 +123,10 @@ def body_from_wheel(wheel_m_s: np.ndarray, *, wheel_base_m: float) -> np.ndarray
     b = _check_wheel_base(wheel_base_m)
     wheel = _last_axis(np.asarray(wheel_m_s, dtype=float), 2, "wheel_m_s", "(left, right)")
     left, right = wheel[..., 0], wheel[..., 1]
-    return np.stack([0.5 * (right + left), (right - left) / b], axis=-1)
+    body = np.empty(wheel.shape)        # filled in place: np.stack costs more per step
+    body[..., 0] = 0.5 * (right + left)
+    body[..., 1] = (right - left) / b
+    return body
 
 
 def wheel_from_body(speeds: np.ndarray, *, wheel_base_m: float) -> np.ndarray:
@@ -156,7 +159,10 @@ def wheel_from_body(speeds: np.ndarray, *, wheel_base_m: float) -> np.ndarray:
     b = _check_wheel_base(wheel_base_m)
     speeds = _last_axis(np.asarray(speeds, dtype=float), 2, "body", "(v, w)")
     v, w = speeds[..., 0], speeds[..., 1]
-    return np.stack([v - 0.5 * b * w, v + 0.5 * b * w], axis=-1)
+    wheel = np.empty(speeds.shape)      # filled in place: np.stack costs more per step
+    wheel[..., 0] = v - 0.5 * b * w
+    wheel[..., 1] = v + 0.5 * b * w
+    return wheel
 
 
 def body_from_wheel_matrix(wheel_base_m: float) -> np.ndarray:
@@ -232,6 +238,16 @@ def _sinc_half_derivative(h: np.ndarray) -> np.ndarray:
     return np.where(small, series, closed)
 
 
+def _batch_shape(pose: np.ndarray, *speeds: np.ndarray) -> tuple[int, ...] | None:
+    """``pose``'s batch shape when every other input is a scalar or has exactly that shape
+    (the per-step case: no broadcasting to work out), else None."""
+    batch = pose.shape[:-1]
+    for a in speeds:
+        if a.ndim and a.shape != batch:
+            return None
+    return batch
+
+
 def _check_pose_inputs(
     pose: np.ndarray,
     v_m_s: np.ndarray | float,
@@ -242,13 +258,14 @@ def _check_pose_inputs(
     v = np.asarray(v_m_s, dtype=float)
     w = np.asarray(w_rad_s, dtype=float)
     dt = np.asarray(dt_s, dtype=float)
-    try:
-        np.broadcast_shapes(pose.shape[:-1], v.shape, w.shape, dt.shape)
-    except ValueError:
-        raise ShapeError(
-            f"pose batch shape {pose.shape[:-1]} (pose {pose.shape}), v {v.shape}, w {w.shape} "
-            f"and dt {dt.shape} do not broadcast"
-        ) from None
+    if _batch_shape(pose, v, w, dt) is None:
+        try:
+            np.broadcast_shapes(pose.shape[:-1], v.shape, w.shape, dt.shape)
+        except ValueError:
+            raise ShapeError(
+                f"pose batch shape {pose.shape[:-1]} (pose {pose.shape}), v {v.shape}, "
+                f"w {w.shape} and dt {dt.shape} do not broadcast"
+            ) from None
     for name, arr in (("pose", pose), ("v_m_s", v), ("w_rad_s", w), ("dt_s", dt)):
         if not np.isfinite(arr).all():      # the method: no np.all wrapper (per-step callers)
             raise NonFiniteError(f"{name} contains NaN or infinite values; clean the input first")
@@ -302,17 +319,20 @@ def pose_step(
     [1.0, 1.0, 1.570796326795]
     """
     pose, v, w, dt = _check_pose_inputs(pose, v_m_s, w_rad_s, dt_s)
-    shape = np.broadcast_shapes(pose.shape[:-1], v.shape, w.shape, dt.shape)
-    pose = np.broadcast_to(pose, (*shape, 3))
+    shape = _batch_shape(pose, v, w, dt)
+    if shape is None:
+        shape = np.broadcast_shapes(pose.shape[:-1], v.shape, w.shape, dt.shape)
+        pose = np.broadcast_to(pose, (*shape, 3))
     theta = pose[..., 2]
     phi = w * dt
     half = 0.5 * phi
     chord = v * dt * _sinc_half(half)  # paper eq. 11, chord form
     mid = theta + half
-    return np.stack(
-        [pose[..., 0] + chord * np.cos(mid), pose[..., 1] + chord * np.sin(mid), theta + phi],
-        axis=-1,
-    )
+    out = np.empty((*shape, 3))        # filled in place: np.stack costs more per step
+    out[..., 0] = pose[..., 0] + chord * np.cos(mid)
+    out[..., 1] = pose[..., 1] + chord * np.sin(mid)
+    out[..., 2] = theta + phi
+    return out
 
 
 def pose_step_jacobians(

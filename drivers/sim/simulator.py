@@ -245,6 +245,7 @@ class Simulator:
         self._noise = _NoiseBlocks(seeds)
         self._k = 0
         self._last_t = np.full(self.n, -np.inf)
+        self._times: tuple[int, np.ndarray] = (-1, np.empty((self.n, 0)))  # see _period_times
         # what every call needs and only the parameters decide, built once
         self._vmax = np.array([p.max_speed_m_s for p in params])[:, None, None]
         self._vlimit = self._vmax + 1e-9
@@ -367,7 +368,7 @@ class Simulator:
                 f"wheel-speed command {worst:.4g} m/s exceeds the robot's limit of "
                 f"{float(self._vmax.min()):.4g} m/s; clip commands before sending"
             )
-        return np.round(cmd * 1000.0) / 1000.0      # the OI takes whole mm/s
+        return np.rint(cmd * 1000.0) / 1000.0       # the OI takes whole mm/s (= np.round)
 
     def _schedule(self, k0: int, n: int, events: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -424,7 +425,8 @@ class Simulator:
         period axis."""
         cmd = self._check_commands(cmd)
         k0, n = self._k, cmd.shape[1]
-        heading0 = self._state[:, 2].copy()        # true heading at the start, for the gyro
+        # true heading at the start, for the gyro
+        heading0 = self._state[:, 2].copy() if self._gyro_std is not None else None
         events = self._noise.draw(1, k0, n)
         per, spikes, valid = self._schedule(k0, n, events)
         noise = np.ascontiguousarray(self._noise.draw(0, k0, n))
@@ -436,13 +438,26 @@ class Simulator:
             ticks = ticks + np.round(spikes).astype(np.int64)
         ticks = _wrap(ticks, self._modulus, self._ring)
         # host timestamps: end of each period plus a jittered, never negative latency
-        latency = np.maximum(0.0, self._lat_mean + self._lat_std * events[..., 5])
-        t_s = (k0 + 1 + np.arange(n)) * self.dt_s + latency
-        t_s = np.maximum.accumulate(np.maximum(t_s, self._last_t[:, None] + 1e-6), axis=1)
+        t_s = np.maximum(self._period_times(k0, n, events), self._last_t[:, None] + 1e-6)
+        if n > 1:
+            t_s = np.maximum.accumulate(t_s, axis=1)
         self._last_t = t_s[:, -1].copy()
-        gyro = self._gyro(k0, heading0, pose[..., 2]) if self._gyro_std is not None else None
+        gyro = None if heading0 is None else self._gyro(k0, heading0, pose[..., 2])
         self._k += n
         return t_s, ticks, light, bumps, cmd, valid, pose, body, current, overcurrent, gyro
+
+    def _period_times(self, k0: int, n: int, events: np.ndarray) -> np.ndarray:
+        """Host times of periods ``k0 ..`` before the monotone clamp, (N, n) [s]: the end of
+        each period plus its jittered, never negative latency. A single period (step()) reads
+        them from a whole block of periods computed at once (the same elementwise values)."""
+        if n > 1:
+            latency = np.maximum(0.0, self._lat_mean + self._lat_std * events[..., 5])
+            return np.arange(k0 + 1, k0 + 1 + n) * self.dt_s + latency
+        b, start = divmod(k0, _BLOCK)
+        if b != self._times[0]:
+            k1 = b * _BLOCK
+            self._times = (b, self._period_times(k1, _BLOCK, self._noise.draw(1, k1, _BLOCK)))
+        return self._times[1][:, start:start + 1]
 
     def _gyro(self, k0: int, heading0: np.ndarray, heading: np.ndarray) -> np.ndarray:
         """Gyro readings of periods ``k0 ..``, shape (N, n): the true heading's change over

@@ -32,7 +32,7 @@ from lti_motion.frames import SensorFrame
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.odometry import TICK_MODULUS, tick_deltas
 
 __all__ = [
     "ROUTE_LANDMARKS",
@@ -57,6 +57,9 @@ ROUTE_M.flags.writeable = False
 #: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
 ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
 
+_HALF_RING = TICK_MODULUS // 2
+
+
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
 
@@ -70,12 +73,16 @@ class Estimator(Protocol):
 
 
 def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
-    return tick_deltas(np.stack([np.asarray(prev, np.int64), np.asarray(now, np.int64)]))[0]
+    """:func:`~lti_motion.odometry.tick_deltas` of one step ``prev -> now`` (16-bit counters),
+    without stacking the two: ``((now - prev + 32768) mod 65536) - 32768`` (spec section 7.2)."""
+    diff = np.asarray(now, np.int64) - np.asarray(prev, np.int64)
+    return (diff + _HALF_RING) % TICK_MODULUS - _HALF_RING
 
 
 def _valid(frame: SensorFrame, n_robots: int) -> np.ndarray:
     """The frame's ``valid`` flag per robot: a lost frame's counts are never read."""
-    return np.broadcast_to(np.asarray(frame.valid, bool), (n_robots,))
+    valid = np.asarray(frame.valid, bool)
+    return valid if valid.shape == (n_robots,) else np.broadcast_to(valid, (n_robots,))
 
 
 class Odometry:
@@ -300,15 +307,15 @@ def _follower(est: np.ndarray, target_idx: np.ndarray, phase: np.ndarray, *,
     delta = goal - est[:, :2]
     dist = np.hypot(delta[:, 0], delta[:, 1])
     err = wrap_angle(np.arctan2(delta[:, 1], delta[:, 0]) - est[:, 2])
-    v = np.zeros(len(est))
-    w = np.zeros(len(est))
-    turning = phase == 1
+    # per robot by phase: at rest (0, 3), turn in place (1), drive (2); np.where on whole
+    # arrays, np.minimum(np.maximum()) for np.clip (the same values, less call overhead)
     driving = phase == 2
-    w[turning] = np.clip(2.0 * err[turning], -turn_rad_s, turn_rad_s)
-    slow = np.clip(dist / 0.3, 0.25, 1.0)                  # slow down near the checkpoint
-    v[driving] = cruise_m_s * slow[driving] * np.maximum(0.0, np.cos(err[driving]))
-    w[driving] = np.clip(1.5 * err[driving], -0.5, 0.5)
-    return wheel_from_body(np.stack([v, w], axis=1), wheel_base_m=wheel_base_m), dist, err
+    slow = np.minimum(np.maximum(dist / 0.3, 0.25), 1.0)   # slow down near the checkpoint
+    body = np.zeros((len(est), 2))
+    body[:, 0] = np.where(driving, cruise_m_s * slow * np.maximum(0.0, np.cos(err)), 0.0)
+    body[:, 1] = np.where(phase == 1, np.minimum(np.maximum(2.0 * err, -turn_rad_s), turn_rad_s),
+                          np.where(driving, np.minimum(np.maximum(1.5 * err, -0.5), 0.5), 0.0))
+    return wheel_from_body(body, wheel_base_m=wheel_base_m), dist, err
 
 
 def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[int],
@@ -346,7 +353,7 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     for k in range(n_max):
         cmd, dist, err = _follower(est, target, phase, cruise_m_s=cruise_m_s,
                                    turn_rad_s=turn_rad_s, wheel_base_m=params.wheel_base_m)
-        cmd = np.clip(cmd, -params.max_speed_m_s, params.max_speed_m_s)
+        cmd = np.minimum(np.maximum(cmd, -params.max_speed_m_s), params.max_speed_m_s)
         cmd[(phase == 0) | (phase == 3)] = 0.0
         frame = sim.step(cmd)
         # the estimator gets what a robot reports: the simulator's truth is stripped
@@ -354,22 +361,24 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
         obs = None if landmarks is None else _observe(landmarks, frame.true_pose, k + 1,
                                                       stride=stride, noise=noise,
                                                       rng=sensor_rng)
-        est = estimator.step(seen, np.round(cmd * 1000.0) / 1000.0, obs)
+        est = estimator.step(seen, np.rint(cmd * 1000.0) / 1000.0, obs)   # whole mm/s
         true_log.append(frame.true_pose)
         est_log.append(est.copy())
         # phase transitions, on the estimate only
         hold = np.maximum(hold - 1, 0)
         stop_done = (phase == 0) & (hold == 0)
-        phase = np.where(stop_done, np.where(target >= len(ROUTE_M), 3, after_stop), phase)
+        if stop_done.any():         # most periods change no phase: skip the updates
+            phase = np.where(stop_done, np.where(target >= len(ROUTE_M), 3, after_stop), phase)
         turned = (phase == 1) & (np.abs(err) < 0.03)
         arrived = (phase == 2) & (dist < reach_m)
-        target = np.where(arrived, target + 1, target)
-        after_stop = np.where(turned, 2, np.where(arrived, 1, after_stop))
-        hold = np.where(turned | arrived, round(0.4 / dt), hold)
-        phase = np.where(turned | arrived, 0, phase)
+        if (turned | arrived).any():
+            target = np.where(arrived, target + 1, target)
+            after_stop = np.where(turned, 2, np.where(arrived, 1, after_stop))
+            hold = np.where(turned | arrived, round(0.4 / dt), hold)
+            phase = np.where(turned | arrived, 0, phase)
         if progress is not None and k % 200 == 0:
             progress(int((phase == 3).sum()), n)
-        if np.all(phase == 3):
+        if (phase == 3).all():
             break
     true = np.stack(true_log, axis=1)
     est_all = np.stack(est_log, axis=1)

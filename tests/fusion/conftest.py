@@ -7,8 +7,9 @@ from benchmarks.bench_monitor import fit_route_null
 
 @pytest.fixture(scope="session")
 def route_model(ekf_example_model):
-    """The monitor benchmarks' ARX model: ``benchmarks.bench_monitor.calibrated_model()`` is
-    ``examples/ekf_plugin.py``'s calibration (seed 1, plan seed 3, 180 s), computed once."""
+    """The monitor benchmarks' ARX model (``examples/ekf_plugin.py``'s calibration, seed 1):
+    :func:`benchmarks.bench_monitor.calibrated_model` is the same calibration, so the
+    session's one of the example serves (``test_route_model_is_the_benchmarks_calibration``)."""
     return ekf_example_model
 
 

@@ -188,6 +188,20 @@ def test_pose_step_broadcasts(rng):
     assert pose_step(np.zeros(3), np.ones((2, 4)), 0.0, 1.0).shape == (2, 4, 3)
 
 
+def test_pose_step_without_broadcasting_equals_the_broadcast_path(rng):
+    """Inputs of the pose's batch shape skip the broadcasting (the per-step case); the
+    same numbers broadcast from other shapes give the same poses bit for bit."""
+    poses = rng.normal(size=(6, 3))
+    v, w = rng.normal(size=6), rng.normal(size=6)
+    w[0] = 0.0
+    direct = pose_step(poses, v, w, 0.015)
+    np.testing.assert_array_equal(direct, pose_step(poses[None], v[None], w, 0.015)[0])
+    every = pose_step(poses, v[:, None], w[:, None], np.full((1, 1), 0.015))  # (6, 6, 3)
+    np.testing.assert_array_equal(direct, every[np.arange(6), np.arange(6)])
+    with pytest.raises(ShapeError, match="do not broadcast"):
+        pose_step(poses, v[:4], w, 0.015)
+
+
 def test_integrate_empty_sequence():
     poses = integrate_poses(np.zeros((0, 2)), 0.1, initial_pose=[1.0, 2.0, 3.0])
     np.testing.assert_array_equal(poses, [[1.0, 2.0, 3.0]])

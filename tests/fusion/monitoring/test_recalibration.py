@@ -6,9 +6,12 @@ retries, the refit's steady-state gain), then a short form of the benchmark
 a fault, the monitor's first alarm after the onset, an excitation manoeuvre on request,
 and the fit of the model in use on fresh faulty data against the nominal fit.
 """
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+import benchmarks.bench_monitor as bench_monitor
 from benchmarks.bench_monitor import (
     DYNAMICS_FAULTS,
     excitation_speeds,
@@ -28,6 +31,23 @@ def model(route_model):
 @pytest.fixture(scope="module")
 def null(route_null):
     return route_null
+
+
+def test_route_model_is_the_benchmarks_calibration(load_example, monkeypatch):
+    """The session's ``route_model`` is the example's calibration (``tests/fusion/conftest.py``):
+    the benchmarks' :func:`calibrated_model` must ask for the same one."""
+    calls = []
+
+    def record(preset, **options):
+        calls.append((preset, options))
+        return SimpleNamespace(arx=None)
+
+    example = load_example("ekf_plugin")
+    monkeypatch.setattr(bench_monitor, "calibrate_simulator", record)
+    monkeypatch.setattr(example, "calibrate_simulator", record)
+    bench_monitor.calibrated_model()
+    example.calibrate_model()
+    assert len(calls) == 2 and calls[0] == calls[1]
 
 
 def _alarm(t_s=10.0, onset_s=0.0):
