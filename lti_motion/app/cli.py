@@ -34,9 +34,16 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+
+# The command's numpy runs OpenBLAS on one thread unless the user set OPENBLAS_NUM_THREADS
+# (numpy reads it once, when it loads: here, before the first import that loads it). The
+# library's matrices are small; more threads only spin (measured: the demo 126 -> 105 s wall
+# on a loaded 2-core machine). A program importing the library keeps its own setting.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from drivers.sim.config import FLOORS, load_robot
 from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
