@@ -106,7 +106,7 @@ from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.scale_odometry import KAPPA as _KAPPA
 from fusion.monitoring.scale_odometry import KV as _KV
 from fusion.monitoring.scale_odometry import KW as _KW
-from fusion.monitoring.scale_odometry import N_STATE, landmark_update, odometry_predict
+from fusion.monitoring.scale_odometry import N_STATE, landmark_update, odometry_predict_into
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.intrinsics import OdometryIntrinsics
@@ -370,6 +370,7 @@ class ScaleMonitor:
         p0 = np.diag([*(std ** 2), *(np.asarray(opt.scales.prior_std) ** 2),
                       opt.curvature_prior_std_rad_per_m ** 2])
         self._P = np.tile(p0, ((1 + w) * n, 1, 1))
+        self._spare = np.empty_like(self._x), np.empty_like(self._P)
         self._q_c = np.array([*opt.scales.walk_per_sqrt_s,
                               opt.curvature_walk_rad_per_m_sqrt_s]) ** 2 * opt.dt_s
         self._llr = np.zeros((w, n))                         # eq. 1 per shadow
@@ -429,10 +430,13 @@ class ScaleMonitor:
     def _predict(self, tick_deltas: np.ndarray) -> None:
         """One period of encoder travel for the main filters and the shadows."""
         opt = self.options
-        self._x, self._P = odometry_predict(
-            self._x, self._P, np.tile(tick_deltas, (1 + self._n_alt, 1)),
+        x_out, P_out = self._spare          # the compiled step writes into the spare buffers
+        odometry_predict_into(
+            self._x, self._P, np.tile(tick_deltas, (1 + self._n_alt, 1)), x_out, P_out,
             intrinsics=self.intrinsics, dt_s=opt.dt_s, slip=opt.slip, walk_var=self._q_c,
             missing_std=(opt.missing_speed_m_s, opt.missing_turn_rad_s))
+        self._spare = self._x, self._P
+        self._x, self._P = x_out, P_out
 
     def _restart(self, shadow: int, robots: np.ndarray, t: float) -> None:
         """Shadow slot ``shadow`` of ``robots`` restarts from the main filters: its scale

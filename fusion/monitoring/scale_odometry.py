@@ -36,6 +36,14 @@ the NIS, in Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18), with each
 sighting's own covariance or the sensor's :class:`~fusion.noise.LandmarkNoise`
 at the predicted range.
 
+:func:`odometry_predict` is the numpy reference of the prediction;
+:func:`odometry_predict_into` evaluates the same expressions compiled (numba,
+row by row, as :mod:`fusion.ekf.kernel`): :class:`~fusion.monitoring.ScaleMonitor`
+predicts every period, and numpy's per-call overhead on a few small arrays
+cost many times the arithmetic. The two agree to rounding (the covariance is
+summed in another order and computed on its lower triangle, mirrored;
+``tests/fusion/monitoring/test_scale.py``).
+
 References
 ----------
 Larsen, T. D., Bak, M., Andersen, N. A., Ravn, O. (1998). Location
@@ -48,12 +56,15 @@ Applications to Tracking and Navigation, eq. 5.2.3-18.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from fusion.noise import LandmarkNoise, SlipNoise
 from fusion.range_bearing import range_bearing_terms
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.kinematics import pose_step_terms, wrap_angle
+from lti_motion.kinematics import _DSINC_SERIES, _SERIES_BELOW, pose_step_terms, wrap_angle
 
 __all__ = [
     "KAPPA",
@@ -62,6 +73,7 @@ __all__ = [
     "N_STATE",
     "landmark_update",
     "odometry_predict",
+    "odometry_predict_into",
     "range_bearing_batch",
 ]
 
@@ -124,6 +136,110 @@ def odometry_predict(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray, *,
     P_new[:, KW, KW] += walk_var[1]
     P_new[:, KAPPA, KAPPA] += walk_var[2]
     return x_new, 0.5 * (P_new + P_new.transpose(0, 2, 1))
+
+
+def odometry_predict_into(x: np.ndarray, P: np.ndarray, tick_deltas: np.ndarray,
+                          x_out: np.ndarray, P_out: np.ndarray, *,
+                          intrinsics: OdometryIntrinsics, dt_s: float, slip: SlipNoise,
+                          walk_var: np.ndarray, missing_std: tuple[float, float]) -> None:
+    """:func:`odometry_predict`, compiled, written into ``x_out`` and ``P_out``.
+
+    Parameters
+    ----------
+    x, P, tick_deltas
+        As :func:`odometry_predict`: C-contiguous float64 arrays, shapes
+        (n, 6), (n, 6, 6), (n, 2).
+    x_out, P_out : ndarray, shapes (n, 6) and (n, 6, 6)
+        C-contiguous float64 buffers that receive the predicted states and
+        covariances (not ``x`` or ``P`` themselves).
+    intrinsics, dt_s, slip, walk_var, missing_std
+        As :func:`odometry_predict`.
+
+    Notes
+    -----
+    Equal to :func:`odometry_predict` to rounding (module notes).
+    """
+    constants = np.array((dt_s, slip.v_floor_m_s, slip.v_frac, slip.w_floor_rad_s, slip.w_frac,
+                          slip.w_per_v_rad_m, missing_std[0], missing_std[1], *walk_var))
+    _predict_kernel(x, P, tick_deltas, intrinsics.jacobian(), constants, x_out, P_out)
+
+
+@njit(cache=True)
+def _sinc_terms(h):
+    """``sin(h) / h`` as ``np.sinc(h / pi)`` evaluates it, and its derivative as
+    :func:`lti_motion.kinematics._sinc_half_derivative` (series below ``|h| = 0.25``)."""
+    y = math.pi * (h * (1.0 / math.pi))
+    value = math.sin(y) / y if y != 0.0 else 1.0
+    if abs(h) < _SERIES_BELOW:
+        series = 0.0
+        for i in range(len(_DSINC_SERIES) - 1, -1, -1):
+            series = series * (h * h) + _DSINC_SERIES[i]
+        return value, series * h
+    return value, (h * math.cos(h) - math.sin(h)) / (h * h)
+
+
+@njit(cache=True)
+def _predict_kernel(x, P, tick_deltas, J, constants, x_out, P_out):
+    """Rows of :func:`odometry_predict`: eq. 1, paper eq. 11 (chord form), ``F``, ``Q``,
+    ``F P F^T + Q`` on the lower triangle, mirrored. ``constants``: ``dt_s``, the
+    :class:`~fusion.noise.SlipNoise` figures, ``missing_std``, ``walk_var``."""
+    dt = constants[0]
+    F = np.zeros((N_STATE, N_STATE))
+    fp = np.empty((N_STATE, N_STATE))
+    for r in range(x.shape[0]):
+        d0, d1 = tick_deltas[r, 0], tick_deltas[r, 1]
+        missing = not (math.isfinite(d0) and math.isfinite(d1))
+        if missing:
+            d0, d1 = 0.0, 0.0
+        ds, dth = d0 * J[0, 0] + d1 * J[0, 1], d0 * J[1, 0] + d1 * J[1, 1]   # [m], [rad]
+        gs = (1.0 + x[r, KV]) * ds                                       # eq. 1
+        gth = (1.0 + x[r, KW]) * dth + x[r, KAPPA] * ds
+        half = 0.5 * gth
+        s, dsinc = _sinc_terms(half)
+        mid = x[r, 2] + half
+        cm, sm = math.cos(mid), math.sin(mid)
+        chord = gs * s
+        x_out[r, 0] = x[r, 0] + chord * cm                               # paper eq. 11
+        x_out[r, 1] = x[r, 1] + chord * sm
+        x_out[r, 2] = x[r, 2] + gth
+        for i in range(3, N_STATE):
+            x_out[r, i] = x[r, i]
+        k = 0.5 * gs
+        fv0, fv1 = s * cm, s * sm                                        # F_s = (f_v, f_w)
+        fw0, fw1 = k * (dsinc * cm - s * sm), k * (dsinc * sm + s * cm)
+        F[0, 0], F[0, 2], F[1, 1], F[1, 2], F[2, 2] = 1.0, -chord * sm, 1.0, chord * cm, 1.0
+        F[0, KV], F[0, KW], F[0, KAPPA] = fv0 * ds, fw0 * dth, fw0 * ds
+        F[1, KV], F[1, KW], F[1, KAPPA] = fv1 * ds, fw1 * dth, fw1 * ds
+        F[2, KW], F[2, KAPPA] = dth, ds
+        F[KV, KV] = F[KW, KW] = F[KAPPA, KAPPA] = 1.0
+        av = abs(ds / dt)                                                # SlipNoise.stds
+        sv = constants[1] + constants[2] * av
+        sw = constants[3] + constants[4] * abs(dth / dt) + constants[5] * av
+        if missing:
+            sv, sw = constants[6], constants[7]
+        sv, sw = sv * dt, sw * dt
+        g = ((fv0 * sv, fw0 * sw), (fv1 * sv, fw1 * sw), (0.0, sw))      # F_s diag(sigma)
+        for i in range(N_STATE):                                         # F P
+            for j in range(N_STATE):
+                acc = 0.0
+                for m in range(N_STATE):
+                    f = F[i, m]
+                    if f != 0.0:
+                        acc += f * P[r, m, j]
+                fp[i, j] = acc
+        for i in range(N_STATE):                          # F (F P)^T + Q, lower triangle
+            for j in range(i + 1):
+                acc = 0.0
+                for m in range(N_STATE):
+                    f = F[i, m]
+                    if f != 0.0:
+                        acc += f * fp[j, m]
+                if i < 3:
+                    acc += g[i][0] * g[j][0] + g[i][1] * g[j][1]
+                elif i == j:
+                    acc += constants[5 + i]                              # walk_var
+                P_out[r, i, j] = acc
+                P_out[r, j, i] = acc
 
 
 def range_bearing_batch(x: np.ndarray, landmark_xy: np.ndarray, *,
