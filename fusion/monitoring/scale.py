@@ -101,12 +101,17 @@ from typing import Literal
 import numpy as np
 from scipy.stats import chi2
 
+from fusion.ekf.kernel import kernel_array
 from fusion.exceptions import FilterOptionError, FusionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.scale_odometry import KAPPA as _KAPPA
 from fusion.monitoring.scale_odometry import KV as _KV
 from fusion.monitoring.scale_odometry import KW as _KW
-from fusion.monitoring.scale_odometry import N_STATE, landmark_update, odometry_predict_into
+from fusion.monitoring.scale_odometry import (
+    N_STATE,
+    landmark_update_compiled,
+    odometry_predict_into,
+)
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.intrinsics import OdometryIntrinsics
@@ -432,7 +437,7 @@ class ScaleMonitor:
         opt = self.options
         x_out, P_out = self._spare          # the compiled step writes into the spare buffers
         odometry_predict_into(
-            self._x, self._P, np.tile(tick_deltas, (1 + self._n_alt, 1)), x_out, P_out,
+            self._x, self._P, kernel_array(tick_deltas), x_out, P_out,   # shadows: the robot's
             intrinsics=self.intrinsics, dt_s=opt.dt_s, slip=opt.slip, walk_var=self._q_c,
             missing_std=(opt.missing_speed_m_s, opt.missing_turn_rad_s))
         self._spare = self._x, self._P
@@ -506,13 +511,16 @@ class ScaleMonitor:
         if slot != self._slot:                               # staggered restarts
             self._slot = slot
             self._restart(slot % self.options.n_shadows, np.arange(n), t)
-        self.counts["missing"] += int((~np.isfinite(d).all(axis=1)).sum())
+        self.counts["missing"] += sum(not (math.isfinite(left) and math.isfinite(right))
+                                      for left, right in d.tolist())
         self._predict(d)
         if observations is None:
             return []
         if len(observations) != n:
             raise MeasurementShapeError(f"expected observations for {n} robots, got "
                                         f"{len(observations)}")
+        if not any(len(obs) for obs in observations):       # most frames see no landmark
+            return []
         alarms: list[ScaleAlarm] = []
         per_robot = [list(obs) for obs in observations]
         mounts = [obs.sensor_pose for obs in observations]
@@ -546,9 +554,9 @@ class ScaleMonitor:
         if any(c is not None for c in covs):             # NaN: the sensor's noise
             cov = np.tile([np.full((2, 2), np.nan) if c is None else c for c in covs],
                           (1 + w, 1, 1))
-        x, P, ok, ll = landmark_update(self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)),
-                                       np.tile(zs, (1 + w, 1)), self.landmark_noise, self._gate,
-                                       cov=cov, sensor=np.tile(sensor, (1 + w, 1)))
+        x, P, ok, ll = landmark_update_compiled(
+            self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)), np.tile(zs, (1 + w, 1)),
+            self.landmark_noise, self._gate, cov=cov, sensor=np.tile(sensor, (1 + w, 1)))
         self._x[rows], self._P[rows] = x, P
         ok, ll = ok.reshape(1 + w, m), ll.reshape(1 + w, m)
         self.counts["updates"] += int(ok[0].sum())
