@@ -412,9 +412,11 @@ def _update_kernel(x, P, H, nu, R, gate, x_out, P_out, ok, ll):
         nis = si00 * n0 * n0 + (si01 + si10) * n0 * n1 + si11 * n1 * n1
         ll[r] = -0.5 * (min(nis, gate) + math.log(abs(det)))
         ok[r] = nis <= gate
-        if not ok[r]:
-            x_out[r] = x[r]
-            P_out[r] = P[r]
+        if not ok[r]:                                       # gated: the row as it was
+            for i in range(n):
+                x_out[r, i] = x[r, i]
+                for j in range(n):
+                    P_out[r, i, j] = P[r, i, j]
             continue
         for i in range(n):                      # K = P H^T S^-1, x + K nu, M H^T, K R
             k0 = pht[i, 0] * si00 + pht[i, 1] * si10
