@@ -297,8 +297,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._dt_s = fm.dt_s
         self._speed_at = fm.n - 2
         self._t2s = None if fm.ticks_to_speeds is None else fm.ticks_to_speeds.tolist()
-        # rows: counts of the last fused (or anchoring) frame, counts of the current frame
-        self._tick_pair = np.zeros((2, 2), dtype=np.int64)
+        # counts (left, right) of the last fused (or anchoring) frame; the current frame's are
+        # _last_frame (set by _frame_jump)
+        self._ref_ticks = (0, 0)
         self._have_ref = False
         self._periods_since_ref = 0
         self._n_predicts = 0
@@ -326,9 +327,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             first = self._check_ticks(initial_ticks)
             if not np.all(np.isfinite(first)):
                 raise FilterOptionError(f"initial_ticks must be finite, got {initial_ticks}")
-            self._tick_pair[0] = first
             self._have_ref = True
-            self._last_frame = (int(first[0]), int(first[1]))
+            self._last_frame = self._ref_ticks = (int(first[0]), int(first[1]))
             self._have_last = True
         # F buffers must hold the constant blocks (predict_terms writes only the pose rows)
         self._buffers = (np.array(fm.F_template), np.empty((fm.n, fm.n)))
@@ -542,29 +542,28 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._gyro_rules:
             self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
                              and int(ticks[1]) == self._last_frame[1])
-        pair = self._tick_pair
         periods = self._periods_since_ref
         if not self._have_ref or periods == 0 or periods > self.max_periods:
             reason: UpdateReason = "gap" if self._have_ref else "anchor"
             self._frame_jump(ticks)
             self._span_jump = 0.0
-            pair[0] = ticks
+            self._ref_ticks = self._last_frame
             self._have_ref, self._periods_since_ref = True, 0
             return self._skip("encoders", t, reason, 2)
-        pair[1] = ticks
-        jump = self._frame_jump(ticks)
+        jump = self._frame_jump(ticks)              # sets _last_frame: this frame's counts
         speeds = self.x[self._speed_at:]
         y = self._span_speeds()                     # summed over `periods` periods
         verdict = "young"
         if periods >= self.reanchor_periods:
-            verdict = span_verdict(tick_deltas(pair, axis=0, counter_bits=self.counter_bits)[0],
+            verdict = span_verdict(tick_deltas(self._tick_pair(), axis=0,
+                                               counter_bits=self.counter_bits)[0],
                                    np.linalg.solve(self.fm.ticks_to_speeds, speeds),
                                    jump, self._span_jump, periods=periods,
                                    max_jump_ticks=self.max_jump_ticks)
         record = self._gated("encoders", t, y, y - speeds, self.fm.H_encoders, self.R, None,
                              PHt=self.P[:, self._speed_at:], force=verdict == "consistent")
         if record.accepted or verdict == "broken":
-            pair[0] = ticks
+            self._ref_ticks = self._last_frame
             self._periods_since_ref = 0
             self._span_jump = 0.0
         else:
@@ -584,13 +583,17 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._settling and self._still_run >= self._window_periods:
             self._settling = False          # a whole window still: the stop has settled
 
+    def _tick_pair(self) -> np.ndarray:
+        """Counts of the last fused frame and of the current one, rows (left, right), (2, 2)."""
+        return np.array((self._ref_ticks, self._last_frame), dtype=np.int64)
+
     def _span_speeds(self) -> np.ndarray:
         """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
         arithmetic (it runs at every reading): rollover-safe increments as
         :func:`lti_motion.odometry.tick_deltas`, times ``fm.ticks_to_speeds``."""
         if self._t2s is None:
-            return encoder_speeds(self._tick_pair, self.fm)        # raises: no encoder scale
-        (l0, r0), (l1, r1) = self._tick_pair.tolist()
+            return encoder_speeds(self._tick_pair(), self.fm)      # raises: no encoder scale
+        (l0, r0), (l1, r1) = self._ref_ticks, self._last_frame
         dl, dr = l1 - l0, r1 - r0
         if self._modulus:                   # self._step, inline (it runs at every reading)
             half, modulus = self._half, self._modulus

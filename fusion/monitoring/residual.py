@@ -391,6 +391,12 @@ def _whiten_2(nu: np.ndarray, S: np.ndarray) -> np.ndarray | None:
     return np.array((w0, (n1 - l21 * w0) / math.sqrt(e)))
 
 
+def _finite(a: np.ndarray) -> bool:
+    """``numpy.isfinite(a).all()`` for the few values of one reading, in scalar arithmetic
+    (it runs at every reading)."""
+    return all(map(math.isfinite, a.ravel().tolist()))
+
+
 def _symmetric(S: np.ndarray) -> bool:
     """``numpy.allclose(S, S.T, rtol=1e-9, atol=1e-15)``; for a finite 2 x 2 ``S`` the same
     comparisons in scalar arithmetic (:func:`whiten` runs at every reading)."""
@@ -422,7 +428,7 @@ class _Stream:
     glitch_idx: deque = field(default_factory=deque)     # sample indices of recent glitches
     glitch_t: deque = field(default_factory=deque)
     n_samples: int = 0
-    block_sum: np.ndarray | None = None
+    block_sum: list[float] | None = None
     block_n: int = 0
     block_t0: float = math.nan
     g_pos: np.ndarray | None = None
@@ -571,7 +577,7 @@ class ResidualMonitor:
             raise FilterOptionError(f"stream must be 'encoders' or 'landmark', got {stream!r}")
         nu = np.asarray(innovation, dtype=float)
         S = np.asarray(innovation_cov, dtype=float)
-        if not (np.isfinite(nu).all() and np.isfinite(S).all()):
+        if not (_finite(nu) and _finite(S)):
             self.counts["missing"] += 1
             return []
         w = whiten(nu, S)
@@ -583,7 +589,7 @@ class ResidualMonitor:
         st.n_samples += 1
         if st.g_pos is None or st.g_pos.size != w.size:
             st.reset_cusum(w.size)
-            st.block_sum = np.zeros(w.size)
+            st.block_sum = [0.0] * w.size
         value = float(w @ w)                       # NIS = nu^T S^-1 nu = |L^-1 nu|^2
         raised: list[AlarmEvent] = []
         if value > st.thresholds.gate:
@@ -744,17 +750,16 @@ class ResidualMonitor:
         c = v if cmd_m_s is None else np.asarray(cmd_m_s, dtype=float)
         if c.shape != (2,):
             raise MeasurementShapeError(f"expected wheel commands (2,), got {c.shape}")
-        if not (np.isfinite(d).all() and np.isfinite(v).all() and np.isfinite(c).all()):
+        (d_l, d_r), (v_l, v_r), (c_l, c_r) = d.tolist(), v.tolist(), c.tolist()
+        if not all(map(math.isfinite, (d_l, d_r, v_l, v_r, c_l, c_r))):
             self.counts["missing"] += 1
             return []
-        c_l, c_r = c.tolist()
         if cmd_m_s is not None:
             moving = c_l != 0.0 or c_r != 0.0
             if moving and self._at_rest:
                 self._start_t = t - self.options.dt_s     # the period began a frame ago
             self._at_rest = not moving
         opt = self.options
-        (d_l, d_r), (v_l, v_r) = d.tolist(), v.tolist()
         flat = [self._flat_wheel(0, t, d_l, v_l, c_l), self._flat_wheel(1, t, d_r, v_r, c_r)]
         self._wheel_check.update(np.array(flat), d, motor_current_a, wheel_overcurrent)
         raised = []
@@ -835,13 +840,14 @@ class ResidualMonitor:
     def _cusum(self, st: _Stream, t: float, w: np.ndarray) -> list[AlarmEvent]:
         if st.block_n == 0:
             st.block_t0 = t
-        clip = self.options.clip_sigma     # np.clip's values, without its wrapper's cost
-        st.block_sum += np.minimum(np.maximum(w, -clip), clip)
+        clip = self.options.clip_sigma     # np.clip's values, in scalar arithmetic (per sample)
+        st.block_sum = [b + min(max(v, -clip), clip)
+                        for b, v in zip(st.block_sum, w.tolist(), strict=True)]
         st.block_n += 1
         if st.block_n < self.options.decimation:
             return []
-        z = st.block_sum / math.sqrt(st.block_n)         # N(0, I) per block if white
-        st.block_sum[:] = 0.0
+        z = np.array(st.block_sum) / math.sqrt(st.block_n)   # N(0, I) per block if white
+        st.block_sum = [0.0] * z.size
         st.block_n = 0
         k, h = self.options.cusum_k, st.thresholds.cusum_h
         # Page 1954: g+ = max(0, g+ + z - k), g- = max(0, g- - z - k)

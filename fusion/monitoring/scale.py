@@ -101,12 +101,17 @@ from typing import Literal
 import numpy as np
 from scipy.stats import chi2
 
+from fusion.ekf.kernel import kernel_array
 from fusion.exceptions import FilterOptionError, FusionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.scale_odometry import KAPPA as _KAPPA
 from fusion.monitoring.scale_odometry import KV as _KV
 from fusion.monitoring.scale_odometry import KW as _KW
-from fusion.monitoring.scale_odometry import N_STATE, landmark_update, odometry_predict
+from fusion.monitoring.scale_odometry import (
+    N_STATE,
+    landmark_update_compiled,
+    odometry_predict_into,
+)
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.intrinsics import OdometryIntrinsics
@@ -370,6 +375,7 @@ class ScaleMonitor:
         p0 = np.diag([*(std ** 2), *(np.asarray(opt.scales.prior_std) ** 2),
                       opt.curvature_prior_std_rad_per_m ** 2])
         self._P = np.tile(p0, ((1 + w) * n, 1, 1))
+        self._spare = np.empty_like(self._x), np.empty_like(self._P)
         self._q_c = np.array([*opt.scales.walk_per_sqrt_s,
                               opt.curvature_walk_rad_per_m_sqrt_s]) ** 2 * opt.dt_s
         self._llr = np.zeros((w, n))                         # eq. 1 per shadow
@@ -429,10 +435,13 @@ class ScaleMonitor:
     def _predict(self, tick_deltas: np.ndarray) -> None:
         """One period of encoder travel for the main filters and the shadows."""
         opt = self.options
-        self._x, self._P = odometry_predict(
-            self._x, self._P, np.tile(tick_deltas, (1 + self._n_alt, 1)),
+        x_out, P_out = self._spare          # the compiled step writes into the spare buffers
+        odometry_predict_into(
+            self._x, self._P, kernel_array(tick_deltas), x_out, P_out,   # shadows: the robot's
             intrinsics=self.intrinsics, dt_s=opt.dt_s, slip=opt.slip, walk_var=self._q_c,
             missing_std=(opt.missing_speed_m_s, opt.missing_turn_rad_s))
+        self._spare = self._x, self._P
+        self._x, self._P = x_out, P_out
 
     def _restart(self, shadow: int, robots: np.ndarray, t: float) -> None:
         """Shadow slot ``shadow`` of ``robots`` restarts from the main filters: its scale
@@ -502,13 +511,16 @@ class ScaleMonitor:
         if slot != self._slot:                               # staggered restarts
             self._slot = slot
             self._restart(slot % self.options.n_shadows, np.arange(n), t)
-        self.counts["missing"] += int((~np.isfinite(d).all(axis=1)).sum())
+        self.counts["missing"] += sum(not (math.isfinite(left) and math.isfinite(right))
+                                      for left, right in d.tolist())
         self._predict(d)
         if observations is None:
             return []
         if len(observations) != n:
             raise MeasurementShapeError(f"expected observations for {n} robots, got "
                                         f"{len(observations)}")
+        if not any(len(obs) for obs in observations):       # most frames see no landmark
+            return []
         alarms: list[ScaleAlarm] = []
         per_robot = [list(obs) for obs in observations]
         mounts = [obs.sensor_pose for obs in observations]
@@ -542,9 +554,9 @@ class ScaleMonitor:
         if any(c is not None for c in covs):             # NaN: the sensor's noise
             cov = np.tile([np.full((2, 2), np.nan) if c is None else c for c in covs],
                           (1 + w, 1, 1))
-        x, P, ok, ll = landmark_update(self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)),
-                                       np.tile(zs, (1 + w, 1)), self.landmark_noise, self._gate,
-                                       cov=cov, sensor=np.tile(sensor, (1 + w, 1)))
+        x, P, ok, ll = landmark_update_compiled(
+            self._x[rows], self._P[rows], np.tile(lxy, (1 + w, 1)), np.tile(zs, (1 + w, 1)),
+            self.landmark_noise, self._gate, cov=cov, sensor=np.tile(sensor, (1 + w, 1)))
         self._x[rows], self._P[rows] = x, P
         ok, ll = ok.reshape(1 + w, m), ll.reshape(1 + w, m)
         self.counts["updates"] += int(ok[0].sum())

@@ -32,7 +32,9 @@ from fusion.monitoring.scale_odometry import (
     KV,
     KW,
     landmark_update,
+    landmark_update_compiled,
     odometry_predict,
+    odometry_predict_into,
     range_bearing_batch,
 )
 from fusion.noise import LandmarkNoise, SlipNoise
@@ -119,6 +121,60 @@ def test_odometry_predict_mean_and_covariance_match_a_numerical_linearisation(de
                    - _mean_step(x[0] - eps * e, d[0], intrinsics)) / (2 * eps)
                   for e in np.eye(6)], axis=1)
     np.testing.assert_allclose(P1[0], J @ P[0] @ J.T, rtol=1e-6, atol=1e-14)
+
+
+def test_the_compiled_prediction_equals_the_numpy_reference(rng):
+    """odometry_predict_into (numba) against odometry_predict, row by row: the states bit for
+    bit, the covariances to rounding; straight, turning in place, a half turn in one period
+    (the closed form of sin(h)/h), at rest and missing counts, unequal wheels."""
+    n = 40
+    intrinsics = OdometryIntrinsics(4.42e-4, 4.38e-4, WHEEL_BASE_M)
+    x = np.column_stack([rng.normal(0.0, 2.0, (n, 3)), rng.normal(0.0, 0.03, (n, 3))])
+    A = rng.standard_normal((n, 6, 6)) * 0.01
+    P = A @ A.transpose(0, 2, 1) + 1e-6 * np.eye(6)
+    P = 0.5 * (P + P.transpose(0, 2, 1))
+    d = rng.normal(0.0, 10.0, (n, 2))
+    d[:6] = [(8.0, 8.0), (-6.0, 6.0), (-600.0, 600.0), (0.0, 0.0), (np.nan, 5.0), (3.0, np.inf)]
+    kw = dict(intrinsics=intrinsics, dt_s=0.015, slip=SlipNoise(),
+              walk_var=np.array([1e-8, 2e-8, 3e-8]), missing_std=(0.5, 4.0))
+    x_ref, P_ref = odometry_predict(x, P, d, **kw)
+    x_out, P_out = np.empty_like(x), np.empty_like(P)
+    odometry_predict_into(x, P, d, x_out, P_out, **kw)
+    np.testing.assert_array_equal(x_out, x_ref)
+    np.testing.assert_allclose(P_out, P_ref, rtol=1e-13, atol=1e-15 * np.abs(P_ref).max())
+    assert np.all(P_out == P_out.transpose(0, 2, 1))
+    # in blocks: 8 robots' counts for 5 rows each (a robot's shadows share its counts)
+    x_ref, _ = odometry_predict(x, P, np.tile(d[:8], (5, 1)), **kw)
+    odometry_predict_into(x, P, d[:8], x_out, P_out, **kw)
+    np.testing.assert_array_equal(x_out, x_ref)
+    with pytest.raises(MeasurementShapeError, match="dividing"):
+        odometry_predict_into(x, P, d[:7], x_out, P_out, **kw)
+
+
+def test_the_compiled_landmark_update_equals_the_numpy_reference(rng):
+    """landmark_update_compiled against landmark_update: the same gate decisions, states,
+    covariances and log-likelihoods to rounding; outliers gated, own covariances on some
+    rows, sensors off the axle."""
+    n = 30
+    x = np.column_stack([rng.uniform(-2, 2, (n, 2)), rng.uniform(-3, 3, n),
+                         rng.normal(0.0, 0.03, (n, 3))])
+    A = rng.standard_normal((n, 6, 6)) * 0.02
+    P = A @ A.transpose(0, 2, 1) + 1e-6 * np.eye(6)
+    P = 0.5 * (P + P.transpose(0, 2, 1))
+    lxy = rng.uniform(-5, 5, (n, 2))
+    mounts = np.column_stack([rng.uniform(-0.3, 0.3, (n, 2)), rng.uniform(-1, 1, n)])
+    z = range_bearing_batch(x, lxy, sensor=mounts)[0] + rng.normal(0.0, 1.0, (n, 2)) * [0.05, 0.02]
+    z[::7] += 3.0                                            # outliers
+    cov = np.full((n, 2, 2), np.nan)
+    cov[::3] = np.array([[0.01, 0.001], [0.001, 0.002]])
+    ref = landmark_update(x, P, lxy, z, LandmarkNoise(), 13.8, cov=cov, sensor=mounts)
+    out = landmark_update_compiled(x, P, lxy, z, LandmarkNoise(), 13.8, cov=cov, sensor=mounts)
+    np.testing.assert_array_equal(out[2], ref[2])
+    assert 0 < ref[2].sum() < n
+    np.testing.assert_allclose(out[0], ref[0], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(out[1], ref[1], rtol=1e-12, atol=1e-14 * np.abs(ref[1]).max())
+    np.testing.assert_allclose(out[3], ref[3], rtol=1e-12)
+    assert np.all(out[1] == out[1].transpose(0, 2, 1))
 
 
 def test_missing_counts_move_nothing_and_grow_the_pose_covariance():
