@@ -42,7 +42,8 @@ from pathlib import Path
 # The command's numpy runs OpenBLAS on one thread unless the user set OPENBLAS_NUM_THREADS
 # (numpy reads it once, when it loads: here, before the first import that loads it). The
 # library's matrices are small; more threads only spin (measured: the demo 126 -> 105 s wall
-# on a loaded 2-core machine). A program importing the library keeps its own setting.
+# on a loaded 2-core machine). The library itself sets nothing: a program that loads numpy
+# before this module keeps its own setting.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from drivers.sim.config import FLOORS, load_robot
