@@ -23,6 +23,7 @@ __all__ = [
     "body_speeds_from_ticks",
     "stream_clock",
     "tick_deltas",
+    "tick_step",
     "unfold_commanded_direction",
     "unwrap_ticks",
 ]
@@ -58,7 +59,27 @@ def tick_deltas(ticks: np.ndarray, *, axis: int = 0, counter_bits: int = 16) -> 
     >>> tick_deltas(np.array([2**24 - 6, 5]), counter_bits=24).tolist()
     [11]
     """
-    diff = np.diff(np.asarray(ticks, dtype=np.int64), axis=axis)
+    return _ring_step(np.diff(np.asarray(ticks, dtype=np.int64), axis=axis), counter_bits)
+
+
+def tick_step(prev: np.ndarray, now: np.ndarray, *, counter_bits: int = 16) -> np.ndarray:
+    """Signed tick increments from the raw counts ``prev`` to ``now``, elementwise.
+
+    :func:`tick_deltas` of the two rows ``[prev, now]``, without stacking them
+    (per-period callers).
+
+    Examples
+    --------
+    >>> tick_step(np.array([65530, 5]), np.array([5, 65530])).tolist()
+    [11, -11]
+    """
+    return _ring_step(np.asarray(now, dtype=np.int64) - np.asarray(prev, dtype=np.int64),
+                      counter_bits)
+
+
+def _ring_step(diff: np.ndarray, counter_bits: int) -> np.ndarray:
+    """``((diff + half) mod 2**bits) - half`` (spec section 7.2): the shortest signed step
+    on the counters' ring; plain differences from 63 bits (counters that never wrap)."""
     if counter_bits >= 63:
         return diff
     modulus = 1 << counter_bits

@@ -32,7 +32,7 @@ from lti_motion.frames import SensorFrame
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
 from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS, tick_deltas
+from lti_motion.odometry import tick_deltas, tick_step
 
 __all__ = [
     "ROUTE_LANDMARKS",
@@ -57,8 +57,6 @@ ROUTE_M.flags.writeable = False
 #: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
 ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
 
-_HALF_RING = TICK_MODULUS // 2
-
 
 class Estimator(Protocol):
     """A pose estimator driven in lock step with ``N`` robots."""
@@ -70,13 +68,6 @@ class Estimator(Protocol):
              observations: Sequence[RangeBearing] | None = None) -> np.ndarray:
         """Take the frame closing the period of ``cmd_m_s`` (N, 2), and the landmark
         observations of that period if any (one per robot); return poses (N, 3)."""
-
-
-def _tick_step(prev: np.ndarray, now: np.ndarray) -> np.ndarray:
-    """:func:`~lti_motion.odometry.tick_deltas` of one step ``prev -> now`` (16-bit counters),
-    without stacking the two: ``((now - prev + 32768) mod 65536) - 32768`` (spec section 7.2)."""
-    diff = np.asarray(now, np.int64) - np.asarray(prev, np.int64)
-    return (diff + _HALF_RING) % TICK_MODULUS - _HALF_RING
 
 
 def _valid(frame: SensorFrame, n_robots: int) -> np.ndarray:
@@ -121,7 +112,7 @@ class Odometry:
         valid = _valid(frame, len(ticks))
         # a lost frame is skipped: the next valid frame's counts span the gap
         use = valid & self._anchored
-        d = self.intrinsics.wheel_travel_m(_tick_step(self._ticks, ticks))
+        d = self.intrinsics.wheel_travel_m(tick_step(self._ticks, ticks))
         d[~use] = 0.0
         self._ticks = np.where(valid[:, None], ticks, self._ticks)
         self._anchored |= valid
@@ -205,7 +196,7 @@ class ArxHybrid:
         self._since[self._since > 0] += 1
         use = valid & (self._since > 0)
         # over a gap of lost frames: the mean speed since the last valid frame
-        step = _tick_step(self._ticks, ticks)
+        step = tick_step(self._ticks, ticks)
         if m.intrinsics is None:
             d, base = step * (m.m_per_tick / m.dt_s), m.wheel_base_m
         else:                                   # each wheel's own scale

@@ -5,7 +5,7 @@ import pytest
 
 from lti_motion.exceptions import ShapeError
 from lti_motion.frames import FrameLog, SensorFrame
-from lti_motion.odometry import body_speeds_from_ticks, tick_deltas, unwrap_ticks
+from lti_motion.odometry import body_speeds_from_ticks, tick_deltas, tick_step, unwrap_ticks
 
 
 def _log(n=5, batch=None):
@@ -56,6 +56,15 @@ def test_framelog_batch_robot_window_and_frames_round_trip():
 def test_tick_deltas_shortest_step_on_the_ring(prev, cur, step):
     """The checks of spec section 7.2, and the libcreate#71 backward wrap."""
     assert tick_deltas(np.array([prev, cur]))[0] == step
+
+
+def test_one_step_of_counts_is_tick_deltas_across_the_16_bit_wrap(rng):
+    prev = rng.integers(0, 1 << 16, size=(50, 2))
+    now = (prev + rng.integers(-40000, 40000, size=(50, 2))) % (1 << 16)
+    now[:4] = [[5, 65530], [0, 65535], [65535, 0], [32768, 0]]
+    prev[:4] = [[65530, 5], [32768, 32767], [0, 32768], [0, 32768]]
+    np.testing.assert_array_equal(tick_step(prev, now),
+                                  tick_deltas(np.stack([prev, now]))[0])
 
 
 def test_unwrap_ticks_both_directions(rng):

@@ -10,11 +10,9 @@ from lti_motion.app.route import (
     ArxHybrid,
     Odometry,
     SensorLess,
-    _tick_step,
     drive_route,
 )
 from lti_motion.calibration import CalibrationPlan, calibrate
-from lti_motion.odometry import tick_deltas
 
 P = get_preset("create2")
 
@@ -29,15 +27,6 @@ def cal():
 def test_route_is_about_10_m_and_closed():
     length = np.linalg.norm(np.diff(ROUTE_M, axis=0), axis=1).sum()
     assert 9.5 < length < 11.0 and np.array_equal(ROUTE_M[0], ROUTE_M[-1])
-
-
-def test_one_step_of_counts_is_tick_deltas_across_the_16_bit_wrap(rng):
-    prev = rng.integers(0, 1 << 16, size=(50, 2))
-    now = (prev + rng.integers(-40000, 40000, size=(50, 2))) % (1 << 16)
-    now[:4] = [[5, 65530], [0, 65535], [65535, 0], [32768, 0]]
-    prev[:4] = [[65530, 5], [32768, 32767], [0, 32768], [0, 32768]]
-    np.testing.assert_array_equal(_tick_step(prev, now),
-                                  tick_deltas(np.stack([prev, now]))[0])
 
 
 def test_odometry_run_stops_where_it_believes_it_started(cal):
