@@ -594,17 +594,18 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._t2s is None:
             return encoder_speeds(self._tick_pair(), self.fm)      # raises: no encoder scale
         (l0, r0), (l1, r1) = self._ref_ticks, self._last_frame
-        dl, dr = l1 - l0, r1 - r0
-        if self._modulus:                   # self._step, inline (it runs at every reading)
-            half, modulus = self._half, self._modulus
-            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
+        dl, dr = self._steps(l1 - l0, r1 - r0)
         (a, b), (c, d) = self._t2s
         return np.array((a * dl + b * dr, c * dl + d * dr))
 
-    def _step(self, d: int) -> int:
-        """A count difference as the shortest signed step on the counters' ring [ticks]
-        (:func:`lti_motion.odometry.tick_deltas`, scalar: it runs at every reading)."""
-        return d if not self._modulus else (d + self._half) % self._modulus - self._half
+    def _steps(self, d_left: int, d_right: int) -> tuple[int, int]:
+        """Both wheels' count differences as the shortest signed steps on the counters'
+        ring [ticks] (:func:`lti_motion.odometry.tick_deltas`, scalar: it runs at every
+        reading)."""
+        if not self._modulus:
+            return d_left, d_right
+        half, modulus = self._half, self._modulus
+        return (d_left + half) % modulus - half, (d_right + half) % modulus - half
 
     def _frame_jump(self, ticks: np.ndarray) -> float:
         """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
@@ -612,10 +613,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         period). Scalar arithmetic: it runs at every reading."""
         left, right = ticks.tolist()
         left, right = int(left), int(right)
-        dl, dr = left - self._last_frame[0], right - self._last_frame[1]
-        if self._modulus:                   # self._step, inline
-            half, modulus = self._half, self._modulus
-            dl, dr = (dl + half) % modulus - half, (dr + half) % modulus - half
+        dl, dr = self._steps(left - self._last_frame[0], right - self._last_frame[1])
         dl, dr = abs(dl), abs(dr)
         jump = 0.0
         if self._have_last_delta:

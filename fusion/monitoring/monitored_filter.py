@@ -233,7 +233,7 @@ class MonitoredFilter:
             return tick_deltas(np.stack([self._last_ticks, now]), axis=0,
                                counter_bits=ekf.counter_bits)[0].astype(float)
         (l0, r0), (l1, r1) = self._last_ticks.tolist(), now.tolist()
-        return np.array((ekf._step(l1 - l0), ekf._step(r1 - r0)), dtype=float)
+        return np.array(ekf._steps(l1 - l0, r1 - r0), dtype=float)
 
     def _predicted_wheels(self) -> np.ndarray:
         """The filter's predicted (left, right) wheel speeds [m/s], (2,):
