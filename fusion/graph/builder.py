@@ -122,9 +122,12 @@ class GraphBuilder:
     def n_poses(self) -> int:
         return len(self.keyframes)
 
-    def calibration_index(self, pose: int) -> int:
-        """Calibration variable in force at ``pose`` (that of its outgoing interval)."""
+    def calibration_index(self, pose: int | np.ndarray) -> int | np.ndarray:
+        """Calibration variable in force at ``pose`` (that of its outgoing interval); for an
+        integer array of poses, an array of them."""
         last_interval = max(self.n_poses - 2, 0)
+        if isinstance(pose, np.ndarray):
+            return np.minimum(pose, last_interval) // self.opts.calibration_every
         return min(pose, last_interval) // self.opts.calibration_every
 
     def _add(self, factor: gtsam.NonlinearFactor) -> _Ref:
@@ -258,8 +261,7 @@ class GraphBuilder:
         poses = gtsam.utilities.extractPose2(values)    # X(0) .. X(n - 1): keys sort by index
         if poses.shape != (n, 3):
             raise RuntimeError(f"the solution holds {len(poses)} poses, the graph {n}")
-        # calibration_index of every pose
-        cal_idx = np.minimum(np.arange(n), max(n - 2, 0)) // self.opts.calibration_every
+        cal_idx = self.calibration_index(np.arange(n))
         cals = cal_cov = pose_cov = None
         if self.opts.calibrate:
             at = gtsam.Values.atPoint2 if self.opts.n_calibration == 2 else gtsam.Values.atPoint3
