@@ -13,7 +13,7 @@ restored afterwards).
   Baseline in the same process: ``cv2.aruco.ArucoDetector.detectMarkers``
   alone with the same parameters, so the ratio is what the pose and
   covariance cost.
-- ``aruco.observation_us``: :func:`fusion.landmarks.aruco.observation_from_corners` on
+- ``aruco.observation_us``: :func:`fusion.landmarks.observation_from_corners` on
   one marker's detected corners (no target).
 - ``aruco.render_ms``: one :meth:`fusion.landmarks.SyntheticCamera.render` of a
   three-marker scene, for simulator budgets (no target).

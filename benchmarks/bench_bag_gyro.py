@@ -5,7 +5,7 @@ carpet (the ground turns about 5% short of the encoders) with a gyro (0.005
 rad/s/sqrt(Hz), bias 0.006 rad/s), 5 s at rest, then 20 s of curves that keep
 turning left (0.34 rad/s on average), 5% of frames lost after 6 s; drive seeds
 ``SEED0 .. SEED0 + N_RUNS - 1``. Each drive is written to a ROS 1 bag with
-``/imu/data`` (:func:`drivers.bag_writer.write_drive_bag`) and read back the way
+``/imu/data`` (:func:`drivers.bags.write_drive_bag`) and read back the way
 ``lti-motion replay --bag`` reads it (:func:`lti_motion.app.bag_commands.load_bag_log`
 on the model's period); the ``ekf`` estimator runs on it with the Imu and with
 no ``--gyro``, and on the in-memory log (the simulator's own readings, no bag).
@@ -31,17 +31,17 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark
-from drivers.bag_writer import write_drive_bag
+from drivers.bags.writer import write_drive_bag
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from lti_motion.app.bag_commands import BagOptions, load_bag_log
 from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_frame_log
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import CalibrationPlan
 from lti_motion.kinematics import wrap_angle
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 N_RUNS, SEED0 = 10, 21
 DENSITY = 0.005                   # rad/s/sqrt(Hz)

@@ -25,17 +25,17 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
-from drivers.bag_writer import write_drive_bag
-from drivers.bags import read_bag
+from drivers.bags.reader import read_bag
+from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
+from drivers.bags.writer import write_drive_bag
 from drivers.sim.config import PRESETS, Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.app.bag_commands import calibrate_from_bag
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.metrics import fit_percent
-from lti_motion.model import MotionModel, fit_arx
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel, fit_arx
+from lti_motion.recordings.frames import FrameLog
 
 DT_S = 0.02
 WHEEL_BASE_M = 0.235

@@ -47,10 +47,10 @@ from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing
-from lti_motion.frames import FrameLog
 from lti_motion.kinematics import body_from_wheel, integrate_poses
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.ticks import tick_deltas
 
 N_RUNS = 10
 REST_S, DRIVE_S, BIAS_M_S = 30.0, 25.0, -0.022

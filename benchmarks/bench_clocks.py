@@ -14,8 +14,8 @@ event noise are separate streams):
   driver never sees them) and the robot's clock 100 ppm slow against the
   host's (host stamps scaled by 1 + 1e-4).
 
-Each drive is calibrated offline (:func:`lti_motion.offline.calibrate_recording`
-from its :class:`~lti_motion.recording.Recording`, the preset's nominal
+Each drive is calibrated offline (:func:`lti_motion.calibration.calibrate_recording`
+from its :class:`~lti_motion.recordings.Recording`, the preset's nominal
 encoder scale, ARX orders 1-4 and delays 2-6 to keep the run to a few
 minutes), and both models are scored by their free-run fit [%] of (v, w) on
 one common clean validation drive (seed 1000, 60 s, other commands).
@@ -45,11 +45,11 @@ import numpy as np
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.calibration import speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.frames import FrameLog
-from lti_motion.offline import calibrate_recording
-from lti_motion.recording import Recording
+from lti_motion.calibration.manoeuvres import speeds_from_log
+from lti_motion.calibration.recorded import calibrate_recording
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.recording import Recording
 
 N_DRIVES = 50
 DRIVE_S = 60.0

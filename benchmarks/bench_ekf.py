@@ -34,8 +34,8 @@ from drivers.sim.simulator import Simulator
 from fusion.ekf import functions as ef
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.model import MotionModel
+from lti_motion.calibration.manoeuvres import CalibrationPlan
+from lti_motion.model.motion_model import MotionModel
 
 N_STEPS = 2000
 REPEAT = 15

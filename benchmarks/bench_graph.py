@@ -40,7 +40,7 @@ from fusion.graph.factors import observe_landmarks
 from fusion.graph.preintegration import Preintegrated, preintegrate, preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration import speeds_from_log
+from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.kinematics import integrate_poses
 
 #: Keyframes of the iSAM2 drive; ``BENCH_GRAPH_KEYFRAMES`` overrides it for a quick look.

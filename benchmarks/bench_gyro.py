@@ -43,9 +43,9 @@ from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import GyroNoise, ScaleErrors
-from lti_motion.frames import FrameLog
 from lti_motion.kinematics import wrap_angle
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 N_RUNS = int(os.environ.get("BENCH_GYRO_RUNS", "10"))
 SEED0 = int(os.environ.get("BENCH_GYRO_SEED0", "300"))

@@ -75,12 +75,12 @@ from fusion.ekf.functions import SCALES
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import LandmarkNoise, ScaleErrors
 from lti_motion.app.route import ROUTE_LANDMARKS, EkfEstimator, Odometry, _observe, drive_route
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
-from lti_motion.excitation import rotation_in_place
+from lti_motion.calibration.encoder_scale import encoder_scale_m_per_tick, rotation_period_ticks
+from lti_motion.calibration.intrinsics_fit import calibrate_intrinsics
+from lti_motion.calibration.manoeuvres import CalibrationPlan
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.intrinsics_calibration import calibrate_intrinsics
-from lti_motion.odometry import tick_deltas, unwrap_ticks
+from lti_motion.model.excitation import rotation_in_place
+from lti_motion.recordings.ticks import tick_deltas, unwrap_ticks
 
 FLOOR = "tile"
 ROUTE_SEEDS = range(30)

@@ -63,7 +63,7 @@ from drivers.sim.motion_capture import intrinsics_drive
 from drivers.sim.simulator import Simulator
 from lti_motion.app.route import ROUTE_LANDMARKS, drive_route
 from lti_motion.app.route_smoother import ROUTE_SMOOTHER_OPTIONS, SmootherEstimator
-from lti_motion.calibration import CalibrationPlan
+from lti_motion.calibration.manoeuvres import CalibrationPlan
 
 ONLINE_BAND = 0.002
 

@@ -44,9 +44,9 @@ from lti_motion.app.monitor_setup import (
     nominal_on_simulator,
     sightings,
 )
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.frames import SensorFrame
-from lti_motion.model import MotionModel
+from lti_motion.calibration.manoeuvres import CalibrationPlan
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import SensorFrame
 
 DURATION_S = 60.0
 NOMINAL_H = 10.0

@@ -18,10 +18,10 @@ import numpy as np
 from benchmarks.harness import Figure, benchmark, median_seconds
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.arx import RecursiveARX, arx_regression, estimate_arx
-from lti_motion.calibration import speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.model import MotionModel
+from lti_motion.calibration.manoeuvres import speeds_from_log
+from lti_motion.model.arx import RecursiveARX, arx_regression, estimate_arx
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
 
 ORDER, DELAY, N = 9, 4, 10_000
 

@@ -22,7 +22,7 @@ Run ``python -m benchmarks monitor``; the detection table is printed too.
 ``python -m benchmarks monitor_threshold`` (about 40 s): the start test's
 threshold from the per-run maxima of its CUSUM on 10.8 h of nominal route
 driving (seeds 5000-5649, a design set used for nothing else), for 0.1 false
-alarms an hour (:data:`fusion.monitoring.dynamics.START_THRESHOLD` holds the value).
+alarms an hour (:data:`fusion.monitoring.START_THRESHOLD` holds the value).
 
 ``python -m benchmarks recalibration`` (the recalibration that follows a
 dynamics alarm, about 40 s): per dynamics fault the same 20 route runs,
@@ -69,10 +69,10 @@ from fusion.monitoring.dynamics_start import (
 from fusion.monitoring.recalibration import Recalibrator
 from fusion.monitoring.residual import MonitorOptions, ResidualMonitor
 from lti_motion.app.route import RecordingOdometry, drive_route
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.excitation import random_held_normal
+from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel
-from lti_motion.model import MotionModel
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
 
 NOMINAL_H = 10.0
 N_FAULT_RUNS = 20

@@ -7,9 +7,9 @@ delay of +3 periods, and both at once (same onset). 20 drives per fault and
 block; onsets uniform in 20-40 s.
 
 - **Rule block** (seeds 300-319, onsets seed 7): the posterior change time's
-  settings (:class:`~fusion.monitoring.change_time.ChangeTimeRule`: the
+  settings (:class:`~fusion.monitoring.ChangeTimeRule`: the
   likelihood's temperature ``kappa`` and the interval's level) are chosen here, on the dynamics
-  monitor's own alarms (:class:`~fusion.monitoring.dynamics.DynamicsMonitor`
+  monitor's own alarms (:class:`~fusion.monitoring.DynamicsMonitor`
   fed the drives' commands and counts): of the candidates whose interval held
   every fault onset (``lo <= onset <= hi``) for the first alarm after it, the
   one with the narrowest median interval.
@@ -39,8 +39,8 @@ from drivers.sim.config import Fault
 from fusion.monitoring.change_time import ChangeTimeRule
 from fusion.monitoring.dynamics import DynamicsAlarm, DynamicsMonitor
 from fusion.monitoring.phase_one import NominalFit
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
 
 N_RUNS = 20
 MIXES: dict[str, tuple[tuple[str, dict], ...]] = {

@@ -1,6 +1,6 @@
-"""Benchmark ``oi``: stream-frame parsing throughput of :class:`drivers.roomba.oi.StreamParser`.
+"""Benchmark ``oi``: stream-frame parsing throughput of :class:`drivers.roomba.StreamParser`.
 
-The input is a seeded stream of valid frames for :data:`drivers.roomba.oi.DEFAULT_STREAM_IDS`
+The input is a seeded stream of valid frames for :data:`drivers.roomba.DEFAULT_STREAM_IDS`
 (random values over each packet's full range, so 19s occur inside the data),
 fed in 1024-byte chunks as a serial read loop would. The in-process baseline
 is a straightforward byte-at-a-time state machine implementing the same
@@ -46,7 +46,7 @@ def make_stream(n_frames: int, *, seed: int = _SEED) -> bytes:
 class NaiveStreamParser:
     """Byte-at-a-time state machine (header -> n -> body), the baseline.
 
-    Same acceptance rule as :class:`drivers.roomba.oi.StreamParser`: on a failed
+    Same acceptance rule as :class:`drivers.roomba.StreamParser`: on a failed
     candidate only the header byte is dropped and the following bytes are
     scanned again.
     """

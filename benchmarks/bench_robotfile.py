@@ -1,6 +1,6 @@
 """Reading robot files: what the shipped presets cost on first use, and one user file.
 
-``drivers.sim.config`` builds :data:`~drivers.sim.config.PRESETS` from the shipped robot
+``drivers.sim.config`` builds :data:`~drivers.sim.PRESETS` from the shipped robot
 files the first time a preset is asked for (not at import: ``lti-motion --help`` reads
 no file), so this is paid once by every program that simulates a preset.
 

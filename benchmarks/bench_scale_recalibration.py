@@ -39,7 +39,7 @@ from fusion.monitoring.residual import AlarmEvent
 from fusion.monitoring.scale import ScaleMonitor
 from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M
 from lti_motion.kinematics import body_from_wheel
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 
 def true_turn_ratio(model: MotionModel, drives: Drives, robot: int, from_s: float) -> float:

@@ -5,7 +5,7 @@ calibration); per run a :class:`~fusion.ekf.ModelEKF` on the encoders and a
 :class:`~fusion.monitoring.ResidualMonitor` with the gate, glitch bursts and the
 stuck check (no dynamics or scale test). Two gates: the chi-square default
 (NIS 55.3) and the Phase-I gate
-(:func:`fusion.monitoring.phase_one.fit_nominal`, 10 times the
+(:func:`fusion.monitoring.fit_nominal`, 10 times the
 largest encoder NIS of 30 nominal runs, seeds 1000-1029: the runs that fit
 the dynamics null).
 
@@ -35,8 +35,8 @@ from drivers.sim.config import Fault
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import fit_nominal
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions
-from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import TICK_MODULUS
 
 NOMINAL_H = 10.0
 BATCH = 50

@@ -1,6 +1,6 @@
 """Issue 17 item 4: the wheels' diameter ratio without any external reference, from two
-straight runs beside a wall (:mod:`lti_motion.wall_run`, driven by
-:func:`lti_motion.wall_run_drive.drive_wall_run`).
+straight runs beside a wall (:mod:`lti_motion.calibration.wall_run`, driven by
+:func:`lti_motion.calibration.drive_wall_run`).
 
 The robot of the intrinsics benchmark (a Create 2 with a 1% larger left wheel and a 10%
 weaker right motor, on tile) starts 0.5 m in front of a straight white wall, facing it
@@ -45,9 +45,9 @@ from benchmarks.bench_intrinsics import (
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.config import RobotParams, Room
 from drivers.sim.simulator import Simulator
+from lti_motion.calibration.wall_run import WallRunCalibration, calibrate_wall_run
+from lti_motion.calibration.wall_run_drive import drive_wall_run, wall_passes
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.wall_run import WallRunCalibration, calibrate_wall_run
-from lti_motion.wall_run_drive import drive_wall_run, wall_passes
 
 SEEDS = range(20)
 CASE_SEEDS = range(10)

@@ -56,7 +56,7 @@ from fusion.monitoring.recalibration import Recalibrator
 from fusion.monitoring.residual import AlarmEvent
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
 from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 N_FAULT_RUNS = 40
 NOMINAL_H = 10.0

@@ -3,7 +3,7 @@
 Each subclasses the matching builtin so callers may catch either.
 
 A stream frame whose checksum fails is not an error: the stream parser drops it,
-resynchronises and counts it (:attr:`drivers.roomba.oi.StreamParser.checksum_failures`,
+resynchronises and counts it (:attr:`drivers.roomba.StreamParser.checksum_failures`,
 ``Roomba.counters``), since a few corrupt frames are normal on a serial link (spec G10).
 The Sensors (142) and Query List (149) replies carry no checksum (spec §4); a reply of
 the wrong length raises :class:`ProtocolError`.

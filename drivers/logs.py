@@ -1,9 +1,9 @@
 """Record frames from any driver to a log file, and replay a log as frames.
 
-:class:`Recorder` collects :class:`~lti_motion.frames.SensorFrame` objects
+:class:`Recorder` collects :class:`~lti_motion.recordings.SensorFrame` objects
 from a :class:`~drivers.roomba.Roomba`, a :class:`~drivers.sim.Simulator` or
 anything else that yields them, and writes them with
-:func:`lti_motion.logfile.save_log`; :func:`replay` reads such a file back
+:func:`lti_motion.recordings.save_log`; :func:`replay` reads such a file back
 as frames, so recorded drives can be fed to the same code as live ones.
 
 Examples
@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from drivers.roomba.oi import STREAM_PERIOD_S
-from lti_motion.frames import FrameLog, SensorFrame
-from lti_motion.logfile import load_log, save_log
+from lti_motion.recordings.frames import FrameLog, SensorFrame
+from lti_motion.recordings.logfile import load_log, save_log
 
 __all__ = ["Recorder", "replay"]
 
@@ -108,7 +108,7 @@ class Recorder:
         return dataclasses.replace(log, valid=valid)
 
     def save(self, path: str | os.PathLike, *, dt_s: float | None = None) -> Path:
-        """Write the recorded frames atomically with :func:`lti_motion.logfile.save_log`.
+        """Write the recorded frames atomically with :func:`lti_motion.recordings.save_log`.
 
         Returns
         -------

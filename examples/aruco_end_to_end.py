@@ -54,9 +54,9 @@ from fusion.landmarks.aruco import MarkerDetector
 from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
 from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration import speeds_from_log
-from lti_motion.frames import FrameLog
-from lti_motion.model import MotionModel
+from lti_motion.calibration.manoeuvres import speeds_from_log
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 __all__ = [
     "CAMERA_RATE_HZ",

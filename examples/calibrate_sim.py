@@ -31,9 +31,9 @@ from matplotlib.figure import Figure
 from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
 from drivers.sim.config import PRESETS, Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.calibration import Calibration, CalibrationPlan, speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.model import MotionModel
+from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan, speeds_from_log
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
 
 
 def run_calibration(preset: str, *, seed: int = 0, excitation_s: float = 180.0) -> Calibration:

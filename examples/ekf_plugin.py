@@ -40,11 +40,11 @@ from fusion.ekf.updates import FilterStats
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import CalibrationPlan
 from lti_motion.kinematics import integrate_poses, wrap_angle
-from lti_motion.model import MotionModel
-from lti_motion.odometry import body_speeds_from_ticks, stream_clock
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.ticks import body_speeds_from_ticks, stream_clock
 
 __all__ = [
     "LANDMARKS",
@@ -68,7 +68,8 @@ START_POSE = (2.5, 1.3, 0.0)
 
 def calibrate_model(*, preset: str = "create2", seed: int = 1, excitation_s: float = 180.0
                     ) -> MotionModel:
-    """Calibrate the ARX model on the simulator (``tests/lti_motion/test_calibration_sim.py``)."""
+    """Calibrate the ARX model on the simulator (as
+    ``tests/lti_motion/calibration/test_calibration_sim.py`` does)."""
     return calibrate_simulator(preset, seed=seed, plan=CalibrationPlan(
         seed=seed + 2, excitation_s=excitation_s)).arx
 

@@ -35,10 +35,10 @@ from fusion.graph.transient_noise import (
 )
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.metrics import ate
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 #: Camera model of the landmark observations: noise, reach and field of view.
 BEARING_SIGMA_RAD = 0.02
@@ -175,7 +175,7 @@ def true_calibration(model: MotionModel, log: FrameLog, keyframes: np.ndarray, *
                      ) -> list[tuple[float, float, np.ndarray]]:
     """The calibration the true poses imply before and after the floor change.
 
-    :func:`~fusion.graph.preintegration.fit_calibration` on the true keyframe poses
+    :func:`~fusion.graph.fit_calibration` on the true keyframe poses
     of each span (the first ``settle_s`` after the change left out).
     """
     u, _ = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
@@ -240,7 +240,7 @@ def calibrated_model_and_noise(*, seed: int = 1
     long-run covariance of its sensor-less speed errors measured on its own three
     calibration logs (rotation, steps, excitation) against the encoders, conditioned on
     the model's wheel tracking error
-    (:func:`fusion.graph.transient_noise.transient_speed_covariance_from_data`: Newey-West, 5 s
+    (:func:`fusion.graph.transient_speed_covariance_from_data`: Newey-West, 5 s
     bandwidth, 0.15 s window): the covariance to preintegrate with, no hand factor."""
     p = get_preset("create2")
     cal = calibrate_simulator(p, seed=seed, plan=CalibrationPlan(seed=3))

@@ -64,11 +64,11 @@ from lti_motion.app.route import (
     RecordingOdometry,
     drive_route,
 )
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.excitation import random_held_normal
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel
-from lti_motion.model import MotionModel
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",
@@ -86,7 +86,7 @@ def calibrated_model(*, seed: int = 1, excitation_s: float = 180.0) -> MotionMod
 def phase_one(model: MotionModel, *, runs: int, seed0: int = 1000) -> NominalFit:
     """The dynamics null and the encoder gate from ``runs`` nominal route drives.
 
-    Commands and counts only (:func:`~fusion.monitoring.phase_one.fit_nominal`);
+    Commands and counts only (:func:`~fusion.monitoring.fit_nominal`);
     the null leaves out each drive's first 3 s, as the benchmark's
     (``benchmarks/bench_monitor.py``, whose false-alarm rate it measured).
     """

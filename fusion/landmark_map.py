@@ -32,7 +32,7 @@ class LandmarkMap:
 
     The one map type of the package: the EKF looks positions up by id
     (:meth:`position`), the factor graph (:mod:`fusion.graph.smoother`,
-    :func:`fusion.graph.factors.observe_landmarks`) uses the vectorised view
+    :func:`fusion.graph.observe_landmarks`) uses the vectorised view
     :attr:`integer_ids` and :attr:`xy_m`, computed once and cached.
 
     Parameters

@@ -342,7 +342,7 @@ class RangeBearing:
     -----
     The covariance is the sensor's, in the order of the measurement vector
     ``z = (r, b)``; gtsam's ``BearingRange`` measurement runs the other way,
-    ``(b, r)``, and :func:`fusion.graph.factors.range_bearing_factors`
+    ``(b, r)``, and :func:`fusion.graph.range_bearing_factors`
     reorders it.
 
     Examples

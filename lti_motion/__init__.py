@@ -34,16 +34,16 @@ __all__ = [
 ]
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    "lti_motion.calibration": ("Calibration", "CalibrationPlan", "calibrate", "drive"),
-    "lti_motion.frames": ("FrameLog", "SensorFrame"),
+    "lti_motion.calibration.manoeuvres": ("Calibration", "CalibrationPlan", "calibrate", "drive"),
+    "lti_motion.recordings.frames": ("FrameLog", "SensorFrame"),
     "lti_motion.kinematics": ("integrate_poses", "pose_step", "wrap_angle"),
     "lti_motion.metrics": ("ate", "fit_percent", "rpe"),
-    "lti_motion.model": ("MotionModel", "fit_arx", "fit_fir_from_steps"),
+    "lti_motion.model.motion_model": ("MotionModel", "fit_arx", "fit_fir_from_steps"),
 }, __all__)
 
 if TYPE_CHECKING:
-    from lti_motion.calibration import Calibration, CalibrationPlan, calibrate, drive
-    from lti_motion.frames import FrameLog, SensorFrame
+    from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan, calibrate, drive
     from lti_motion.kinematics import integrate_poses, pose_step, wrap_angle
     from lti_motion.metrics import ate, fit_percent, rpe
-    from lti_motion.model import MotionModel, fit_arx, fit_fir_from_steps
+    from lti_motion.model.motion_model import MotionModel, fit_arx, fit_fir_from_steps
+    from lti_motion.recordings.frames import FrameLog, SensorFrame

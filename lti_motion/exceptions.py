@@ -79,7 +79,7 @@ class UnidentifiableError(CalibrationError):
 
 class WallRunError(CalibrationError):
     """The wall-run manoeuvre cannot be driven as planned: no wall ahead, or runs that came at
-    the wall on both sides (:mod:`lti_motion.wall_run_drive`)."""
+    the wall on both sides (:mod:`lti_motion.calibration.wall_run_drive`)."""
 
 
 class CurvedIntoWallError(WallRunError):

@@ -8,7 +8,7 @@ never be read back silently wrong. So a document is
 - written to a temporary file in the target's directory, flushed and
   ``fsync``-ed, then moved over the target with ``os.replace`` (atomic on
   POSIX and Windows), and the directory entry synced (:func:`atomic_write`,
-  which :mod:`lti_motion.logfile` uses too), with the permissions a plain
+  which :mod:`lti_motion.recordings.logfile` uses too), with the permissions a plain
   ``open`` would give under the process umask;
 - read back with every failure (truncation, damage, another format or
   version, a hand edit) turned into a :class:`ModelFileError` that says what
@@ -16,7 +16,7 @@ never be read back silently wrong. So a document is
 
 Floats are written with Python's shortest round-trip representation, so
 arrays come back bit for bit. The schema of a document (which keys it holds)
-belongs to its owner, e.g. :mod:`lti_motion.model`.
+belongs to its owner, e.g. :mod:`lti_motion.model.motion_model`.
 """
 
 from __future__ import annotations

@@ -7,8 +7,8 @@ from pathlib import Path
 
 # One OpenBLAS thread unless the caller chose (before numpy is imported): the tests' matrices
 # are small, and on two cores the second thread only spins and takes the core another process
-# needs. Measured: tests/lti_motion/test_calibration_sim.py 23.6 -> 8.2 s CPU and 44 -> 16 s
-# wall on a loaded 2-core machine, outputs bit-identical.
+# needs. Measured: tests/lti_motion/calibration/test_calibration_sim.py 23.6 -> 8.2 s CPU and
+# 44 -> 16 s wall on a loaded 2-core machine, outputs bit-identical.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
@@ -74,7 +74,7 @@ def short_arx_model():
     40 s of excitation (simulator and plan seeded ``seed``), calibrated once per seed and
     session (deterministic; a ``MotionModel`` is frozen)."""
     from drivers.sim.calibration import calibrate_simulator
-    from lti_motion.calibration import CalibrationPlan
+    from lti_motion.calibration.manoeuvres import CalibrationPlan
 
     cache = {}
 

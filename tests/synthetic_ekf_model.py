@@ -4,8 +4,8 @@ noise, driven by held forward wheel commands."""
 
 import numpy as np
 
-from lti_motion.arx import estimate_arx
-from lti_motion.model import MotionModel
+from lti_motion.model.arx import estimate_arx
+from lti_motion.model.motion_model import MotionModel
 
 DT, B = 0.015, 0.235
 M_PER_TICK = 2e-5    # fine counts: quantisation far below the synthetic model's noise

@@ -1,13 +1,13 @@
 """A known linear plant for identification tests: two second-order wheels behind a
 4-sample delay, body speeds v = (vR + vL) / 2, w = (vR - vL) / b, with measurement noise.
 
-Shared by tests/lti_motion/test_arx.py, test_fir.py and test_model.py.
+Shared by tests/lti_motion/model/test_arx.py, test_fir.py and test_model.py.
 """
 import numpy as np
 from scipy.signal import lfilter
 
-from lti_motion.excitation import random_held_normal
 from lti_motion.kinematics import body_from_wheel
+from lti_motion.model.excitation import random_held_normal
 
 DT, BASE, DELAY = 0.015, 0.235, 4
 NOISE = (0.003, 0.02)  # std of v [m/s] and w [rad/s]

@@ -9,7 +9,7 @@ def test_calibrate_sim_writes_plots_and_model(tmp_path, capsys, load_example):
     for name in ("step_responses.png", "order_selection.png", "calibration_sequence.png",
                  "validation.png"):
         assert (tmp_path / name).stat().st_size > 10_000, name
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
 
     model = MotionModel.load(tmp_path / "model_arx.json")
     assert model.kind == "arx" and model.m_per_tick > 0

@@ -66,7 +66,7 @@ HEAVY = (*ADAPTERS, "scipy.signal", "scipy.stats")
         ("import fusion", HEAVY),
         ("import drivers", ("numpy", *HEAVY)),
         ("import drivers.sim.config", (*HEAVY, "tomllib")),     # robot files on first use
-        ("import lti_motion.excitation", HEAVY),
+        ("import lti_motion.model.excitation", HEAVY),
     )])
 def test_an_import_loads_only_what_it_needs(code, absent):
     assert loaded_after(code, absent) == []

@@ -6,10 +6,188 @@
 - :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba`, the simulator behind the
   protocol on a pseudo-terminal;
 - :mod:`drivers.roomba.stream_clock`: sensor-period time from host arrival times.
+
+The names below load with their module on first use (:mod:`lti_motion.lazy`), so
+importing the door costs nothing until a name is read.
 """
 
-from drivers.roomba.driver import LinkCounters, Roomba
-from drivers.roomba.stream_clock import StreamClock
-from drivers.roomba.virtual import VirtualRoomba, serve
+from __future__ import annotations
 
-__all__ = ["LinkCounters", "Roomba", "StreamClock", "VirtualRoomba", "serve"]
+from typing import TYPE_CHECKING
+
+from lti_motion.lazy import lazy_exports
+
+__all__ = [
+    "BAUD_RATES",
+    "COMMAND_DATA_BYTES",
+    "DEFAULT_BANNER",
+    "DEFAULT_BAUD_BPS",
+    "DEFAULT_CHARGER_TEXT",
+    "DEFAULT_STREAM_IDS",
+    "GROUPS",
+    "MAX_WHEEL_SPEED_MM_S",
+    "PACKETS",
+    "STREAM_HEADER",
+    "STREAM_PERIOD_S",
+    "EmulatorStats",
+    "GroupSpec",
+    "LinkCounters",
+    "OIMode",
+    "Opcode",
+    "PacketLayout",
+    "PacketSpec",
+    "ReceivedCommand",
+    "Roomba",
+    "StreamClock",
+    "StreamFrame",
+    "StreamParser",
+    "VirtualRoomba",
+    "baud",
+    "check_stream_bandwidth",
+    "checksum",
+    "data_size",
+    "decode_packet_value",
+    "decode_query_list_reply",
+    "drive_direct",
+    "encode_packet_value",
+    "encode_query_list_reply",
+    "encode_stream_frame",
+    "expand_ids",
+    "full",
+    "is_group",
+    "lookup_packet",
+    "pause_resume_stream",
+    "query_list",
+    "query_reply_size",
+    "reset",
+    "safe",
+    "sensors",
+    "serve",
+    "start",
+    "stop",
+    "stream",
+    "stream_budget_bytes",
+    "stream_frame_size",
+]
+
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "drivers.roomba.driver": (
+            "LinkCounters",
+            "Roomba",
+        ),
+        "drivers.roomba.oi": (
+            "BAUD_RATES",
+            "COMMAND_DATA_BYTES",
+            "DEFAULT_BAUD_BPS",
+            "DEFAULT_STREAM_IDS",
+            "MAX_WHEEL_SPEED_MM_S",
+            "OIMode",
+            "Opcode",
+            "STREAM_PERIOD_S",
+            "StreamFrame",
+            "StreamParser",
+            "baud",
+            "check_stream_bandwidth",
+            "drive_direct",
+            "encode_stream_frame",
+            "full",
+            "pause_resume_stream",
+            "query_list",
+            "reset",
+            "safe",
+            "sensors",
+            "start",
+            "stop",
+            "stream",
+            "stream_budget_bytes",
+            "stream_frame_size",
+        ),
+        "drivers.roomba.oi_packets": (
+            "GROUPS",
+            "GroupSpec",
+            "PACKETS",
+            "PacketLayout",
+            "PacketSpec",
+            "STREAM_HEADER",
+            "checksum",
+            "data_size",
+            "decode_packet_value",
+            "decode_query_list_reply",
+            "encode_packet_value",
+            "encode_query_list_reply",
+            "expand_ids",
+            "is_group",
+            "lookup_packet",
+            "query_reply_size",
+        ),
+        "drivers.roomba.stream_clock": ("StreamClock",),
+        "drivers.roomba.virtual": (
+            "DEFAULT_BANNER",
+            "DEFAULT_CHARGER_TEXT",
+            "EmulatorStats",
+            "ReceivedCommand",
+            "VirtualRoomba",
+            "serve",
+        ),
+    },
+    __all__,
+)
+
+if TYPE_CHECKING:
+    from drivers.roomba.driver import LinkCounters, Roomba
+    from drivers.roomba.oi import (
+        BAUD_RATES,
+        COMMAND_DATA_BYTES,
+        DEFAULT_BAUD_BPS,
+        DEFAULT_STREAM_IDS,
+        MAX_WHEEL_SPEED_MM_S,
+        STREAM_PERIOD_S,
+        OIMode,
+        Opcode,
+        StreamFrame,
+        StreamParser,
+        baud,
+        check_stream_bandwidth,
+        drive_direct,
+        encode_stream_frame,
+        full,
+        pause_resume_stream,
+        query_list,
+        reset,
+        safe,
+        sensors,
+        start,
+        stop,
+        stream,
+        stream_budget_bytes,
+        stream_frame_size,
+    )
+    from drivers.roomba.oi_packets import (
+        GROUPS,
+        PACKETS,
+        STREAM_HEADER,
+        GroupSpec,
+        PacketLayout,
+        PacketSpec,
+        checksum,
+        data_size,
+        decode_packet_value,
+        decode_query_list_reply,
+        encode_packet_value,
+        encode_query_list_reply,
+        expand_ids,
+        is_group,
+        lookup_packet,
+        query_reply_size,
+    )
+    from drivers.roomba.stream_clock import StreamClock
+    from drivers.roomba.virtual import (
+        DEFAULT_BANNER,
+        DEFAULT_CHARGER_TEXT,
+        EmulatorStats,
+        ReceivedCommand,
+        VirtualRoomba,
+        serve,
+    )

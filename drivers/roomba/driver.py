@@ -2,7 +2,7 @@
 
 :class:`Roomba` opens the serial port, wakes the robot, enters Safe or Full
 mode, requests a sensor stream and turns every valid stream frame into a
-:class:`~lti_motion.frames.SensorFrame`. Its :meth:`Roomba.step` has the
+:class:`~lti_motion.recordings.SensorFrame`. Its :meth:`Roomba.step` has the
 signature of :meth:`drivers.sim.Simulator.step`, so calibration manoeuvres run
 unchanged on the simulator or the robot, e.g. through :func:`lti_motion.calibration.drive`.
 
@@ -31,7 +31,7 @@ Examples
 Drive a virtual Roomba on a pseudo-terminal through the real driver:
 
 >>> from drivers.roomba.virtual import VirtualRoomba
->>> from lti_motion.calibration import drive
+>>> from lti_motion.calibration.manoeuvres import drive
 >>> with VirtualRoomba(seed=3, speed=5.0) as vr, Roomba(vr.device_path, clock_rate=5.0,
 ...                                                      stall_periods=100) as robot:
 ...     log = drive(robot, np.full((20, 2), 0.1))
@@ -73,7 +73,7 @@ from drivers.roomba.oi import (
     stream,
 )
 from drivers.roomba.stream_clock import StreamClock
-from lti_motion.frames import N_LIGHT_BUMPS, SensorFrame
+from lti_motion.recordings.frames import N_LIGHT_BUMPS, SensorFrame
 
 __all__ = ["LinkCounters", "Roomba", "StreamClock"]
 
@@ -202,7 +202,7 @@ class Roomba:
         Largest arrival latency [robot s] the stream clock does not take for a
         lost frame (covers FTDI bursts, G17); ``math.inf``: frames are counted,
         lateness is never taken for loss (a lossless link such as a
-        pseudo-terminal to :class:`~drivers.roomba.virtual.VirtualRoomba`).
+        pseudo-terminal to :class:`~drivers.roomba.VirtualRoomba`).
     mode_report_offset : int
         Subtracted from packet 35 before use: 1 for Roombas that report the
         mode off by one (G8). Values still outside 0..3 are counted and ignored.

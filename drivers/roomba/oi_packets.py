@@ -12,7 +12,7 @@ from the printed "Type" column:
 
 * packets 43 and 44 (encoder counts) are decoded as **unsigned** 16-bit
   modular counters 0..65535, because the project unwraps them with
-  :func:`lti_motion.odometry.unwrap_ticks` (spec §7.2);
+  :func:`lti_motion.recordings.unwrap_ticks` (spec §7.2);
 * packets 54-57 (motor currents) are decoded as signed int16, as the spec's
   header and range say, although its prose says "unsigned" (spec §5).
 

@@ -162,7 +162,7 @@ class VirtualRoomba:
     ----------
     robot : str or RobotParams
         Simulator preset or parameters (``"create2"``, ``"paper"``, ...); its own
-        faults (:attr:`~drivers.sim.config.RobotParams.faults`) happen as scheduled.
+        faults (:attr:`~drivers.sim.RobotParams.faults`) happen as scheduled.
     seed : int
         Seed of the simulator and (through a separate generator) of the line faults.
     speed : float
@@ -738,7 +738,7 @@ def serve(
     ----------
     preset : str or RobotParams
         The robot: parameters, a preset name or a robot file
-        (:func:`~drivers.sim.config.load_robot`).
+        (:func:`~drivers.sim.load_robot`).
     seed, speed, floor
         As for :class:`VirtualRoomba` (``floor`` defaults to the robot's).
     print_fn : callable

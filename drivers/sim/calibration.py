@@ -9,8 +9,8 @@ import numpy as np
 
 from drivers.sim.config import FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
-from lti_motion.calibration import Calibration, CalibrationPlan, calibrate
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan, calibrate
+from lti_motion.recordings.frames import FrameLog
 
 __all__ = ["calibrate_simulator", "print_progress", "summarize", "wall_run_simulator"]
 
@@ -34,9 +34,9 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
     Parameters
     ----------
     robot : str or RobotParams
-        Preset name, robot file (:func:`~drivers.sim.config.load_robot`) or parameters.
+        Preset name, robot file (:func:`~drivers.sim.load_robot`) or parameters.
         The calibration is of the healthy robot: its own faults
-        (:attr:`~drivers.sim.config.RobotParams.faults`) are left out.
+        (:attr:`~drivers.sim.RobotParams.faults`) are left out.
     seed : int
         Simulator seed; also the excitation's unless ``plan`` says otherwise.
     floor : str or FloorMap, optional
@@ -67,9 +67,9 @@ def calibrate_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
 
 def wall_run_simulator(robot: str | RobotParams = "create2", *, seed: int = 0,
                        floor: str | FloorMap | None = None) -> Simulator:
-    """A simulated robot set up for the wall run (:mod:`lti_motion.wall_run_drive`) as a
+    """A simulated robot set up for the wall run (:mod:`lti_motion.calibration.wall_run_drive`) as a
     user sets up a real one: healthy (its own faults left out), 0.5 m in front of a straight
-    white wall 10 m long (:meth:`~drivers.sim.config.Room.single_wall`), facing it within
+    white wall 10 m long (:meth:`~drivers.sim.Room.single_wall`), facing it within
     +-3 degrees (drawn from ``seed``, as in ``benchmarks/bench_wall_run.py``).
 
     Parameters

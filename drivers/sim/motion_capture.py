@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from drivers.exceptions import SimulatorError
-from lti_motion.frames import FrameLog
 from lti_motion.kinematics import wheel_from_body
+from lti_motion.recordings.frames import FrameLog
 
 __all__ = ["intrinsics_drive", "motion_capture"]
 

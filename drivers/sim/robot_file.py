@@ -7,8 +7,8 @@ unit and its default; :data:`SCHEMA` is that table in code. The shipped presets 
 such files (``drivers/sim/robots/create2.toml``, ``paper.toml``), read through
 :mod:`importlib.resources` so that an installed package finds them.
 
-This module reads and checks the file; :func:`drivers.sim.config.load_robot` turns
-the result into :class:`~drivers.sim.config.RobotParams` (whose own checks, such as
+This module reads and checks the file; :func:`drivers.sim.load_robot` turns
+the result into :class:`~drivers.sim.RobotParams` (whose own checks, such as
 the delay against its jitter, then run with the file's name in the message). Every
 error is one line that names the file, the section and the field::
 
@@ -42,7 +42,7 @@ class Field(NamedTuple):
     Attributes
     ----------
     key : str
-        Name in the file; also the :class:`~drivers.sim.config.RobotParams` field, except
+        Name in the file; also the :class:`~drivers.sim.RobotParams` field, except
         ``ir_angles_deg`` (radians in ``ir_angles_rad``).
     check : str
         ``"positive"``, ``"nonnegative"``, ``"real"``, ``"fraction"`` (0 < x <= 1),
@@ -109,7 +109,7 @@ SCHEMA: Mapping[str, tuple[Field, ...]] = MappingProxyType({
 })
 
 #: Keys of a ``[[faults]]`` entry besides ``kind``, ``t_s`` and ``duration_s``, by kind
-#: (the parameters :class:`~drivers.sim.config.Fault` reads for that kind).
+#: (the parameters :class:`~drivers.sim.Fault` reads for that kind).
 FAULT_FIELDS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "floor": ("floor",), "payload": ("payload_kg",), "motor": ("weakening", "wheel"),
     "delay": ("extra_periods",), "encoder_spikes": ("rate_hz", "magnitude_ticks", "wheel"),
@@ -153,13 +153,13 @@ class RobotSpec:
     source : str
         Where it came from, as messages name it (``robot file PATH`` or ``preset NAME``).
     params : dict
-        :class:`~drivers.sim.config.RobotParams` keyword arguments (SI, radians).
+        :class:`~drivers.sim.RobotParams` keyword arguments (SI, radians).
     floor_default : str
         Floor everywhere no region covers.
     floor_regions : tuple of (xmin_m, xmax_m, ymin_m, ymax_m, floor)
         Floor-map rectangles; empty for one floor everywhere.
     faults : tuple of dict
-        :class:`~drivers.sim.config.Fault` keyword arguments, in file order.
+        :class:`~drivers.sim.Fault` keyword arguments, in file order.
     """
 
     source: str
@@ -349,7 +349,7 @@ def read_robot_file(name_or_path: str | os.PathLike[str]) -> RobotSpec:
     Returns
     -------
     RobotSpec
-        The checked fields; :func:`drivers.sim.config.load_robot` builds the robot.
+        The checked fields; :func:`drivers.sim.load_robot` builds the robot.
 
     Raises
     ------

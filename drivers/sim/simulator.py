@@ -11,7 +11,7 @@ a quarter of a 1 ms controller step; frames come out once per sensor period.
 A frame carries what a real Create 2 streams (raw encoder counts, 16-bit as the
 Open Interface's unless ``RobotParams.counter_bits`` says otherwise, that
 count wheel rotation in the commanded direction, six light-bump IR signals of
-the walls and boxes of a :class:`~drivers.sim.config.Room`, bump flags, the
+the walls and boxes of a :class:`~drivers.sim.Room`, bump flags, the
 commands in effect, the wheel motors' currents and overcurrent flags) plus the
 simulator's ground truth. Estimators must never
 read the truth; tests and experiments compare against it.
@@ -39,7 +39,7 @@ import numpy as np
 from drivers.exceptions import SimulatorError
 from drivers.sim import kernel as K
 from drivers.sim.config import FLOORS, Fault, FloorMap, RobotParams, Room, get_floor, get_preset
-from lti_motion.frames import FrameLog, SensorFrame
+from lti_motion.recordings.frames import FrameLog, SensorFrame
 
 __all__ = ["Simulator", "ground_m_per_tick"]
 

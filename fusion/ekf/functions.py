@@ -139,8 +139,8 @@ A stock filterpy EKF driven by these functions (``predict_x`` is filterpy's
 documented extension point):
 
 >>> from filterpy.kalman import ExtendedKalmanFilter
->>> from lti_motion.fir import FirFit
->>> from lti_motion.model import MotionModel
+>>> from lti_motion.model.fir import FirFit
+>>> from lti_motion.model.motion_model import MotionModel
 >>> model = MotionModel.from_fir(
 ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
 ...            residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps"),
@@ -183,8 +183,8 @@ from fusion.sensor_pose import SensorPose
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import wrap_angle
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = [
     "GYRO_BIAS",
@@ -481,7 +481,7 @@ def predict_terms(x: np.ndarray, cmd_m_s: np.ndarray, fm: FilterModel, *, accumu
     ``c = v dt sin(h)/h``: ``x' = x + c cos(theta + h)``,
     ``y' = y + c sin(theta + h)``, ``theta' = theta + 2 h``; its Jacobians are
     those of :func:`lti_motion.kinematics.pose_step_jacobians`, in scalar
-    arithmetic, compiled (:func:`fusion.ekf.kernel.predict_terms_kernel`: per-step cost).
+    arithmetic, compiled (:func:`fusion.ekf.predict_terms_kernel`: per-step cost).
     """
     x = kernel_array(_check_state(x, fm))
     cmd_m_s = kernel_array(_check_command(cmd_m_s))
@@ -526,7 +526,7 @@ def predict_step(x: np.ndarray, P: np.ndarray, cmd_m_s: np.ndarray, fm: FilterMo
 
     Notes
     -----
-    :func:`fusion.ekf.kernel.predict_kernel`: the same arithmetic as the two
+    :func:`fusion.ekf.predict_kernel`: the same arithmetic as the two
     functions, skipping the zeros of ``F``; equal to them to rounding.
     """
     x = kernel_array(_check_state(x, fm))
@@ -626,7 +626,7 @@ def encoder_speeds(ticks: np.ndarray, fm: FilterModel) -> np.ndarray:
     Returns
     -------
     ndarray, shape (2,)
-        Rollover-safe: increments by :func:`lti_motion.odometry.tick_deltas`,
+        Rollover-safe: increments by :func:`lti_motion.recordings.tick_deltas`,
         speeds through the intrinsics (each wheel's scale and the wheel base)
         as the 2 x 2 matrix ``fm.ticks_to_speeds``, ``J / dt_s``
         (:meth:`lti_motion.intrinsics.OdometryIntrinsics.jacobian`).

@@ -9,9 +9,9 @@ carries (paper eq. 11 turns the heading by ``dt g_w`` a period)::
     n ~ N(0, density^2 T + 2 sigma_q^2)
 
 with ``theta_c`` the heading at the start of the window, a clone in the state
-(:data:`~fusion.ekf.functions.HEADING_CLONE`; stochastic cloning, Roumeliotis &
+(:data:`~fusion.ekf.HEADING_CLONE`; stochastic cloning, Roumeliotis &
 Burdick 2002), and ``b`` the bias, a random-walk state
-(:data:`~fusion.ekf.functions.GYRO_BIAS`; the bias state of robot_localization
+(:data:`~fusion.ekf.GYRO_BIAS`; the bias state of robot_localization
 and of visual-inertial filters, Mourikis & Roumeliotis 2007, section III-A),
 constant over the window. ``H`` is constant::
 

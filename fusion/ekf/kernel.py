@@ -10,7 +10,7 @@ expressions as explicit loops; their sums run in another order than numpy's
 references are in :mod:`fusion.ekf.functions`; this module only evaluates:
 
 - :func:`predict_terms_kernel`: ``x' = f(x, u)``, the pose rows of ``F`` and
-  ``Q = G2 blkdiag(R, R_slip) G2^T + Q_c`` (:func:`~fusion.ekf.functions.predict_terms`);
+  ``Q = G2 blkdiag(R, R_slip) G2^T + Q_c`` (:func:`~fusion.ekf.predict_terms`);
 - :func:`predict_kernel`: that, then ``P' = F P F^T + Q``, symmetrised
   (Bar-Shalom, Li & Kirubarajan 2001, eq. 5.2.3-5), skipping ``F``'s zeros
   (adding an exact zero changes no rounding);
@@ -26,7 +26,7 @@ only, and halves the work.
 
 Numba compiles each kernel on its first call and caches the machine code
 beside this file (``cache=True``); importing the module compiles nothing.
-The constants come from :class:`~fusion.ekf.functions.FilterModel`
+The constants come from :class:`~fusion.ekf.FilterModel`
 (``kernel_constants``; ``nz`` and the layout follow from their shapes). A
 kernel is compiled once per combination of argument types: the library passes
 C-contiguous, writable float64 arrays (:func:`kernel_array` makes one of
@@ -92,7 +92,7 @@ def predict_terms_kernel(x, cmd, accumulate, scalars, ABo, G_template, Q_const, 
     shape ``(nz + 2, nz + 3)``. ``F`` must hold the constant blocks already
     (``FilterModel.F_template`` or an earlier ``F`` of the same layout).
     Returns ``x'`` (a new array). The expressions are those of
-    :func:`fusion.ekf.functions.predict_terms` (module notes there: paper eq. 11
+    :func:`fusion.ekf.predict_terms` (module notes there: paper eq. 11
     in chord form, ``F``, ``G2``, ``Q``).
     """
     n = x.shape[0]

@@ -15,10 +15,10 @@ One sensor period ``k`` (frame ``k`` closes period ``k``, whose command
     ekf.update_pose(pose, cov)         # optional absolute fix
     ekf.update_gyro(yaw_rate_k)        # optional gyro (gyro=GyroNoise(...)), fusion.ekf.gyro
 
-Every update returns an :class:`~fusion.ekf.updates.UpdateRecord` (innovation,
+Every update returns an :class:`~fusion.ekf.UpdateRecord` (innovation,
 its covariance, NIS, accepted flag, kind, time, reason) and appends it to
 :attr:`ModelEKF.records`; the gate, the records and the landmark updates are
-:class:`fusion.ekf.updates.GatedUpdates`, which :class:`fusion.ekf.VelocityModelEKF`
+:class:`fusion.ekf.GatedUpdates`, which :class:`fusion.ekf.VelocityModelEKF`
 shares.
 A reading is fused only if its NIS is inside the chi-square gate; otherwise it
 is counted and the state is left alone. A reading with NaN is skipped and
@@ -79,7 +79,6 @@ from fusion.ekf.gyro import (
     rest_jacobian,
     rest_measurement,
 )
-from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
 from fusion.ekf.resets import (
     MAX_SCALE_ERROR,
     DivergenceWatch,
@@ -95,9 +94,10 @@ from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRec
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import GyroNoise, LandmarkNoise, ScaleErrors, SlipNoise
+from fusion.scale_errors import IntrinsicsEstimate, intrinsics_estimate
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = ["ModelEKF"]
 
@@ -155,7 +155,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     reanchor_periods : int
         When an encoder reading is still outside the gate after spanning
         this many periods, the span is judged
-        (:func:`~fusion.ekf.functions.span_verdict`): a wheel flat while
+        (:func:`~fusion.ekf.span_verdict`): a wheel flat while
         predicted to turn (stuck) renews the count reference and gives up the
         motion since; both wheels counting steadily means the model misses a
         transient (a start from rest), and the counts are fused anyway
@@ -203,7 +203,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     Examples
     --------
-    >>> from lti_motion.fir import FirFit
+    >>> from lti_motion.model.fir import FirFit
     >>> model = MotionModel.from_fir(
     ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
     ...            residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps"),
@@ -400,16 +400,16 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     # -- predict ---------------------------------------------------------------------------------
     def predict_x(self, cmd_m_s: np.ndarray = 0) -> None:
-        """filterpy's hook: ``x = f(x, u)`` (:func:`~fusion.ekf.functions.state_transition`)."""
+        """filterpy's hook: ``x = f(x, u)`` (:func:`~fusion.ekf.state_transition`)."""
         self.x = state_transition(self.x, cmd_m_s, self.fm)
 
     def predict(self, cmd_m_s: np.ndarray) -> None:
         """Advance one sensor period with wheel commands ``u = (L, R)`` [m/s], shape (2,).
 
         Sets ``x``, ``P``, ``F``, ``Q``, ``x_prior``, ``P_prior`` and adds
-        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.functions.predict_step`: the
-        arithmetic of :func:`~fusion.ekf.functions.predict_terms` and
-        :func:`~fusion.ekf.functions.propagate_covariance`, compiled).
+        ``dt_s`` to :attr:`t_s` (:func:`~fusion.ekf.predict_step`: the
+        arithmetic of :func:`~fusion.ekf.predict_terms` and
+        :func:`~fusion.ekf.propagate_covariance`, compiled).
 
         Raises
         ------
@@ -588,9 +588,9 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         return np.array((self._ref_ticks, self._last_frame), dtype=np.int64)
 
     def _span_speeds(self) -> np.ndarray:
-        """:func:`~fusion.ekf.functions.encoder_speeds` of the counts pair, in scalar
+        """:func:`~fusion.ekf.encoder_speeds` of the counts pair, in scalar
         arithmetic (it runs at every reading): rollover-safe increments as
-        :func:`lti_motion.odometry.tick_deltas`, times ``fm.ticks_to_speeds``."""
+        :func:`lti_motion.recordings.tick_deltas`, times ``fm.ticks_to_speeds``."""
         if self._t2s is None:
             return encoder_speeds(self._tick_pair(), self.fm)      # raises: no encoder scale
         (l0, r0), (l1, r1) = self._ref_ticks, self._last_frame
@@ -600,7 +600,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
 
     def _steps(self, d_left: int, d_right: int) -> tuple[int, int]:
         """Both wheels' count differences as the shortest signed steps on the counters'
-        ring [ticks] (:func:`lti_motion.odometry.tick_deltas`, scalar: it runs at every
+        ring [ticks] (:func:`lti_motion.recordings.tick_deltas`, scalar: it runs at every
         reading)."""
         if not self._modulus:
             return d_left, d_right
@@ -777,7 +777,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         return record
 
     def _start_gyro_window(self) -> None:
-        """Clone the heading and empty the sum (:func:`fusion.ekf.gyro.clone_heading`)."""
+        """Clone the heading and empty the sum (:func:`fusion.ekf.clone_heading`)."""
         self.x, self.P = clone_heading(self.x, self.P)
         self.x_post, self.P_post = self.x, self.P
         # (sum of y dt [rad], predictions at the clone, readings summed)

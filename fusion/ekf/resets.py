@@ -23,10 +23,10 @@ default ``1 - 1e-6``: ``d^2 > 30.7``, 5.5 sigma, 5.5% at the 1% prior, a
 diameter ratio 5.5% off for ``kappa`` alone) is implausible: the scale states
 are reset to their prior (:func:`reset_scales`), counted, logged, and reported
 as a :class:`FilterReset`. Besides, the states are clipped to what a robot
-can be: ``|k_v|, |k_w|`` to :data:`MAX_SCALE_ERROR` (0.5: a ground speed
+can be: ``|k_v|, |k_w|`` to :data:`~fusion.scale_errors.MAX_SCALE_ERROR` (0.5: a ground speed
 between half and one and a half times the encoder speed; ``k = -1`` would be
 wheels turning on the spot without moving the robot) and ``|kappa|`` to
-:data:`MAX_RATIO_ERROR` over the wheel base (0.1: wheels whose diameters
+:data:`~fusion.scale_errors.MAX_RATIO_ERROR` over the wheel base (0.1: wheels whose diameters
 differ by 10%, more than any tyre wear or hair; 0.43 rad/m on a Create 2).
 With the default prior the reset comes first; the clip is the bound for a
 wide prior. Clipping moves the mean only, so the covariance stays as it was,
@@ -66,10 +66,9 @@ import numpy as np
 from fusion.ekf.functions import POSE, SCALES
 from fusion.exceptions import FilterOptionError
 from fusion.noise import ScaleErrors, gate_threshold
+from fusion.scale_errors import MAX_RATIO_ERROR, MAX_SCALE_ERROR
 
 __all__ = [
-    "MAX_RATIO_ERROR",
-    "MAX_SCALE_ERROR",
     "DivergenceWatch",
     "FilterReset",
     "ResetCause",
@@ -79,13 +78,6 @@ __all__ = [
     "scale_statistic",
     "widen_pose",
 ]
-
-#: Largest physically possible relative scale error ``|k_v|``, ``|k_w|`` (module notes).
-MAX_SCALE_ERROR = 0.5
-
-#: Largest physically possible relative difference of the wheels' diameters, which bounds
-#: ``|kappa| <= MAX_RATIO_ERROR / b`` (module notes).
-MAX_RATIO_ERROR = 0.1
 
 ResetCause = Literal["scale_implausible", "diverged"]
 
@@ -134,7 +126,8 @@ class ScaleBound:
     Raises
     ------
     FilterOptionError
-        If the bound reaches :data:`MAX_SCALE_ERROR` or :data:`MAX_RATIO_ERROR`
+        If the bound reaches :data:`~fusion.scale_errors.MAX_SCALE_ERROR` or
+        :data:`~fusion.scale_errors.MAX_RATIO_ERROR`
         at the prior (the test could never fire before the clip).
 
     Examples

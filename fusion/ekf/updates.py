@@ -5,7 +5,7 @@
 from both). Every update goes through :meth:`GatedUpdates._gated`: the
 normalised innovation squared (NIS) ``nu^T S^-1 nu`` against a chi-square
 gate (Bar-Shalom, Li & Kirubarajan 2001, section 5.4.2), then a Joseph-form
-update (eq. 5.2.3-18, :func:`fusion.ekf.functions.joseph_covariance`), and
+update (eq. 5.2.3-18, :func:`fusion.ekf.joseph_covariance`), and
 returns an :class:`UpdateRecord` that it also appends to ``records`` and
 counts in ``stats``. Readings that are never compared (NaN, unknown landmark,
 robot on the landmark) are records too (:meth:`GatedUpdates._skip`).
@@ -355,7 +355,7 @@ class GatedUpdates:
                         innovation: np.ndarray, R: np.ndarray, landmark_id: Hashable | None,
                         force: bool) -> UpdateRecord | None:
         """:meth:`_gated` for a 2-D reading of the last two states, in one compiled call
-        (:func:`fusion.ekf.kernel.selector_update_kernel`); None if ``S`` has no positive
+        (:func:`fusion.ekf.selector_update_kernel`); None if ``S`` has no positive
         determinant (the numpy path then decides)."""
         # innovation: a fresh float array; x, P, R: the filter's own (kernel_array copies
         # anything else a user assigned)

@@ -12,10 +12,10 @@ The arc and its Jacobians are those of :func:`lti_motion.kinematics.pose_step` a
 paper; the same exact arc as Thrun's table 5.3, without its ``1/w``
 singularity); the measurement is :mod:`fusion.range_bearing`. The landmark
 updates, their gate and their records are the model filter's
-(:class:`fusion.ekf.updates.GatedUpdates`): the same ``update_landmark(id,
+(:class:`fusion.ekf.GatedUpdates`): the same ``update_landmark(id,
 (r, b))`` and ``update_landmarks(sightings)`` on a
 :class:`~fusion.landmark_map.LandmarkMap`, the same
-:class:`~fusion.ekf.updates.UpdateRecord` and ``stats``.
+:class:`~fusion.ekf.UpdateRecord` and ``stats``.
 """
 
 from __future__ import annotations

@@ -2,11 +2,11 @@
 
 :class:`GraphBuilder` holds the keys, the initial guesses, and the factors not
 yet handed to an optimiser; :class:`~fusion.graph.IncrementalSmoother` and
-:func:`~fusion.graph.smoother.smooth_batch` both build through it, so the two paths
+:func:`~fusion.graph.smooth_batch` both build through it, so the two paths
 cannot drift apart. Not public API: use :mod:`fusion.graph.smoother`.
 
 The graph: a prior on the first pose; one motion factor per keyframe interval;
-range-bearing factors (:func:`~fusion.graph.factors.range_bearing_factors`, a
+range-bearing factors (:func:`~fusion.graph.range_bearing_factors`, a
 full Gaussian noise model per sighting: its own covariance, or
 ``options.landmark_noise``) to landmark variables, known landmarks held by a
 prior of ``options.landmark_sigma_m``, unknown ones initialised from their

@@ -100,7 +100,7 @@ from fusion.exceptions import (
 from fusion.graph.speed_noise import filtered_speeds
 from fusion.graph.transient_noise import TransientSpeedCovariance
 from lti_motion.kinematics import pose_step_jacobians
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "FILTERED_SLIP_DENSITY",
@@ -118,7 +118,7 @@ __all__ = [
 #: Default :func:`preintegrate` ``slip_density``: 1 mm and 1 mrad per square-root second.
 SLIP_DENSITY = (1e-6, 1e-6, 1e-6)
 #: :func:`preintegrate_model`'s ``slip_density`` in ``mode="filtered"`` and with a
-#: :class:`~fusion.graph.transient_noise.TransientSpeedCovariance`: 0.1 mm and 0.1 mrad per
+#: :class:`~fusion.graph.TransientSpeedCovariance`: 0.1 mm and 0.1 mrad per
 #: square-root second (slip along the track and in heading is in the per-sample
 #: covariance there; this keeps the sideways direction positive definite).
 FILTERED_SLIP_DENSITY = (1e-8, 1e-8, 1e-8)
@@ -245,7 +245,7 @@ def speed_error_covariance(model: MotionModel, *, mode: SpeedMode = "free_run") 
     --------
     A static gain with white output noise (no state): ``Phi = R``.
 
-    >>> from lti_motion.fir import FirFit
+    >>> from lti_motion.model.fir import FirFit
     >>> m = MotionModel.from_fir(FirFit(taps=np.stack([np.eye(2)]), residual_cov=np.eye(2) * 1e-4,
     ...     n_samples=100, source="steps"), dt_s=0.015, wheel_base_m=0.235,
     ...     calibrated_at="2026-01-01T00:00:00+00:00")
@@ -458,7 +458,7 @@ def preintegrate_model(model: MotionModel, cmd_m_s: np.ndarray, *, keyframes: np
         Sensor-less (:meth:`MotionModel.simulate`), one step ahead with the
         encoders (:meth:`MotionModel.predict_one_step`), or the model's
         Kalman-filtered speeds given the encoders
-        (:func:`fusion.graph.speed_noise.filtered_speeds`, with their per-sample
+        (:func:`fusion.graph.filtered_speeds`, with their per-sample
         error covariance, slip included). The last two need ``measured_speeds``.
     measured_speeds : array_like, shape (n, 2), optional
         Encoder body speeds, for ``mode="one_step"`` and ``"filtered"``.
@@ -470,8 +470,8 @@ def preintegrate_model(model: MotionModel, cmd_m_s: np.ndarray, *, keyframes: np
         The speed covariance to use instead of the model's own
         (:func:`speed_error_covariance`): shape (2, 2) or (n, 2, 2), e.g.
         measured on the calibration log
-        (:func:`fusion.graph.speed_noise.speed_covariance_from_data`); or a
-        :class:`fusion.graph.transient_noise.TransientSpeedCovariance`, evaluated
+        (:func:`fusion.graph.speed_covariance_from_data`); or a
+        :class:`fusion.graph.TransientSpeedCovariance`, evaluated
         per sample at the commands and the predicted speeds (larger during
         the model's transients).
     calibration : (float, float) or (float, float, float)

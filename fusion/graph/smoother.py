@@ -5,13 +5,13 @@ preintegrated motion up to each new keyframe, add the landmark observations
 made there, :meth:`~IncrementalSmoother.update`, and read the estimate and
 marginal covariances. :func:`smooth_batch` builds the same graph for a whole
 log and solves it with Levenberg-Marquardt. Both build their factors through
-one graph builder (:class:`fusion.graph.builder.GraphBuilder`, which describes
+one graph builder (:class:`fusion.graph.GraphBuilder`, which describes
 the graph), so the two paths cannot drift apart. Their settings and results
 are :class:`SmootherOptions` and :class:`SmootherResult`
 (:mod:`fusion.graph.smoother_options`, re-exported here).
 
 :func:`smooth_log` and :func:`smoother_ates` run the whole chain on a recorded
-:class:`~lti_motion.frames.FrameLog` (commands and encoder ticks in,
+:class:`~lti_motion.recordings.FrameLog` (commands and encoder ticks in,
 keyframe poses out), for experiments and comparisons with other estimators.
 
 References
@@ -31,7 +31,6 @@ from typing import Literal
 import gtsam
 import numpy as np
 
-from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate
 from fusion.exceptions import UnknownPoseError
 from fusion.graph.builder import GraphBuilder
 from fusion.graph.factors import calibration_key, pose_key
@@ -44,12 +43,13 @@ from fusion.graph.smoother_options import (
 from fusion.graph.transient_noise import TransientSpeedCovariance
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration import speeds_from_log
+from fusion.scale_errors import IntrinsicsEstimate
+from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.frames import FrameLog
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.metrics import ate
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
 
 __all__ = [
     "IncrementalSmoother",
@@ -376,9 +376,9 @@ def smooth_log(model: MotionModel, log: FrameLog, *, initial_pose: np.ndarray,
         Factor on the speed-error covariance.
     speed_covariance : array_like, shape (2, 2), or TransientSpeedCovariance, optional
         Speed-error covariance instead of the model's own, e.g. measured on
-        the calibration logs (:func:`fusion.graph.speed_noise.speed_covariance_from_data`,
+        the calibration logs (:func:`fusion.graph.speed_covariance_from_data`,
         or conditioned on the model's transients:
-        :func:`fusion.graph.transient_noise.transient_speed_covariance_from_data`).
+        :func:`fusion.graph.transient_speed_covariance_from_data`).
     options : SmootherOptions, optional
         Graph settings.
     method : {"isam2", "batch"}

@@ -2,7 +2,7 @@
 
 :func:`calibration_intrinsics_estimate` turns a smoother's calibration ``(s, g, kappa)``
 into the odometry intrinsics it implies, as the model EKF's scale errors ``(k_v, k_w,
-kappa)`` are (:mod:`fusion.ekf.intrinsics_estimate`): ``k_v = s - 1``, ``k_w = g - 1``
+kappa)`` are (:mod:`fusion.scale_errors`): ``k_v = s - 1``, ``k_w = g - 1``
 (the speeds are ``(s v, g w + kappa v)``, the EKF's ``D_c s``), a shift, so the
 covariance of ``(k_v, k_w, kappa)`` is the calibration's own.
 """
@@ -15,10 +15,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate, intrinsics_estimate
-from fusion.ekf.resets import MAX_RATIO_ERROR
 from fusion.graph.factors import CONSTANT_SIGMA_M
 from fusion.noise import LandmarkNoise, ScaleErrors
+from fusion.scale_errors import MAX_RATIO_ERROR, IntrinsicsEstimate, intrinsics_estimate
 from lti_motion.intrinsics import OdometryIntrinsics
 
 __all__ = ["SmootherOptions", "SmootherResult", "calibration_intrinsics_estimate"]
@@ -59,7 +58,7 @@ class SmootherOptions:
         constant scale faster (the trade-off is measured in ``docs/factor_graph.md``).
     curvature_bound_rad_per_m : float
         ``|kappa|`` beyond which the estimate is not a robot (the EKF's clip,
-        :data:`fusion.ekf.resets.MAX_RATIO_ERROR` over the wheel base, set by
+        :data:`fusion.scale_errors.MAX_RATIO_ERROR` over the wheel base, set by
         :meth:`with_curvature`). The graph cannot clip a variable, so it bounds
         what the smoother *uses* of its estimate: the calibration it
         linearises new intervals at (:class:`~fusion.graph.IncrementalSmoother`)
@@ -98,7 +97,7 @@ class SmootherOptions:
     landmark_sigma_m : float
         Standard deviation [m] of the prior that holds each known landmark
         (:class:`fusion.landmark_map.LandmarkMap`) at its mapped position: the
-        map's accuracy. The default :data:`~fusion.graph.factors.CONSTANT_SIGMA_M`
+        map's accuracy. The default :data:`~fusion.graph.CONSTANT_SIGMA_M`
         (1e-6 m) stands for "exactly known".
     reinitialize_every : int
         Every this many updates, the newest pose and calibration are read
@@ -295,7 +294,7 @@ def calibration_intrinsics_estimate(intrinsics: OdometryIntrinsics, calibration:
     Returns
     -------
     IntrinsicsEstimate
-        :func:`fusion.ekf.intrinsics_estimate.intrinsics_estimate` of the scale errors
+        :func:`fusion.scale_errors.intrinsics_estimate` of the scale errors
         ``(s - 1, g - 1, kappa)`` (module notes): ``intrinsics.corrected(s - 1, g - 1,
         kappa)``, eq. 1 there.
 

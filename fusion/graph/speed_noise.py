@@ -3,7 +3,7 @@
 Preintegration (:mod:`fusion.graph.preintegration`) needs the per-sample covariance
 ``Phi`` of the speed errors such that ``N Phi`` is the covariance of their sum
 over ``N`` samples. The model's own ``Phi``
-(:func:`~fusion.graph.preintegration.speed_error_covariance`) follows from its
+(:func:`~fusion.graph.speed_error_covariance`) follows from its
 noise model; on the simulator's driving it is optimistic (the linear model
 misses traction limits and current saturation, and its ``R`` and ``Q`` come
 from one-step residuals). This module measures ``Phi`` instead, and gives the
@@ -75,7 +75,7 @@ import numpy as np
 
 from fusion.noise import SlipNoise
 from lti_motion.exceptions import NonFiniteError, ShapeError
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "DEFAULT_BANDWIDTH_S",

@@ -1,6 +1,6 @@
 """Speed-error covariance conditioned on the model's transients, measured on data.
 
-The long-run covariance ``Phi`` of :func:`fusion.graph.speed_noise.speed_covariance_from_data`
+The long-run covariance ``Phi`` of :func:`fusion.graph.speed_covariance_from_data`
 is one matrix for all driving: an average. The errors of a linear motion model are not
 homoscedastic. After a large command step the real wheels are held back by the motors'
 current limit and the floor's traction (``docs/calibration.md``), and the model, whose
@@ -20,7 +20,7 @@ commands alone: the mean squared **wheel tracking error** of the predicted speed
 with ``u`` the wheel commands, ``y_hat = (v, w)`` the model's predicted body speeds,
 ``M`` the body-to-wheel map of the differential drive (``v -+ w b / 2``, the inverse of
 ``v = (L + R) / 2``, ``w = (R - L) / b`` in
-:func:`lti_motion.odometry.body_speeds_from_ticks`) and ``W`` samples of
+:func:`lti_motion.recordings.body_speeds_from_ticks`) and ``W`` samples of
 ``window_s``. ``d`` is large while the model's wheels are still catching up with a command
 step; the window covers the slower real transient. The per-sample long-run covariance of
 the model's speed errors against the encoders is
@@ -30,7 +30,7 @@ the model's speed errors against the encoders is
     \\Phi(f_k) = \\Phi_0 + f_k \\Phi_1, \\qquad \\Phi_0 \\succ 0, \\ \\Phi_1 \\succeq 0,
 
 fitted by least squares of the per-sample Newey-West terms ``h_k``
-(:func:`fusion.graph.speed_noise.long_run_contributions`, whose mean is the unconditional
+(:func:`fusion.graph.long_run_contributions`, whose mean is the unconditional
 estimate) on ``(1, f_k)``: a variance function estimated by regressing second moments on
 a covariate (Carroll & Ruppert 1988, ch. 3), with Newey-West second moments. Least
 squares with an intercept passes through the means, so averaged over the data it was
@@ -39,10 +39,10 @@ the steady samples to the transient ones.
 
 The encoders cannot see the ground, so the calibration logs hold no trace of wheel slip.
 :meth:`TransientSpeedCovariance.per_sample` adds it from a prior, the EKF's state-dependent
-:class:`~fusion.ekf.functions.SlipNoise` (:func:`fusion.graph.speed_noise.slip_covariance`), as
+:class:`~fusion.ekf.functions.SlipNoise` (:func:`fusion.graph.slip_covariance`), as
 ``mode="filtered"`` does; the white pose noise of
 :func:`~fusion.graph.preintegrate` then only needs to keep the sideways direction
-positive definite (:data:`~fusion.graph.preintegration.FILTERED_SLIP_DENSITY`).
+positive definite (:data:`~fusion.graph.FILTERED_SLIP_DENSITY`).
 
 References
 ----------
@@ -68,7 +68,7 @@ from fusion.graph.speed_noise import (
     slip_covariance,
 )
 from fusion.noise import SlipNoise
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "DEFAULT_SLIP",
@@ -162,7 +162,7 @@ class TransientSpeedCovariance:
         unconditional long-run covariance of that data.
     slip : SlipNoise or None
         Ground-versus-encoder speed noise added per sample
-        (:func:`fusion.graph.speed_noise.slip_covariance`; default the EKF's
+        (:func:`fusion.graph.slip_covariance`; default the EKF's
         :class:`~fusion.ekf.functions.SlipNoise`); ``None`` adds none.
 
     Raises
@@ -261,7 +261,7 @@ def transient_speed_covariance_from_data(model: MotionModel, runs: Runs, *,
         Commands and *encoder* body speeds of the model's calibration logs
         (:func:`lti_motion.calibration.speeds_from_log`), each starting at rest.
     mode : {"free_run", "one_step"}
-        Which predictor's errors and speeds (:func:`~fusion.graph.speed_noise.model_speed_errors`).
+        Which predictor's errors and speeds (:func:`~fusion.graph.model_speed_errors`).
     bandwidth_s : float
         Newey-West bandwidth [s].
     window_s : float

@@ -20,7 +20,7 @@ Detections come out as the package's one observation type,
 :class:`fusion.range_bearing.RangeBearing`: one row per marker, its id, range,
 bearing and covariance (eq. 2-3 below), ``index`` the frame the image belongs
 to, and the camera's planar mount ``(x_m, y_m, yaw_rad)`` as its
-``sensor_pose`` (:meth:`fusion.landmarks.camera.CameraMount.sensor_pose`),
+``sensor_pose`` (:meth:`fusion.landmarks.CameraMount.sensor_pose`),
 through which the EKFs, the factor graph and the scale test predict it
 (:mod:`fusion.range_bearing`, eq. 1); they take it as it is.
 

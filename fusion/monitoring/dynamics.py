@@ -54,7 +54,7 @@ two. Each start's three windows give a score ``Z`` (eq. 7 there, near N(0, 1)
 under the null); a CUSUM over starts of ``mu1 Z - mu1^2 / 2`` with
 ``mu1 = 3`` (one start's worth of evidence), threshold set from nominal
 driving (peaks over threshold,
-:func:`~fusion.monitoring.dynamics_start.start_threshold_from_maxima`):
+:func:`~fusion.monitoring.start_threshold_from_maxima`):
 :data:`START_THRESHOLD` = 7.16 for ``F_start = 0.1`` an hour, fitted on 10.8 h
 of route driving (seeds 5000-5649, ``python -m benchmarks monitor_threshold``).
 It is a property of the null and the route: refit it for other driving.
@@ -106,7 +106,7 @@ from fusion.monitoring.dynamics_start import (
     drive_start_anchors,
     start_evidence,
 )
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "START_THRESHOLD",
@@ -203,7 +203,7 @@ class DynamicsMonitor:
     clip : float
         ``q_clip``.
     glitch_ticks : float
-        See :class:`fusion.monitoring.dynamics_null.WindowIntegrator`.
+        See :class:`fusion.monitoring.WindowIntegrator`.
     change_time : ChangeTimeRule, optional
         How an alarm's onset is dated (:mod:`fusion.monitoring.change_time`).
 

@@ -69,7 +69,7 @@ from fusion.monitoring.dynamics_start import (
 )
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import body_from_wheel_matrix, wheel_from_body_matrix
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "DynamicsNull",
@@ -404,7 +404,7 @@ def fit_dynamics_null(model: MotionModel, runs: Sequence[tuple[np.ndarray, np.nd
     The mean by weighted least squares and the covariance parameters by
     minimising the Gaussian negative log-likelihood (Powell), alternated;
     then the start score's nominal mean and spread on the drive starts of the
-    same windows (:func:`fusion.monitoring.dynamics_start.fit_start_null`, eq. 7).
+    same windows (:func:`fusion.monitoring.fit_start_null`, eq. 7).
 
     Parameters
     ----------

@@ -26,7 +26,7 @@ eqs. 1-2), the projections on the start's direction::
 
 are each N(0, 1) if the null holds (a fixed direction's projection of
 ``N(0, Sigma)``, whitened); ``z_0 > 0`` is a late start (the lag evidence of
-:class:`~fusion.monitoring.dynamics_null.WindowStatistics` normalised), ``z_m > 0`` a robot
+:class:`~fusion.monitoring.WindowStatistics` normalised), ``z_m > 0`` a robot
 ahead of the prediction along the start's direction (catching up). The
 score::
 

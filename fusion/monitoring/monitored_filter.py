@@ -16,7 +16,7 @@ out at its start):
    correct them;
 5. the encoder counts are fused (gated) and the update record goes to the
    per-sample gate and glitch-burst tests;
-6. with a Phase-I fit (:func:`~fusion.monitoring.phase_one.fit_nominal`), the
+6. with a Phase-I fit (:func:`~fusion.monitoring.fit_nominal`), the
    dynamics tests get the command and the count changes;
 7. with a gyro (``gyro=``), the frame's yaw-rate reading goes to
    :meth:`ModelEKF.update_gyro <fusion.ekf.ModelEKF.update_gyro>` after the
@@ -53,8 +53,8 @@ from fusion.monitoring.scale import ScaleMonitor
 from fusion.noise import GyroNoise, LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = ["FrameResult", "MonitoredFilter"]
 
@@ -105,7 +105,7 @@ class MonitoredFilter:
     model : MotionModel
         The calibrated model; needs ``m_per_tick``.
     nominal : NominalFit, optional
-        Phase I (:func:`~fusion.monitoring.phase_one.fit_nominal`): runs the
+        Phase I (:func:`~fusion.monitoring.fit_nominal`): runs the
         dynamics tests with its null and the encoder gate it set. Without it
         the windowed NIS and CUSUM on the encoder innovations run instead
         (they cry wolf on real drives, ``docs/guide_alarms.md``).
@@ -156,7 +156,7 @@ class MonitoredFilter:
 
     Examples
     --------
-    >>> from lti_motion.fir import FirFit
+    >>> from lti_motion.model.fir import FirFit
     >>> model = MotionModel.from_fir(
     ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
     ...            residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps"),
@@ -226,7 +226,7 @@ class MonitoredFilter:
 
     def _deltas(self, now: np.ndarray) -> np.ndarray:
         """Count changes since the last valid frame [ticks], (2,) floats:
-        :func:`lti_motion.odometry.tick_deltas`, in scalar arithmetic below 63-bit counters
+        :func:`lti_motion.recordings.tick_deltas`, in scalar arithmetic below 63-bit counters
         (the filter's ring step; int64 and Python integers agree there). Runs every frame."""
         ekf = self.ekf
         if ekf.counter_bits >= 63:

@@ -5,7 +5,7 @@ on the kind of route it will drive, as a control chart's Phase I (Montgomery
 2009, section 5.3.5):
 
 - the dynamics null of :class:`~fusion.monitoring.DynamicsMonitor`
-  (:func:`~fusion.monitoring.dynamics_null.fit_dynamics_null`, commands and
+  (:func:`~fusion.monitoring.fit_dynamics_null`, commands and
   counts only): the linear model's misfit depends on the manoeuvre, so the null
   is fitted on the drives the robot will do;
 - the encoder stream's per-sample gate (``MonitorOptions.encoder_gate_nis``):
@@ -36,8 +36,8 @@ from fusion.ekf.model_ekf import ModelEKF
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.monitoring.dynamics_null import DynamicsNull, fit_dynamics_null
 from fusion.monitoring.residual import MonitorOptions, design_thresholds
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = ["NominalFit", "encoder_nis", "fit_nominal"]
 

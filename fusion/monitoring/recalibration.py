@@ -22,7 +22,7 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   least ``min_gain_pp`` percentage points. An adopted model is saved
   atomically (:meth:`MotionModel.save`) when a path is given.
 - ``"scale_changed"``: re-estimate the scale from landmarks, else ask for a
-  rotation. The scale test's alarm (:class:`~fusion.monitoring.scale.ScaleAlarm`
+  rotation. The scale test's alarm (:class:`~fusion.monitoring.ScaleAlarm`
   in :attr:`AlarmEvent.scale`) carries the ground travel and turn per encoder
   travel and turn since the onset, ``scale_ratio`` and ``yaw_ratio``, with
   standard deviations. Rule: a ratio is *precise enough* when its standard
@@ -34,7 +34,7 @@ each :class:`~fusion.monitoring.AlarmEvent`:
   yaw_ratio`` (else ``b' = b_ref``: turns are taken to scale as travel),
   ``(m_ref, b_ref)`` being the scale the monitor's ratios refer to
   (``scale_reference``); its outputs are rescaled so that it predicts the
-  same counts (:func:`fusion.monitoring.rescale.rescaled_model`). Otherwise it
+  same counts (:func:`fusion.monitoring.rescaled_model`). Otherwise it
   waits: the application feeds the monitor's running estimate
   (:meth:`Recalibrator.update_scale` with :attr:`ScaleMonitor.scale_ratio`
   and its standard deviation, which keep improving after the alarm) and the
@@ -71,7 +71,7 @@ manoeuvre on request (``benchmarks/bench_monitor.py``, ``recalibration``;
 ``docs/monitor.md``); the landmark scale re-estimate on carpet runs of the
 route (``benchmarks/bench_scale_recalibration.py``). Not done: a
 recursive-least-squares model in use while waiting
-(:class:`lti_motion.arx.RecursiveARX` exists).
+(:class:`lti_motion.model.RecursiveARX` exists).
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ from fusion.monitoring.rescale import output_scaling, rescaled_model
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.exceptions import CalibrationError
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.model import MotionModel, fit_arx
+from lti_motion.model.motion_model import MotionModel, fit_arx
 
 __all__ = ["RecalibrationAction", "RecalibrationRecord", "Recalibrator"]
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from fusion.exceptions import FilterOptionError
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = ["output_scaling", "rescaled_model"]
 
@@ -74,7 +74,7 @@ def output_scaling(model: MotionModel, *, m_per_tick: float, wheel_base_m: float
     ``b 0.965 / 0.95``):
 
     >>> import numpy as np
-    >>> from lti_motion.model import MotionModel
+    >>> from lti_motion.model.motion_model import MotionModel
     >>> m = MotionModel(kind="arx", A=0.5 * np.eye(2), B=np.eye(2), C=np.eye(2),
     ...                 D=np.zeros((2, 2)), K=0.5 * np.eye(2), Q=np.eye(2), R=np.eye(2),
     ...                 dt_s=0.015, wheel_base_m=0.235, m_per_tick=5e-4,
@@ -120,7 +120,7 @@ def rescaled_model(model: MotionModel, *, m_per_tick: float, wheel_base_m: float
     Examples
     --------
     >>> import numpy as np
-    >>> from lti_motion.model import MotionModel
+    >>> from lti_motion.model.motion_model import MotionModel
     >>> m = MotionModel(kind="arx", A=0.5 * np.eye(2), B=np.eye(2), C=np.eye(2),
     ...                 D=np.zeros((2, 2)), K=0.5 * np.eye(2), Q=np.eye(2), R=np.eye(2),
     ...                 dt_s=0.015, wheel_base_m=0.235, m_per_tick=5e-4,

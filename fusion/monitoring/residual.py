@@ -105,7 +105,7 @@ from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor
 from fusion.monitoring.wheel_check import WheelCheck, WheelCheckOptions, WheelVerdict
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 __all__ = [
     "AlarmEvent",

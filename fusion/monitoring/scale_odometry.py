@@ -356,7 +356,7 @@ def landmark_update_compiled(x: np.ndarray, P: np.ndarray, landmark_xy: np.ndarr
     The measurement model, the innovations and ``R`` are :func:`landmark_update`'s
     own; ``S``, its closed-form 2 x 2 inverse and ``ln det S``, the gain and the
     Joseph form (Bar-Shalom et al. 2001, eq. 5.2.3-18, by associativity as
-    :func:`fusion.ekf.kernel.selector_update_kernel`) run compiled. Parameters
+    :func:`fusion.ekf.selector_update_kernel`) run compiled. Parameters
     and returns as :func:`landmark_update`, to which it is equal to rounding.
     """
     nu, H, R = _innovations(x, landmark_xy, range_bearing, noise, cov, sensor)

@@ -1,8 +1,8 @@
 """``lti-motion calibrate / replay / monitor --bag``: the commands on a recorded ROS bag.
 
 A bag is read with :func:`drivers.bags.read_bag` (topics found by message type,
-or named) and turned into a :class:`~lti_motion.frames.FrameLog` by
-:func:`drivers.bag_log.bag_to_log`, the one conversion; from there each command
+or named) and turned into a :class:`~lti_motion.recordings.FrameLog` by
+:func:`drivers.bags.bag_to_log`, the one conversion; from there each command
 runs as it does on a log (``docs/guide_ros_bags.md``):
 
 - :func:`calibrate_from_bag`: the ARX model from the whole drive (commands
@@ -12,7 +12,7 @@ runs as it does on a log (``docs/guide_ros_bags.md``):
   ``JointState`` wheel angles but with ``nav_msgs/Odometry`` (a robot that
   publishes only its odometry, as ``diff_drive_controller`` does) is calibrated
   on the odometry's twist as body speeds instead (:func:`odometry_recording`,
-  then :func:`lti_motion.offline.calibrate_recording`, as ``calibrate --log``);
+  then :func:`lti_motion.calibration.calibrate_recording`, as ``calibrate --log``);
 - :func:`replay_bag`: the estimators against the bag's reference poses
   (``PoseStamped``) if it has any; TUM files, plots, and with ``out_bag`` the EKF's
   estimates as ``nav_msgs/Odometry`` with covariance in a new bag;
@@ -21,7 +21,7 @@ runs as it does on a log (``docs/guide_ros_bags.md``):
   alarms (``diagnostic_msgs/DiagnosticArray``) in a new bag.
 
 In replay and monitor, a bag's ``sensor_msgs/Imu`` yaw rate (found by type, or
-``--imu-topic``) is put on the frames (:func:`drivers.bag_log.bag_to_log`) and
+``--imu-topic``) is put on the frames (:func:`drivers.bags.bag_to_log`) and
 fused by the EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNoise`
 defaults) with ``BagOptions(gyro=True)`` (``--gyro``); by default the Imu is not read
 (opt-in: on a hard floor with the default scale priors the gyro can cost accuracy,
@@ -38,9 +38,9 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.bag_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
-from drivers.bag_writer import BagAlarm, write_estimates_bag
-from drivers.bags import TOPIC_TYPES, StampedSeries, bag_topics, read_bag
+from drivers.bags.reader import TOPIC_TYPES, StampedSeries, bag_topics, read_bag
+from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
+from drivers.bags.writer import BagAlarm, write_estimates_bag
 from drivers.exceptions import BagError
 from fusion.monitoring.monitored_filter import FrameResult
 from fusion.monitoring.residual import AlarmEvent
@@ -48,13 +48,13 @@ from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
 from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
 from lti_motion.app.replay_sources import source_from_frame_log, source_from_grid
-from lti_motion.calibration import speeds_from_log
-from lti_motion.clocks import median_period_s
+from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.frames import FrameLog, SensorFrame
-from lti_motion.model import MotionModel, fit_arx
-from lti_motion.recording import Recording
-from lti_motion.resample import on_grid
+from lti_motion.model.motion_model import MotionModel, fit_arx
+from lti_motion.recordings.clocks import median_period_s
+from lti_motion.recordings.frames import FrameLog, SensorFrame
+from lti_motion.recordings.recording import Recording
+from lti_motion.recordings.resample import on_grid
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_log", "monitor_bag",
            "odometry_recording", "plot_bag_fit", "replay_bag"]
@@ -88,7 +88,7 @@ class BagOptions:
         the wheel turns (most ROS robots).
     max_wheel_m_s : float
         Wheel speeds above this are refused as impossible [m/s]
-        (:func:`drivers.bag_log.bag_to_log`).
+        (:func:`drivers.bags.bag_to_log`).
     gyro : bool
         Replay and monitor: read the bag's Imu yaw rate and fuse it (``--gyro``;
         default ``False``: the Imu is not read).
@@ -182,7 +182,7 @@ def odometry_recording(path: str | os.PathLike, *, options: BagOptions | None = 
     The twist ``(linear.x [m/s], angular.z [rad/s])`` of each message is the robot's own
     estimate of its body speeds over the time since its last message
     (``diff_drive_controller``'s ``/odom``); the commands are the bag's Twist topic. Both
-    keep their stamps; :func:`lti_motion.resample.on_grid` puts them on the sensor
+    keep their stamps; :func:`lti_motion.recordings.on_grid` puts them on the sensor
     period's grid, as for any recording. With ``reference`` (replay), the reference poses
     (``PoseStamped`` or tf) and, with ``options.gyro``, the Imu's yaw rate come along;
     ``meta["bag_start_ns"]`` is the bag's first stamp.
@@ -325,10 +325,10 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                rpe_s: float = 1.0, print_fn: Callable[[str], object] = print) -> ReplayResult:
     """``lti-motion replay --bag``: :func:`~lti_motion.app.replay.run_replay` on a bag's drive.
 
-    The reference poses, from a ``PoseStamped`` topic or tf (:mod:`drivers.bag_tf`), are the truth
+    The reference poses, from a ``PoseStamped`` topic or tf (:mod:`drivers.bags.tf`), are the truth
     the metrics compare against (the estimators start at the first one and never
     read them after). With ``out_bag``, the ``ekf`` estimator's poses and
-    covariances go into a new bag (:func:`drivers.bag_writer.write_estimates_bag`).
+    covariances go into a new bag (:func:`drivers.bags.write_estimates_bag`).
 
     Raises
     ------

@@ -2,7 +2,7 @@
 
 Reads a log of either version (Roomba / simulator frames, or a recording of
 any differential drive, ``docs/log_format.md``), prints the excitation report
-(:func:`lti_motion.offline.excitation_report`), refuses data that cannot
+(:func:`lti_motion.calibration.excitation_report`), refuses data that cannot
 identify a model with the reason, and writes ``model_arx.json`` and
 ``excitation.txt``. The encoder scale is not measured (that needs the rotation
 in place of ``calibrate --sim/--port``): it comes from the robot description
@@ -15,10 +15,10 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from lti_motion.logfile import load_recording
-from lti_motion.offline import OfflineCalibration, calibrate_recording, rotation_scale
+from lti_motion.calibration.recorded import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
-from lti_motion.recording import Recording
+from lti_motion.recordings.logfile import load_recording
+from lti_motion.recordings.recording import Recording
 
 __all__ = ["RobotDescription", "run_calibrate_log", "run_calibrate_recording"]
 

@@ -21,8 +21,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lti_motion.calibration import Calibration, CalibrationPlan
-from lti_motion.frames import FrameLog
+from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan
+from lti_motion.recordings.frames import FrameLog
 
 if TYPE_CHECKING:
     from drivers.sim.config import RobotParams
@@ -89,7 +89,7 @@ def health_problems(cal: Calibration, *,
 
     The measure is the held-out free-run fit stored in the model
     (``diagnostics["validation_fit_v"]`` and ``["validation_fit_w"]``), the
-    one :func:`drivers.sim.calibration.summarize` prints.
+    one :func:`drivers.sim.summarize` prints.
     """
     problems = []
     for name in ("v", "w"):
@@ -102,7 +102,7 @@ def health_problems(cal: Calibration, *,
 
 def _recorded(out: Path, *, resume: bool) -> dict[str, FrameLog]:
     """The logs of manoeuvres driven before (``--resume``); refuse to mix runs otherwise."""
-    from lti_motion.logfile import load_log
+    from lti_motion.recordings.logfile import load_log
 
     found = [s for s in STAGES if stage_log_path(out, s).is_file()]
     if not resume:
@@ -119,7 +119,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
     """The manoeuvres not yet recorded, on the simulator or the robot, and the fits."""
     from drivers.sim.calibration import calibrate_simulator, print_progress
     from drivers.sim.config import floor_name, load_robot
-    from lti_motion.calibration import calibrate
+    from lti_motion.calibration.manoeuvres import calibrate
 
     described = load_robot(args.sim) if args.sim else None
     if described is not None and not args.port:
@@ -171,7 +171,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     import sys
 
     from drivers.exceptions import PassiveModeError
-    from lti_motion.logfile import save_log
+    from lti_motion.recordings.logfile import save_log
 
     out = Path(args.out)
     check_writable_folder(out)

@@ -172,7 +172,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _load_model(path: str):
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"no model file {path}; make one with 'lti-motion calibrate'")
@@ -265,7 +265,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
             raise MissingEncoderScaleError.needed_by("the monitor")
     elif args.sim:
         from drivers.sim.calibration import calibrate_simulator, print_progress
-        from lti_motion.calibration import CalibrationPlan
+        from lti_motion.calibration.manoeuvres import CalibrationPlan
 
         print(f"no --model: calibrating the simulated {robot.name} robot first "
               f"({args.excitation_s:g} s of excitation, seed {args.seed})")

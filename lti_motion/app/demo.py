@@ -36,7 +36,7 @@ from lti_motion.app.route import (
     drive_route,
 )
 from lti_motion.app.route_smoother import SmootherEstimator
-from lti_motion.calibration import Calibration, CalibrationPlan
+from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan
 
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
@@ -213,7 +213,7 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
     seed : int
         Calibration seed; the route runs use seeds ``1000 + seed * runs + i``.
     robot : RobotParams or str
-        The robot, or a preset name or robot file (:func:`~drivers.sim.config.load_robot`),
+        The robot, or a preset name or robot file (:func:`~drivers.sim.load_robot`),
         read before anything is written.
     floor : str or FloorMap, optional
         Floor of the calibration and the route (default the robot's).

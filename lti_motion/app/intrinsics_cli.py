@@ -3,7 +3,7 @@
 
 The log's encoder counts and frame times, and the reference's poses on the same clock
 (motion capture, a scan matcher's or a smoother's trajectory) go to
-:func:`lti_motion.intrinsics_calibration.calibrate_intrinsics`; the result is written
+:func:`lti_motion.calibration.calibrate_intrinsics`; the result is written
 as ``intrinsics.json`` and summarised on the terminal. The log's simulator truth, if
 it has any, is never read.
 """
@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from lti_motion.calibration.intrinsics_fit import IntrinsicsCalibration
     from lti_motion.intrinsics import OdometryIntrinsics
-    from lti_motion.intrinsics_calibration import IntrinsicsCalibration
 
 __all__ = ["add_intrinsics_arguments", "run_intrinsics_calibration", "write_into_model"]
 
@@ -76,7 +76,7 @@ def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out
     FileNotFoundError
         If there is no file ``model_path``.
     """
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
 
     if not Path(model_path).is_file():
         raise FileNotFoundError(f"no model file {model_path}")
@@ -99,9 +99,9 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     """
     import numpy as np
 
-    from lti_motion.intrinsics_calibration import calibrate_intrinsics
-    from lti_motion.logfile import load_log
-    from lti_motion.tum import read_tum
+    from lti_motion.calibration.intrinsics_fit import calibrate_intrinsics
+    from lti_motion.recordings.logfile import load_log
+    from lti_motion.recordings.tum import read_tum
 
     if not args.reference:
         raise ValueError("--log needs --reference FILE.tum: the pose reference to calibrate "

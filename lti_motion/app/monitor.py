@@ -5,7 +5,7 @@ the order of the steps (predict, the stuck-encoder check, the encoder update and
 its gate, the dynamics tests with a Phase-I fit, the scale test with landmarks).
 Alarms are printed as they are raised; a summary follows at the end.
 
-Phase I (:func:`~fusion.monitoring.phase_one.fit_nominal`): the
+Phase I (:func:`~fusion.monitoring.fit_nominal`): the
 dynamics null and the encoder gate come from nominal drives of the same
 route. ``--sim`` drives them first (``nominal_drives`` simulated drives of the
 same length, other seeds, no fault); ``--port`` reads them from logs the
@@ -51,9 +51,9 @@ from lti_motion.app.monitor_setup import (
     sightings,
 )
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import wrap_angle
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import SensorFrame
 
 if TYPE_CHECKING:
     from drivers.sim.config import FloorMap, RobotParams
@@ -136,7 +136,7 @@ def heading_deg(theta_rad: float) -> float:
 
 
 def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
-    """The simulator :class:`~drivers.sim.config.Fault` of a ``--fault`` choice at ``t_s`` [s],
+    """The simulator :class:`~drivers.sim.Fault` of a ``--fault`` choice at ``t_s`` [s],
     and the alarm kind it should raise."""
     from drivers.sim.config import Fault
 
@@ -270,7 +270,7 @@ def monitor_frames(model: MotionModel,
         Monitor settings (default: the model's period and, with ``nominal``,
         its encoder gate; everything else default).
     nominal : NominalFit, optional
-        Phase I (:func:`~fusion.monitoring.phase_one.fit_nominal`): runs the
+        Phase I (:func:`~fusion.monitoring.fit_nominal`): runs the
         dynamics tests with its null and the gate it set. Without it the
         encoder innovations' windowed NIS and CUSUM run instead.
     landmarks : LandmarkMap, optional
@@ -286,7 +286,7 @@ def monitor_frames(model: MotionModel,
         Called with each frame (to record it, to show progress).
     on_step : callable, optional
         Called after each frame with what it gave (a
-        :class:`~fusion.monitoring.monitored_filter.FrameResult`) and the EKF's
+        :class:`~fusion.monitoring.FrameResult`) and the EKF's
         pose covariance, shape (3, 3) [m^2, m rad, rad^2] (to write the estimates).
     counter_bits : int
         Width of the frames' encoder counters [bits] (16: the Open Interface's).
@@ -393,7 +393,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     model : MotionModel
         Calibrated model of the robot.
     robot : RobotParams or str
-        The robot, or a preset name or robot file (:func:`~drivers.sim.config.load_robot`);
+        The robot, or a preset name or robot file (:func:`~drivers.sim.load_robot`);
         its own faults happen in the drive (not in Phase I).
     floor, seed
         Simulator settings (an empty room); ``floor`` defaults to the robot's.

@@ -2,7 +2,7 @@
 
 - :func:`monitor_route`: the monitor's drive (rest, then rounded-rectangle laps);
 - :func:`nominal_on_simulator`, :func:`nominal_from_logs`: Phase I
-  (:func:`fusion.monitoring.phase_one.fit_nominal`) on simulated nominal drives of the
+  (:func:`fusion.monitoring.fit_nominal`) on simulated nominal drives of the
   same route, or on logs the command recorded on the robot's nominal drives;
 - the simulated landmark sensor of ``lti-motion monitor --sim``
   (:data:`MONITOR_LANDMARKS`, :func:`sightings`): it reads the simulator's true
@@ -22,12 +22,12 @@ from fusion.monitoring.phase_one import NominalFit, fit_nominal
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.kinematics import wheel_from_body, wrap_angle
-from lti_motion.model import MotionModel
-from lti_motion.odometry import unwrap_ticks
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import unwrap_ticks
 
 if TYPE_CHECKING:
     from drivers.sim.config import FloorMap, RobotParams
-    from lti_motion.frames import FrameLog
+    from lti_motion.recordings.frames import FrameLog
 
 __all__ = ["MONITOR_LANDMARKS", "monitor_route", "nominal_from_logs", "nominal_on_simulator",
            "sightings"]
@@ -111,7 +111,7 @@ def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "crea
 
 def nominal_from_logs(model: MotionModel, paths: Sequence[str]) -> NominalFit:
     """Phase I from logs of nominal drives (``lti-motion monitor --record`` on the robot)."""
-    from lti_motion.logfile import load_log
+    from lti_motion.recordings.logfile import load_log
 
     drives = []
     for path in paths:

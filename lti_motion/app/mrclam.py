@@ -23,12 +23,12 @@ from typing import Literal
 import numpy as np
 
 from drivers.datasets import CREATE1_WHEEL_BASE_M, MrclamRobot, MrclamSegment, resample_robot
-from lti_motion.fir import estimate_fir
 from lti_motion.kinematics import integrate_poses, wheel_from_body, wrap_angle
 from lti_motion.metrics import fit_percent
-from lti_motion.model import MotionModel, fit_arx
-from lti_motion.output_error import OutputErrorOptions, refine_model
-from lti_motion.structure_cv import Candidate, fit_candidate, score_structures
+from lti_motion.model.fir import estimate_fir
+from lti_motion.model.motion_model import MotionModel, fit_arx
+from lti_motion.model.output_error import OutputErrorOptions, refine_model
+from lti_motion.model.structure_cv import Candidate, fit_candidate, score_structures
 
 __all__ = ["CANDIDATES", "RobotResult", "evaluate_robot", "split_halves"]
 
@@ -120,10 +120,10 @@ def evaluate_robot(robot: MrclamRobot, *, dt_s: float = 0.1, fir_length_s: float
     criterion : {"equation", "output_error", "selected"}
         The ARX model's fit: least squares on the equation error (order and
         delay by held-out free-run fit); that model refined on the
-        output-error criterion (:func:`lti_motion.output_error.refine_model`);
+        output-error criterion (:func:`lti_motion.model.refine_model`);
         or the one of :data:`CANDIDATES` with the least 3-fold cross-validated
         30 s path error on the first half
-        (:func:`lti_motion.structure_cv.score_structures`), refitted on it.
+        (:func:`lti_motion.model.score_structures`), refitted on it.
     output_error : OutputErrorOptions, optional
         Settings of the output-error criterion.
     """

@@ -78,7 +78,7 @@ from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_resi
 from lti_motion.app.mrclam import WARMUP_S, evaluate_robot, split_halves
 from lti_motion.app.mrclam_noise import VARIANTS, speed_covariances
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model import COVARIANCE_JITTER, MotionModel
+from lti_motion.model.motion_model import COVARIANCE_JITTER, MotionModel
 
 __all__ = ["GATE_PROBABILITY", "FilterResult", "MotionNoise", "evaluate_filters",
            "landmark_noise_from_truth", "main", "output_error_model", "sightings_in"]
@@ -191,7 +191,7 @@ def output_error_model(model: MotionModel, speed_cov: np.ndarray) -> MotionModel
 
     Examples
     --------
-    >>> from lti_motion.fir import FirFit
+    >>> from lti_motion.model.fir import FirFit
     >>> model = MotionModel.from_fir(
     ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
     ...            residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps"),

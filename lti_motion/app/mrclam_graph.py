@@ -2,7 +2,7 @@
 
 Per robot, on the second half of its run (never used for fitting), two GTSAM
 graphs get the same barcode sightings as range-bearing factors
-(:func:`fusion.graph.factors.range_bearing_factors`) to the surveyed landmarks, with
+(:func:`fusion.graph.range_bearing_factors`) to the surveyed landmarks, with
 the same noise and the same robust kernel, and differ only in their motion
 factors (:func:`fusion.graph.preintegrate`, one between-factor per
 0.1 s grid step):
@@ -16,7 +16,7 @@ factors (:func:`fusion.graph.preintegrate`, one between-factor per
 Each motion's per-sample speed covariance is *measured the same way* on the
 first half (:func:`~lti_motion.app.mrclam_noise.speed_covariances`, which
 the landmark EKFs use too): the Newey-West long-run covariance
-(:func:`fusion.graph.speed_noise.long_run_covariance`, 5 s bandwidth) of the speeds
+(:func:`fusion.graph.long_run_covariance`, 5 s bandwidth) of the speeds
 differentiated from Vicon minus the predicted speeds (the model's free run, or
 the commands), so that ``N Phi`` covers the error of ``N`` summed samples,
 drift included (:mod:`fusion.graph.preintegration`, notes). The sighting noise is
@@ -28,7 +28,7 @@ Each segment's graph starts from the true pose after the warm-up, with the
 EKFs' prior (:data:`~lti_motion.app.mrclam_filters.POSE_STD`). The
 figure is the RMS position error against Vicon at every grid time after the
 start, the same times the EKFs are scored at: of the batch
-Levenberg-Marquardt solution (:func:`fusion.graph.smoother.smooth_batch`, every
+Levenberg-Marquardt solution (:func:`fusion.graph.smooth_batch`, every
 sighting of the segment, past and future, informs each pose), and on request
 of iSAM2 (:class:`fusion.graph.IncrementalSmoother`): its final estimate,
 and its *online* one (each pose read right after its own update, causal like
@@ -69,7 +69,7 @@ from lti_motion.app.mrclam_filters import (
 )
 from lti_motion.app.mrclam_noise import VARIANTS, predicted_speeds, speed_covariances
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model import MotionModel, fit_arx
+from lti_motion.model.motion_model import MotionModel, fit_arx
 
 __all__ = ["GATE_PROBABILITY", "HUBER_K", "GraphResult", "evaluate_graph", "main",
            "speed_covariances"]

@@ -5,7 +5,7 @@ each sensor period, the raw encoder counts (logs only), landmark sightings
 where there are any, and ground truth where it exists (the simulator's pose
 in a simulated log, Vicon in MRCLAM). Two kinds are read:
 
-- an ``lti-motion-log`` NPZ file (:mod:`lti_motion.logfile`, ``docs/log_format.md``),
+- an ``lti-motion-log`` NPZ file (:mod:`lti_motion.recordings.logfile`, ``docs/log_format.md``),
   written by :class:`drivers.logs.Recorder`, ``lti-motion monitor --record`` or
   ``lti-motion calibrate``; landmark sightings, if any, in its ``meta``
   (``"landmarks"``: ``[[id, x, y], ...]``, ``"observations"``:
@@ -47,9 +47,9 @@ from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, rpe
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
-from lti_motion.tum import write_tum
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import tick_deltas
+from lti_motion.recordings.tum import write_tum
 
 __all__ = [
     "ESTIMATORS",

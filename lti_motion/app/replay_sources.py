@@ -20,12 +20,12 @@ from drivers.exceptions import DatasetError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
-from lti_motion.frames import FrameLog
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.logfile import load_log
-from lti_motion.model import MotionModel
-from lti_motion.odometry import stream_clock
-from lti_motion.resample import GridSignals
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.logfile import load_log
+from lti_motion.recordings.resample import GridSignals
+from lti_motion.recordings.ticks import stream_clock
 
 __all__ = [
     "ESTIMATORS",
@@ -79,13 +79,13 @@ class ReplaySource:
         Raw encoder counts; ``None`` for a data set without encoders.
     counter_bits : int
         Width of the counters [bits] (16: the Open Interface's; the log's
-        :attr:`~lti_motion.frames.FrameLog.counter_bits`).
+        :attr:`~lti_motion.recordings.FrameLog.counter_bits`).
     yaw_rate_rad_s : ndarray, shape (n,), or None
         A gyro's reading over the period each frame closes [rad/s] (the log's
-        :attr:`~lti_motion.frames.FrameLog.yaw_rate_rad_s`); ``None`` without a gyro.
+        :attr:`~lti_motion.recordings.FrameLog.yaw_rate_rad_s`); ``None`` without a gyro.
     gyro_density_rad_s_sqrt_hz : float or None
         The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
-        bag Imu's ``angular_velocity_covariance``, :mod:`drivers.imu_noise`);
+        bag Imu's ``angular_velocity_covariance``, :mod:`drivers.bags.imu_noise`);
         ``None``: not stated.
     body_speeds : ndarray, shape (n, 2), or None
         Measured body speeds (v [m/s], w [rad/s]) of the period each frame closes, for a
@@ -193,7 +193,7 @@ def source_from_log(path: str | os.PathLike, *, robot: int | None = None, start_
     Raises
     ------
     FileNotFoundError, LogFileError
-        From :func:`lti_motion.logfile.load_log`.
+        From :func:`lti_motion.recordings.load_log`.
     ValueError
         For a robot index out of range, an empty stretch, or two frames with
         the same time (the TUM files need increasing times).
@@ -266,7 +266,7 @@ def source_from_frame_log(log: FrameLog, name: str, *, start_s: float = 0.0,
 
 def source_from_grid(grid: GridSignals, name: str, *, dt_s: float, start_s: float = 0.0,
                      duration_s: float | None = None) -> ReplaySource:
-    """A recording of body speeds on the model's grid (:func:`lti_motion.resample.on_grid`)
+    """A recording of body speeds on the model's grid (:func:`lti_motion.recordings.on_grid`)
     as a :class:`ReplaySource`: one frame per period, the measured body speeds in
     :attr:`ReplaySource.body_speeds`.
 
@@ -392,7 +392,7 @@ def fit_mrclam_model(path: str | os.PathLike, *, robot: int, dt_s: float = 0.1
     """
     from drivers.datasets import CREATE1_WHEEL_BASE_M, resample_robot
     from lti_motion.app.mrclam import split_halves
-    from lti_motion.model import fit_arx
+    from lti_motion.model.motion_model import fit_arx
 
     _, rec = _mrclam_robot(path, robot)
     segments = resample_robot(rec, dt_s=dt_s)

@@ -28,11 +28,11 @@ from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
-from lti_motion.frames import SensorFrame
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas, tick_step
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import SensorFrame
+from lti_motion.recordings.ticks import tick_deltas, tick_step
 
 __all__ = [
     "ROUTE_LANDMARKS",
@@ -86,7 +86,7 @@ class Odometry:
     wheel_base_m : float, optional
         Nominal wheel base [m].
     intrinsics : OdometryIntrinsics, optional
-        Each wheel's scale and the wheel base (:mod:`lti_motion.intrinsics_calibration`),
+        Each wheel's scale and the wheel base (:mod:`lti_motion.calibration.intrinsics_fit`),
         instead of the two above.
     """
 
@@ -322,7 +322,7 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     estimated heading error is below 0.03 rad, *stop*, *drive* until the estimated
     distance to the checkpoint is below ``reach_m``; then the next checkpoint. At
     the last checkpoint the robot stops for good. ``floor`` defaults to the robot's
-    (:attr:`~drivers.sim.config.RobotParams.floor`); the robot's own faults happen too.
+    (:attr:`~drivers.sim.RobotParams.floor`); the robot's own faults happen too.
     """
     n = len(seeds)
     dt = params.period_s

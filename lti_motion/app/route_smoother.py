@@ -30,17 +30,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from fusion.ekf.intrinsics_estimate import IntrinsicsEstimate
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
+from fusion.scale_errors import IntrinsicsEstimate
 from lti_motion.exceptions import MissingEncoderScaleError, ShapeError
-from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import body_from_wheel, pose_step
-from lti_motion.model import MotionModel
-from lti_motion.odometry import tick_deltas
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import SensorFrame
+from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = ["ROUTE_SMOOTHER_OPTIONS", "SmootherEstimator"]
 
@@ -96,7 +96,7 @@ class SmootherEstimator:
     model's per-wheel :attr:`~lti_motion.model.MotionModel.intrinsics` when it has
     them, e.g. written back from :meth:`intrinsics_estimates`). Each interval
     is preintegrated from the filtered speeds ``s+ = s- + W (y - s-)``
-    (:func:`fusion.graph.speed_noise.filtered_speeds`, Simon 2006 eq. 5.19), starting from the
+    (:func:`fusion.graph.filtered_speeds`, Simon 2006 eq. 5.19), starting from the
     model state its predecessor ended in (:meth:`MotionModel.state_from_data`, the
     one-step predictor, Ljung 1999 sec. 4.3), so consecutive intervals continue one
     another. A range-bearing factor's range sigma is the sensor's at the *measured*
@@ -106,7 +106,7 @@ class SmootherEstimator:
     --------
     One robot driving straight, 3 ticks of 1 mm per 15 ms period, keyframes every 4 periods:
 
-    >>> from lti_motion.fir import FirFit
+    >>> from lti_motion.model.fir import FirFit
     >>> model = MotionModel.from_fir(
     ...     FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
     ...            residual_cov=np.eye(2) * 1e-6, n_samples=100, source="steps"),

@@ -1,8 +1,8 @@
 """``lti-motion calibrate --wall-run``: the wheels' diameter ratio without any reference,
 from straight runs beside a wall, on the simulator (``--sim``) or a Roomba (``--port``).
 
-The manoeuvre is :func:`lti_motion.wall_run_drive.drive_wall_run` (the same code on both),
-the estimate :func:`lti_motion.wall_run.calibrate_wall_run`. The drive is kept as
+The manoeuvre is :func:`lti_motion.calibration.drive_wall_run` (the same code on both),
+the estimate :func:`lti_motion.calibration.calibrate_wall_run`. The drive is kept as
 ``OUT/log_wall_run.npz``, the result written as ``OUT/wall_run.json`` (and, with
 ``--into-model``, a copy of the model carrying the intrinsics) and summarised on the
 terminal. The simulator's truth is never read.
@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from drivers.sim.config import RobotParams
+    from lti_motion.calibration.wall_run import WallRunCalibration
+    from lti_motion.calibration.wall_run_drive import WallRunDrive
     from lti_motion.intrinsics import OdometryIntrinsics
-    from lti_motion.wall_run import WallRunCalibration
-    from lti_motion.wall_run_drive import WallRunDrive
 
 __all__ = ["add_wall_run_arguments", "run_wall_run"]
 
@@ -45,7 +45,7 @@ def _intrinsics_in_use(args: argparse.Namespace, described: RobotParams | None
     ``--into-model`` (e.g. the rotation manoeuvre's scale), else the robot's nominal ones."""
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.intrinsics import OdometryIntrinsics
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
 
     if args.into_model:
         if not Path(args.into_model).is_file():
@@ -68,7 +68,7 @@ def _intrinsics_in_use(args: argparse.Namespace, described: RobotParams | None
 
 def _check(args: argparse.Namespace) -> None:
     """Refuse, before anything is driven, what cannot give a wall run."""
-    from lti_motion.wall_run import MIN_RUN_M
+    from lti_motion.calibration.wall_run import MIN_RUN_M
 
     if args.log or args.bag:
         raise ValueError("--wall-run drives the robot: give --sim NAME_OR_FILE or --port DEV, "
@@ -83,7 +83,7 @@ def _check(args: argparse.Namespace) -> None:
 def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: RobotParams | None
            ) -> WallRunDrive:
     """The manoeuvre on the simulator or on the robot at ``--port``."""
-    from lti_motion.wall_run_drive import drive_wall_run
+    from lti_motion.calibration.wall_run_drive import drive_wall_run
 
     if described is not None and not args.port:
         from drivers.sim.calibration import wall_run_simulator
@@ -108,8 +108,8 @@ def _summary(cal: WallRunCalibration, drive: WallRunDrive, known: OdometryIntrin
              source: str) -> list[str]:
     import numpy as np
 
-    from lti_motion.wall_run import run_path
-    from lti_motion.wall_run_drive import wall_passes
+    from lti_motion.calibration.wall_run import run_path
+    from lti_motion.calibration.wall_run_drive import wall_passes
 
     over = (" (its first run curved towards the wall on its left)"
             if drive.wall_side == "right" else "")
@@ -149,11 +149,11 @@ def run_wall_run(args: argparse.Namespace) -> int:
     from drivers.sim.config import load_robot
     from lti_motion.app.calibrate_run import check_writable_folder
     from lti_motion.app.intrinsics_cli import write_into_model
+    from lti_motion.calibration.wall_run import calibrate_wall_run
+    from lti_motion.calibration.wall_run_drive import wall_passes
     from lti_motion.exceptions import CurvedIntoWallError
-    from lti_motion.logfile import save_log
     from lti_motion.persistence import atomic_write
-    from lti_motion.wall_run import calibrate_wall_run
-    from lti_motion.wall_run_drive import wall_passes
+    from lti_motion.recordings.logfile import save_log
 
     _check(args)
     out = Path(args.out)

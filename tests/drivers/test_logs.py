@@ -13,8 +13,8 @@ from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.exceptions import LogFileError
-from lti_motion.frames import SensorFrame
-from lti_motion.logfile import load_log
+from lti_motion.recordings.frames import SensorFrame
+from lti_motion.recordings.logfile import load_log
 
 
 def test_round_trip_through_save_and_load_keeps_every_field(tmp_path, rng):

@@ -6,7 +6,7 @@ import pytest
 from lti_motion.exceptions import ShapeError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel
-from lti_motion.odometry import body_speeds_from_ticks
+from lti_motion.recordings.ticks import body_speeds_from_ticks
 
 
 @pytest.mark.parametrize("field", ["m_per_tick_left", "m_per_tick_right", "wheel_base_m"])

@@ -15,7 +15,7 @@ from lti_motion.kinematics import (
     wheel_from_body,
     wrap_angle,
 )
-from lti_motion.odometry import body_speeds_from_ticks
+from lti_motion.recordings.ticks import body_speeds_from_ticks
 
 
 def _step_sequentially(

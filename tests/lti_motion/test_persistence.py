@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from drivers.sim.simulator import Simulator
-from lti_motion.logfile import save_log
 from lti_motion.persistence import atomic_write, read_document, write_document
+from lti_motion.recordings.logfile import save_log
 
 posix = pytest.mark.skipif(os.name != "posix", reason="file modes and the umask are POSIX")
 

@@ -12,8 +12,8 @@ from drivers.roomba.driver import Roomba
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
-from lti_motion.calibration import CalibrationPlan, calibrate, speeds_from_log
-from lti_motion.excitation import random_held_normal
+from lti_motion.calibration.manoeuvres import CalibrationPlan, calibrate, speeds_from_log
+from lti_motion.model.excitation import random_held_normal
 
 SPEED = 20.0          # the emulator runs 20x faster than real time
 PLAN = CalibrationPlan(seed=3)

@@ -38,8 +38,8 @@ from drivers.roomba.oi import Opcode
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
-from lti_motion.calibration import drive as run_commands
-from lti_motion.odometry import unwrap_ticks
+from lti_motion.calibration.manoeuvres import drive as run_commands
+from lti_motion.recordings.ticks import unwrap_ticks
 
 P = oi.STREAM_PERIOD_S
 STOP_SEQUENCE = [(Opcode.DRIVE_DIRECT, bytes(4)), (Opcode.PAUSE_RESUME_STREAM, b"\x00"),

@@ -54,7 +54,7 @@ from drivers.roomba.oi import (
     stream_budget_bytes,
     stream_frame_size,
 )
-from lti_motion.odometry import unwrap_ticks
+from lti_motion.recordings.ticks import unwrap_ticks
 
 # Unknown ids: holes in the id space of spec §5 / §5.1.
 UNKNOWN_IDS = [59, 60, 99, 102, 105, 108, 127, 255]

@@ -14,10 +14,10 @@ from drivers.roomba.oi import DEFAULT_STREAM_IDS
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
+from lti_motion.calibration.wall_run import calibrate_wall_run
+from lti_motion.calibration.wall_run_drive import drive_wall_run, wall_passes
 from lti_motion.exceptions import NoSignalError
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.wall_run import calibrate_wall_run
-from lti_motion.wall_run_drive import drive_wall_run, wall_passes
 
 SPEED = 10.0           # the emulator runs 10x faster than real time
 PARAMS = get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)

@@ -6,8 +6,8 @@ import pytest
 from drivers.exceptions import RobotFileError, SimulatorError
 from drivers.sim.config import get_preset, load_robot
 from drivers.sim.simulator import Simulator
-from lti_motion.frames import FrameLog
-from lti_motion.recording import Recording
+from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.recording import Recording
 
 DENSITY = 0.005         # rad/s/sqrt(Hz), a MEMS gyro
 BIAS = 0.008            # rad/s

@@ -8,7 +8,7 @@ from drivers.exceptions import SimulatorError
 from drivers.sim.config import Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive, motion_capture
 from drivers.sim.simulator import Simulator
-from lti_motion.intrinsics_calibration import calibrate_intrinsics
+from lti_motion.calibration.intrinsics_fit import calibrate_intrinsics
 
 
 def test_calibration_recovers_the_asymmetric_robot_on_tile():

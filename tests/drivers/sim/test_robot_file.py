@@ -79,8 +79,8 @@ def test_counters_of_any_width_wrap_in_the_simulator_and_unwrap_in_the_odometry(
     """A 10-bit counter wraps every 1024 ticks (0.22 m of a 0.07 m wheel at 1000 ticks per
     turn): the drive's speeds are those of the same drive with 16-bit counters."""
     from drivers.sim.simulator import Simulator
-    from lti_motion.calibration import speeds_from_log
-    from lti_motion.odometry import unwrap_ticks
+    from lti_motion.calibration.manoeuvres import speeds_from_log
+    from lti_motion.recordings.ticks import unwrap_ticks
 
     text = _replace(MINIMAL, "ticks_per_rev = 1000", f"ticks_per_rev = 1000\ncounter_bits = {bits}")
     robot = load_robot(_write(tmp_path, text))

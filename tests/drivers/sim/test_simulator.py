@@ -6,7 +6,7 @@ import pytest
 from drivers.exceptions import SimulatorError
 from drivers.sim.config import Fault, FloorMap, Room, get_preset
 from drivers.sim.simulator import Simulator, ground_m_per_tick
-from lti_motion.odometry import tick_deltas, unwrap_ticks
+from lti_motion.recordings.ticks import tick_deltas, unwrap_ticks
 
 PRESETS = ["create2", "paper"]
 

@@ -8,10 +8,10 @@ import pytest
 
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
+from lti_motion.calibration.wall_run import calibrate_wall_run
+from lti_motion.calibration.wall_run_drive import drive_wall_run, wall_passes
 from lti_motion.exceptions import WallRunError
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.wall_run import calibrate_wall_run
-from lti_motion.wall_run_drive import drive_wall_run, wall_passes
 
 PARAMS = get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)
 NOMINAL = OdometryIntrinsics.symmetric(m_per_tick=PARAMS.m_per_tick,

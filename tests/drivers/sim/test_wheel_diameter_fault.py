@@ -12,7 +12,7 @@ import pytest
 from drivers.exceptions import SimulatorError
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.odometry import unwrap_ticks
+from lti_motion.recordings.ticks import unwrap_ticks
 
 PARAMS = get_preset("create2")
 ONSET_S = 3.0

@@ -8,11 +8,11 @@ import numpy as np
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf.model_ekf import ModelEKF
-from lti_motion.excitation import random_held_normal
-from lti_motion.model import MotionModel
-from lti_motion.odometry import unwrap_ticks
-from lti_motion.recording import Recording
-from lti_motion.resample import on_grid
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.recording import Recording
+from lti_motion.recordings.resample import on_grid
+from lti_motion.recordings.ticks import unwrap_ticks
 
 
 def test_wheel_angles_through_the_grid_track_like_the_counts(route_model: MotionModel):

@@ -14,15 +14,15 @@ import pytest
 from synthetic_ekf_model import DT, M_PER_TICK, B, held_commands, numerical_jacobian
 
 from fusion.ekf import functions as ef
-from fusion.ekf.intrinsics_estimate import corrected_jacobian, intrinsics_estimate
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing, range_bearing
+from fusion.scale_errors import corrected_jacobian, intrinsics_estimate
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import pose_step, pose_step_jacobians, wrap_angle
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 #: A left wheel 1% larger than the right: ground curvature of equal counts [rad/m]

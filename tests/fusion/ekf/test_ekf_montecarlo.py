@@ -35,7 +35,7 @@ from drivers.sim.simulator import Simulator
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.sensor_pose import CENTRED, SensorPose
 from lti_motion.kinematics import wrap_angle
-from lti_motion.odometry import tick_deltas
+from lti_motion.recordings.ticks import tick_deltas
 
 N_RUNS, DURATION_S = 30, 60.0
 LONG_RUNS, LONG_DURATION_S = 5, 600.0

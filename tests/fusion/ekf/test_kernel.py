@@ -24,9 +24,9 @@ from fusion.ekf import functions as ef
 from fusion.ekf import kernel as kn
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import GyroNoise, SlipNoise, inverse_covariance, nis
-from lti_motion.fir import FirFit
 from lti_motion.kinematics import sinc_and_derivative
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 RTOL, ATOL = 1e-12, 1e-15       # "to rounding" (the brief's bound), over the whole run
 ROOT = Path(__file__).resolve().parents[3]

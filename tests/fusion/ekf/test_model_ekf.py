@@ -34,7 +34,6 @@ from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import LandmarkNoise, inverse_covariance
 from fusion.range_bearing import range_bearing, range_bearing_jacobian, range_bearing_residual
-from lti_motion.arx import estimate_arx
 from lti_motion.exceptions import ShapeError
 from lti_motion.kinematics import (
     body_from_wheel,
@@ -43,7 +42,8 @@ from lti_motion.kinematics import (
     pose_step_jacobians,
     wrap_angle,
 )
-from lti_motion.model import MotionModel
+from lti_motion.model.arx import estimate_arx
+from lti_motion.model.motion_model import MotionModel
 
 LANDMARKS = LandmarkMap({0: (0.5, 0.5), 1: (4.5, 0.5), 2: (4.5, 4.5), 3: (0.5, 4.5)})
 

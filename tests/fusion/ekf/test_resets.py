@@ -28,9 +28,9 @@ from fusion.ekf.resets import (
 from fusion.exceptions import FilterOptionError
 from fusion.noise import ScaleErrors
 from fusion.range_bearing import RangeBearing, range_bearing
-from lti_motion.fir import FirFit
 from lti_motion.kinematics import integrate_poses
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 # the scenario, shared with `python -m benchmarks bounds`: START, the four corner
 # LANDMARKS, BIAS_M_S = -0.022 m/s (what the odometry reads while the robot stands still)

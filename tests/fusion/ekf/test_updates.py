@@ -20,8 +20,8 @@ from fusion.exceptions import (
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from fusion.sensor_pose import SensorPose
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 LANDMARKS = {1: (2.0, 1.0), 2: (-1.0, 3.0), "door": (3.0, -2.0)}
 COV = np.array([[4e-3, 1.5e-4], [1.5e-4, 2e-4]])

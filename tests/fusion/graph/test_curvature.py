@@ -9,7 +9,6 @@ from graph_scenes import DT, PHI, factor_values, feed_online, group_values, ring
 from graph_scenes import speeds as _speeds
 from gtsam.utils.numerical_derivative import numericalDerivative11
 
-from fusion.ekf.intrinsics_estimate import intrinsics_estimate
 from fusion.exceptions import GraphInputError
 from fusion.graph.factors import (
     calibrated_motion_factor,
@@ -26,11 +25,12 @@ from fusion.graph.smoother import (
     smooth_batch,
 )
 from fusion.noise import ScaleErrors
+from fusion.scale_errors import intrinsics_estimate
 from lti_motion.exceptions import ShapeError
-from lti_motion.fir import FirFit
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import integrate_poses
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 B = 0.235
 

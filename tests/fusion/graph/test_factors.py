@@ -45,10 +45,10 @@ from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from fusion.sensor_pose import SensorPose
-from lti_motion.arx import ArxFit
 from lti_motion.exceptions import NonFiniteError, ShapeError
 from lti_motion.kinematics import integrate_poses
-from lti_motion.model import MotionModel
+from lti_motion.model.arx import ArxFit
+from lti_motion.model.motion_model import MotionModel
 
 
 def _relative(poses, i, j):

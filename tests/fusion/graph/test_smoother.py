@@ -5,7 +5,7 @@ Runs are 20 simulated robots driving for 60 s among known landmarks (the example
 waypoint driver and camera model, ``examples/factor_graph.py``).
 
 The "true" calibration of a run is what the calibration-aware factors would estimate if
-every keyframe pose were known exactly: :func:`fusion.graph.preintegration.fit_calibration` on
+every keyframe pose were known exactly: :func:`fusion.graph.fit_calibration` on
 the true keyframe poses. On the nominal robot it is ``s = 1.004``: the encoder scale
 from the rotation manoeuvre (paper eq. 13) uses the nominal wheel base, 0.4% short of the
 true one, so encoder (and model) speeds are 0.4% low. With wheels 10% larger than the
@@ -49,7 +49,7 @@ from fusion.graph.smoother import (
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing, range_bearing
 from fusion.sensor_pose import CENTRED, SensorPose
-from lti_motion.calibration import speeds_from_log
+from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.metrics import ate
 
 N_RUNS = 20

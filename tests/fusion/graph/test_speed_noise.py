@@ -13,8 +13,8 @@ from fusion.graph.speed_noise import (
     speed_covariance_from_data,
 )
 from lti_motion.exceptions import ShapeError
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 
 def _ar1(rng, n, a, cov):

@@ -13,8 +13,8 @@ from fusion.graph.transient_noise import (
 )
 from fusion.noise import SlipNoise
 from lti_motion.exceptions import NonFiniteError, ShapeError
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 DT = 0.015
 WHEEL_BASE_M = 0.25

@@ -3,9 +3,9 @@
 import numpy as np
 
 from fusion.monitoring.dynamics_null import integrated_residuals
-from lti_motion.arx import estimate_arx
 from lti_motion.kinematics import wheel_from_body_matrix
-from lti_motion.model import MotionModel
+from lti_motion.model.arx import estimate_arx
+from lti_motion.model.motion_model import MotionModel
 
 DT, B, M_PER_TICK = 0.015, 0.235, 4.5e-4
 OFFSET = np.array([0.01, -0.05])

@@ -11,9 +11,9 @@ from fusion.landmarks.synthetic import synthetic_observations
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
-from lti_motion.odometry import TICK_MODULUS
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.ticks import TICK_MODULUS
 
 DT = 0.015
 M_PER_TICK = 5e-4

@@ -6,8 +6,8 @@ import pytest
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.monitoring.phase_one import fit_nominal
 from fusion.monitoring.residual import MonitorOptions, ResidualMonitor, design_thresholds
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 
 @pytest.fixture(scope="module")

@@ -145,7 +145,7 @@ def test_rescaled_model_predicts_the_same_counts(model):
     np.testing.assert_allclose(new.fit_percent([(u, y * s)]), model.fit_percent([(u, y)]),
                                atol=1e-9)
     # the raw ARX coefficients follow the matrices: realised again, the same free run
-    from lti_motion.arx import ArxFit
+    from lti_motion.model.arx import ArxFit
     fit = model.selection.fit
     ss = ArxFit(new.coefficients["a"], new.coefficients["b"], fit.delay, fit.residual_cov,
                 fit.n_rows, fit.rank, fit.condition_number, fit.input_condition_number,
@@ -158,7 +158,7 @@ def test_rescaled_model_predicts_the_same_counts(model):
 
 
 def test_precise_scale_alarm_is_adopted_at_once_and_saved(model, tmp_path):
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
 
     rc = Recalibrator(model, save_path=tmp_path / "model.json")
     dt = model.dt_s

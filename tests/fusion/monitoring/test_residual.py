@@ -329,7 +329,7 @@ def test_standalone_one_step_residuals_feed_the_monitor(example, model):
     sim = Simulator("create2", n_robots=1, seed=402, room=Room.box(5.0, 5.0),
                     initial_pose=example.START_POSE)
     log = example.drive_route(sim, duration_s=20.0, rng=np.random.default_rng(402)).robot(0)
-    from lti_motion.calibration import speeds_from_log
+    from lti_motion.calibration.manoeuvres import speeds_from_log
     u, y = speeds_from_log(log, m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
     res = one_step_innovations(model, u, y)
     mon = ResidualMonitor(MonitorOptions(dt_s=model.dt_s))
@@ -341,8 +341,8 @@ def test_standalone_one_step_residuals_feed_the_monitor(example, model):
 
 # -- recalibration policy ----------------------------------------------------------------------
 def _excitation_speeds(model, faults, *, seed=7, duration_s=90.0):
-    from lti_motion.calibration import speeds_from_log
-    from lti_motion.excitation import random_held_normal
+    from lti_motion.calibration.manoeuvres import speeds_from_log
+    from lti_motion.model.excitation import random_held_normal
     sim = Simulator("create2", seed=seed, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0),
                     faults=faults)
     u = random_held_normal(n=round(duration_s / model.dt_s), dt_s=model.dt_s,
@@ -367,7 +367,7 @@ def test_after_a_dynamics_alarm_the_fit_returns_within_2_points(model, fault, ac
     # refit is adopted and saved. Either way the model in use fits fresh faulty data within
     # 2 percentage points of the old model's fit on fresh nominal data (the criterion).
     from fusion.monitoring.recalibration import Recalibrator
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
     u, y = _excitation_speeds(model, (fault,))
     rc = Recalibrator(model, min_samples=3000, save_path=tmp_path / "model.json")
     for k in range(len(y)):

@@ -25,7 +25,7 @@ from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.app.monitor import format_alarm
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import pose_step
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
 
 WHEEL_BASE_M = 0.235
 M_PER_TICK = 5e-4

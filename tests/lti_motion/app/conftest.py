@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from lti_motion.fir import FirFit
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 
 @pytest.fixture(scope="module")

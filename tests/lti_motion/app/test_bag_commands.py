@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from drivers.bag_writer import write_drive_bag
+from drivers.bags.writer import write_drive_bag
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.app.bag_commands import calibrate_from_bag, monitor_bag
 from lti_motion.app.cli import main
-from lti_motion.calibration import speeds_from_log
-from lti_motion.excitation import random_held_normal
+from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.metrics import fit_percent
-from lti_motion.model import MotionModel, fit_arx
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel, fit_arx
 
 START_NS = 1_750_000_000 * 1_000_000_000
 
@@ -231,8 +231,8 @@ def test_a_bag_with_odometry_and_no_wheel_angles_calibrates_on_the_odometry_twis
 def test_a_bag_with_odometry_but_no_commands_is_refused(bags, tmp_path, capsys):
     bag = write_drive_bag(tmp_path / "no_cmd", bags["cal_log"], start_ns=START_NS,
                           joint_states=False)
-    from drivers.bag_writer import write_estimates_bag
-    from drivers.bags import read_bag  # a copy without /cmd_vel
+    from drivers.bags.reader import read_bag  # a copy without /cmd_vel
+    from drivers.bags.writer import write_estimates_bag
     rec = read_bag(bag, kinds=("odom",))
     poses = rec.odom.values[:, :3]
     odom_only = write_estimates_bag(tmp_path / "est_only", rec.odom.t_ns, poses,

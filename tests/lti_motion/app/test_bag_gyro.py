@@ -23,7 +23,7 @@ import pytest
 
 import drivers.sim
 from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
-from drivers.bag_writer import write_drive_bag
+from drivers.bags.writer import write_drive_bag
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.noise import GyroNoise

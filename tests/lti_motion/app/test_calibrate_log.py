@@ -8,11 +8,11 @@ import pytest
 from drivers.sim.config import get_preset
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.excitation import random_held_normal
-from lti_motion.logfile import save_log, save_recording
-from lti_motion.model import MotionModel
-from lti_motion.odometry import unwrap_ticks
-from lti_motion.recording import Recording
+from lti_motion.model.excitation import random_held_normal
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.logfile import save_log, save_recording
+from lti_motion.recordings.recording import Recording
+from lti_motion.recordings.ticks import unwrap_ticks
 
 PARAMS = get_preset("create2")
 
@@ -86,8 +86,8 @@ def test_counts_without_a_scale_and_an_impossible_wheel_speed_exit_2(drive, tmp_
 def test_a_recording_with_a_rotation_in_place_measures_the_scale(tmp_path, capsys):
     from drivers.sim.config import Room
     from drivers.sim.simulator import ground_m_per_tick
-    from lti_motion.excitation import rotation_in_place
-    from lti_motion.frames import FrameLog
+    from lti_motion.model.excitation import rotation_in_place
+    from lti_motion.recordings.frames import FrameLog
 
     params = PARAMS.replace(wheel_diameter_errors=(0.03, 0.03))   # 3% off the description
     dt = params.period_s

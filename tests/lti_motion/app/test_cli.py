@@ -127,7 +127,7 @@ def test_calibrate_sim_writes_models_and_plots(tmp_path, capsys):
     assert json.loads((tmp_path / "model_arx.json").read_text())["floor"] == "carpet"
     for name in ("model_arx.json", "model_fir.json", "order_selection.png"):
         assert (tmp_path / name).is_file()
-    from lti_motion.logfile import load_log
+    from lti_motion.recordings.logfile import load_log
 
     for stage in ("rotation", "steps", "excitation"):          # the drives, replayable
         assert load_log(tmp_path / f"log_{stage}.npz").has_truth
@@ -236,7 +236,7 @@ def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path
 def test_replay_and_monitor_errors_exit_2_without_traceback(argv, message, model_file, tmp_path,
                                                             capsys):
     from drivers.sim.simulator import Simulator
-    from lti_motion.logfile import save_log
+    from lti_motion.recordings.logfile import save_log
 
     log = save_log(tmp_path / "short.npz", Simulator("create2", seed=0).run(np.full((50, 2), 0.1)))
     argv = [a.format(model=model_file, log=log) for a in argv]
@@ -265,8 +265,8 @@ def test_a_model_without_encoder_scale_is_one_line_in_the_commands_words(argv, a
     """Issue 15 item 5: every command path that needs the scale says, in its own options,
     what gives it; the monitor says so before it drives (or opens the port)."""
     from drivers.sim.simulator import Simulator
-    from lti_motion.logfile import save_log
-    from lti_motion.model import MotionModel
+    from lti_motion.model.motion_model import MotionModel
+    from lti_motion.recordings.logfile import save_log
 
     unscaled = MotionModel.load(model_file).updated(m_per_tick=None).save(
         tmp_path / "unscaled.json")

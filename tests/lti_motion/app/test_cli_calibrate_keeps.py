@@ -13,8 +13,8 @@ from drivers.roomba.oi import Opcode
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Room
 from lti_motion.app.cli import main
-from lti_motion.logfile import load_log
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.logfile import load_log
 
 
 def _one_error_line(err, command="calibrate"):

@@ -9,7 +9,7 @@ import pytest
 
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.logfile import save_log
+from lti_motion.recordings.logfile import save_log
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ from drivers.sim.config import Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive, motion_capture
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.logfile import save_log
-from lti_motion.tum import write_tum
+from lti_motion.recordings.logfile import save_log
+from lti_motion.recordings.tum import write_tum
 
 
 @pytest.fixture(scope="module")
@@ -67,8 +67,8 @@ def test_a_reference_without_a_log_is_one_line_and_exit_2(drive, capsys):
 
 
 def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, capsys):
-    from lti_motion.fir import FirFit
-    from lti_motion.model import MotionModel
+    from lti_motion.model.fir import FirFit
+    from lti_motion.model.motion_model import MotionModel
 
     fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),
                  residual_cov=np.eye(2) * 1e-4, n_samples=100, source="steps")

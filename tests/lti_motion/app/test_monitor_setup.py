@@ -53,7 +53,7 @@ def test_a_robot_with_12_bit_counters_is_monitored_as_its_16_bit_twin(model, tmp
     drive says its width, and a Phase I from that log matches the simulator's."""
     from drivers.sim.config import load_robot
     from lti_motion.app.monitor import run_on_simulator
-    from lti_motion.logfile import load_log
+    from lti_motion.recordings.logfile import load_log
 
     runs = {}
     for bits in (16, 12):

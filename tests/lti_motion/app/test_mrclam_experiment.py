@@ -31,9 +31,9 @@ from lti_motion.app.mrclam_filters import (
     output_error_model,
 )
 from lti_motion.app.mrclam_noise import speed_covariances
-from lti_motion.fir import FirFit
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model import MotionModel
+from lti_motion.model.fir import FirFit
+from lti_motion.model.motion_model import MotionModel
 
 
 @pytest.fixture(scope="module")

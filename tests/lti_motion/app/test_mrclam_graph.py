@@ -16,7 +16,7 @@ from drivers.datasets import CREATE1_WHEEL_BASE_M, load_mrclam, resample_robot
 from lti_motion.app.mrclam import split_halves
 from lti_motion.app.mrclam_graph import evaluate_graph, speed_covariances
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model import fit_arx
+from lti_motion.model.motion_model import fit_arx
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,8 @@ from lti_motion.app.replay import (
     source_from_log,
 )
 from lti_motion.exceptions import ShapeError
-from lti_motion.logfile import load_log, save_log
-from lti_motion.tum import read_tum, tum_rows, write_tum
+from lti_motion.recordings.logfile import load_log, save_log
+from lti_motion.recordings.tum import read_tum, tum_rows, write_tum
 
 LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (3.0, -1.0), 3: (3.0, 3.0), 4: (-1.0, 3.0)})
 

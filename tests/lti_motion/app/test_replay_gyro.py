@@ -8,7 +8,7 @@ from drivers.sim.simulator import Simulator
 from lti_motion.app.replay import estimate, run_replay
 from lti_motion.app.replay_sources import source_from_log
 from lti_motion.kinematics import wrap_angle
-from lti_motion.logfile import load_log, save_log
+from lti_motion.recordings.logfile import load_log, save_log
 
 
 @pytest.fixture(scope="module")

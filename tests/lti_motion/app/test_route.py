@@ -12,7 +12,7 @@ from lti_motion.app.route import (
     SensorLess,
     drive_route,
 )
-from lti_motion.calibration import CalibrationPlan, calibrate
+from lti_motion.calibration.manoeuvres import CalibrationPlan, calibrate
 
 P = get_preset("create2")
 
@@ -117,7 +117,7 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
     from lti_motion.app.route import ROUTE_LANDMARKS
     from lti_motion.app.route_smoother import SmootherEstimator
     from lti_motion.exceptions import ShapeError
-    from lti_motion.frames import SensorFrame
+    from lti_motion.recordings.frames import SensorFrame
 
     with pytest.raises(ValueError, match="encoder scale"):
         SmootherEstimator(cal.arx.updated(m_per_tick=None))
@@ -146,8 +146,8 @@ def test_smoother_estimator_drops_unknown_landmarks_and_rejects_bad_input(cal):
 
 
 def test_odometry_with_per_wheel_intrinsics_turns_as_its_wheels_say():
-    from lti_motion.frames import SensorFrame
     from lti_motion.intrinsics import OdometryIntrinsics
+    from lti_motion.recordings.frames import SensorFrame
 
     k = OdometryIntrinsics(1.01e-3, 1.0e-3, 0.25)
     est = Odometry(intrinsics=k)
@@ -170,8 +170,8 @@ def test_odometry_with_per_wheel_intrinsics_turns_as_its_wheels_say():
 def test_models_with_intrinsics_map_counts_per_wheel(cal):
     from lti_motion.app.replay import _odometry
     from lti_motion.app.replay_sources import ReplaySource
-    from lti_motion.frames import SensorFrame
     from lti_motion.intrinsics import OdometryIntrinsics
+    from lti_motion.recordings.frames import SensorFrame
 
     model = cal.arx
     same = model.updated(intrinsics=OdometryIntrinsics.symmetric(

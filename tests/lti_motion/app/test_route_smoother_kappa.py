@@ -9,9 +9,9 @@ from drivers.sim.config import get_preset
 from fusion.graph.smoother import SmootherOptions
 from lti_motion.app.route import ROUTE_LANDMARKS, drive_route
 from lti_motion.app.route_smoother import ROUTE_SMOOTHER_OPTIONS, SmootherEstimator
-from lti_motion.calibration import CalibrationPlan
-from lti_motion.frames import SensorFrame
+from lti_motion.calibration.manoeuvres import CalibrationPlan
 from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.recordings.frames import SensorFrame
 
 #: Issue 17's robot: left wheel 1% larger, right motor 10% weaker (benchmarks/bench_intrinsics)
 ASYMMETRIC = get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)

@@ -8,10 +8,10 @@ import pytest
 
 from fusion.ekf.model_ekf import ModelEKF
 from lti_motion.app.route import ArxHybrid, EkfEstimator, Odometry
-from lti_motion.arx import estimate_arx
-from lti_motion.frames import SensorFrame
 from lti_motion.kinematics import body_from_wheel_matrix
-from lti_motion.model import MotionModel
+from lti_motion.model.arx import estimate_arx
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.frames import SensorFrame
 
 DT_S, B_M, M_PER_TICK, N = 0.015, 0.235, 1e-4, 200
 WHEEL_M_S = np.array([0.18, 0.22])

@@ -17,8 +17,8 @@ import drivers.sim.calibration
 from drivers.sim.config import Room, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
-from lti_motion.logfile import load_log
-from lti_motion.model import MotionModel
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings.logfile import load_log
 
 CREATE2 = Path(drivers.sim.calibration.__file__).parent / "robots" / "create2.toml"
 
@@ -37,7 +37,7 @@ def lefty(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def run(lefty, tmp_path_factory):
     """One wall run of 1 m runs on the simulator, starting from a model file's intrinsics."""
-    from lti_motion.fir import FirFit
+    from lti_motion.model.fir import FirFit
 
     folder = tmp_path_factory.mktemp("wall")
     fit = FirFit(taps=np.stack([np.zeros((2, 2)), [[0.5, 0.5], [-4.0, 4.0]]]),

@@ -1,0 +1,117 @@
+"""The bags wing: ROS 1 and ROS 2 bags in and out, through ``rosbags`` (no ROS install).
+
+- :mod:`drivers.bags.reader`: :func:`read_bag`, a drive's topics found by message type;
+- :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
+- :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
+- :mod:`drivers.bags.tf`: reference poses from ``/tf``;
+- :mod:`drivers.bags.to_log`: a bag's drive on the grid of the sensor period;
+- :mod:`drivers.bags.imu_noise`: the gyro's noise measured from the bag;
+- :mod:`drivers.bags.writer`: estimates and simulated drives written as bags.
+
+The names below load with their module on first use (:mod:`lti_motion.lazy`), so
+importing the door costs nothing until a name is read.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from lti_motion.lazy import lazy_exports
+
+__all__ = [
+    "CREATE2_TICKS_PER_RAD",
+    "CREATE2_WHEEL_RADIUS_M",
+    "LEFT_JOINT",
+    "RIGHT_JOINT",
+    "TF_TYPE",
+    "TOPIC_OPTIONS",
+    "TOPIC_TYPES",
+    "TRUTH_CHILDREN",
+    "TRUTH_PARENTS",
+    "BagAlarm",
+    "BagRecording",
+    "ImuRateNoise",
+    "StampedSeries",
+    "TfTruth",
+    "bag_paths",
+    "bag_to_log",
+    "bag_topics",
+    "decode_fields",
+    "field_value",
+    "imu_rate_noise",
+    "is_mcap",
+    "open_bag",
+    "raw_messages",
+    "read_bag",
+    "tf_truth",
+    "with_rate_data",
+    "write_drive_bag",
+    "write_estimates_bag",
+]
+
+__getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "drivers.bags.fields": (
+            "decode_fields",
+            "field_value",
+        ),
+        "drivers.bags.imu_noise": (
+            "ImuRateNoise",
+            "imu_rate_noise",
+            "with_rate_data",
+        ),
+        "drivers.bags.messages": (
+            "bag_paths",
+            "is_mcap",
+            "open_bag",
+            "raw_messages",
+        ),
+        "drivers.bags.reader": (
+            "BagRecording",
+            "LEFT_JOINT",
+            "RIGHT_JOINT",
+            "StampedSeries",
+            "TOPIC_OPTIONS",
+            "TOPIC_TYPES",
+            "bag_topics",
+            "read_bag",
+        ),
+        "drivers.bags.tf": (
+            "TF_TYPE",
+            "TRUTH_CHILDREN",
+            "TRUTH_PARENTS",
+            "TfTruth",
+            "tf_truth",
+        ),
+        "drivers.bags.to_log": (
+            "CREATE2_TICKS_PER_RAD",
+            "CREATE2_WHEEL_RADIUS_M",
+            "bag_to_log",
+        ),
+        "drivers.bags.writer": (
+            "BagAlarm",
+            "write_drive_bag",
+            "write_estimates_bag",
+        ),
+    },
+    __all__,
+)
+
+if TYPE_CHECKING:
+    from drivers.bags.fields import decode_fields, field_value
+    from drivers.bags.imu_noise import ImuRateNoise, imu_rate_noise, with_rate_data
+    from drivers.bags.messages import bag_paths, is_mcap, open_bag, raw_messages
+    from drivers.bags.reader import (
+        LEFT_JOINT,
+        RIGHT_JOINT,
+        TOPIC_OPTIONS,
+        TOPIC_TYPES,
+        BagRecording,
+        StampedSeries,
+        bag_topics,
+        read_bag,
+    )
+    from drivers.bags.tf import TF_TYPE, TRUTH_CHILDREN, TRUTH_PARENTS, TfTruth, tf_truth
+    from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
+    from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag
