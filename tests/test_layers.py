@@ -6,7 +6,11 @@
 - nothing in the three packages imports ``lti_motion.app``, the application; the
   examples (what users copy) import from it only the route harness
   ``lti_motion.app.route``, the public evaluation on the simulator (``docs/route.md``);
-- no package holds an import cycle among its modules (deferred imports included).
+- no package holds an import cycle among its modules (deferred imports included);
+- the core's wings follow the flow of data: ``recordings`` and ``model`` stand on the
+  base alone, ``calibration`` on the base, ``recordings`` and ``model``; the base imports
+  no wing (its door only names them);
+- a package keeps few top-level modules besides its wings (the folders show the flow).
 """
 
 from __future__ import annotations
@@ -136,3 +140,33 @@ def test_no_import_cycle_between_modules(package):
                 targets.add(imported)
         graph[name] = targets
     assert _cycle(graph) is None, f"import cycle: {' -> '.join(_cycle(graph))}"
+
+
+CORE_WINGS = {"lti_motion.recordings": set(), "lti_motion.model": set(),
+              "lti_motion.calibration": {"lti_motion.recordings", "lti_motion.model"}}
+
+
+def _wing(name: str) -> str | None:
+    return next((w for w in (*CORE_WINGS, "lti_motion.app")
+                 if name == w or name.startswith(w + ".")), None)
+
+
+@pytest.mark.parametrize("path", CORE, ids=lambda p: str(p.relative_to(ROOT)))
+def test_core_wings_follow_the_flow_of_data(path):
+    """recordings -> calibration <- model, all on the base; the base imports no wing."""
+    name = _module_name(path)
+    own = _wing(name)
+    if path.name == "__init__.py" and own is None:
+        return                                  # the package door names every wing
+    allowed = CORE_WINGS.get(own, set()) | ({own} if own else set())
+    reached = {w for imported in _imports(path) if (w := _wing(imported))}
+    assert reached <= allowed, f"{name} imports the wings {sorted(reached - allowed)}"
+
+
+@pytest.mark.parametrize(("package", "most"), [("lti_motion", 12), ("drivers", 6),
+                                               ("fusion", 8)])
+def test_few_top_level_modules_besides_the_wings(package, most):
+    modules = sorted(p.stem for p in (ROOT / package).glob("*.py") if p.name != "__init__.py")
+    assert len(modules) <= most, f"{package} has {len(modules)} top-level modules: {modules}"
+    wings = [p.name for p in (ROOT / package).iterdir() if (p / "__init__.py").is_file()]
+    assert wings, f"{package} has no wings"
