@@ -98,7 +98,7 @@ def test_every_layer_raises_the_one_error_with_what_to_do(unscaled, call, keywor
     message = str(info.value)
     assert isinstance(info.value, ValueError)
     assert "calibrate the model with the rotation in place" in message
-    assert "lti_motion.calibration.manoeuvres.calibrate" in message
+    assert "lti_motion.calibration.calibrate" in message
     if keyword is not None:
         assert f"pass {keyword}" in message
 
