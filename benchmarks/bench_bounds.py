@@ -1,4 +1,4 @@
-"""Filters that cannot run away (issue 15 item 3): the bounds' accuracy and their cost.
+"""Filters that cannot run away (docs/ekf.md, bounds and resets): the' accuracy and their cost.
 
 The scenario of ``tests/fusion/ekf/test_resets.py``, over more seeds: a robot at
 rest for 30 s while its odometry reads -0.022 m/s (an encoder bias at rest),

@@ -29,8 +29,8 @@ Figures:
     motion capture (an ARX model calibrated on this robot, the route's four landmarks
     at 2 Hz): worst errors over 10 seeds, and the route closure of 5 of them (no targets).
 
-``python -m benchmarks intrinsics_online`` (issue 17 item 3: the model EKF learns the diameter
-ratio from landmarks; :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`). The same robot and
+``python -m benchmarks intrinsics_online`` (docs/intrinsics.md: the model EKF learns the
+diameter ratio from landmarks; :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`). The same robot and
 floor, the ARX model of the ``landmarks_*`` figures (calibrated symmetric: the rotation
 scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 route seeds:
 
@@ -95,7 +95,7 @@ REPEATS = 6
 
 
 def asymmetric_robot() -> RobotParams:
-    """The robot of issue 17: left wheel 1% larger, right motor 10% weaker."""
+    """The asymmetric robot: left wheel 1% larger, right motor 10% weaker (docs/intrinsics.md)."""
     return get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)
 
 

@@ -15,7 +15,7 @@ each of four landmarks at 2 Hz).
 - Encoder spikes on both wheels and a 3 s stuck left encoder, 30 runs of 60 s: final
   error at most half of odometry's on every run; every injected spike (found by
   comparing with a twin simulator without spikes) rejected by the gate.
-- Landmark sensor 0.22 m ahead of the axle (issue 16), 10 runs of 60 s: with its mount
+- Landmark sensor 0.22 m ahead of the axle (fusion.sensor_pose), 10 runs of 60 s: with its mount
   given, position RMS error within 2 cm and at most 5% of the sightings gated, as
   centred; the same sightings taken as from the axle centre (the issue's failure)
   are mostly gated and leave several times the error.

@@ -1,4 +1,4 @@
-"""The wheel-drift alarm (issue 17 item 5): the scale test's curvature shadows.
+"""The wheel-drift alarm (docs/intrinsics.md): the scale test's curvature shadows.
 
 A straight line with a known curvature change (closed form: the ground heading
 turns ``kappa`` per metre while both encoders count alike), the same line with a
