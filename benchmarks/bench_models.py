@@ -8,6 +8,8 @@
 - ``models.rls_samples_s``: recursive least squares, order 9, one
   ``update(u, y)`` call per sample (as an online loop uses it), and
   ``models.rls_update_many_samples_s`` for a buffered block.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -14,6 +14,8 @@ wheel motors are current limited. The ``paper`` preset is the paper's Roomba 560
 18 ms sensor period, a wheel base of 0.33 m as the paper states (paper section III.A,
 eq. 13) and a longer command delay; a step settles within 15 samples (paper
 Fig. 6).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -49,6 +49,8 @@ The mechanics is integrated with semi-implicit Euler at a quarter of the
 controller step; each wheel's update is implicit in its own slip (the traction
 force linearised about the current slip), which keeps the stiff, light wheel
 mode stable at low speed, where the slip-ratio contact is stiffest.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

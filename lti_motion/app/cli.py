@@ -27,6 +27,8 @@ allowed to import ``drivers`` and ``fusion`` (docs/architecture.md, Layout and l
 Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
 and a mistyped option cost only the parser (and numpy, for the simulator's floor names;
 robot files are read when a sub-command names a robot).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

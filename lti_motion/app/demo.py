@@ -8,6 +8,8 @@
 3. A table like Table II beside the paper's numbers, and a report folder:
    ``metrics.json`` (``closure_offset_m``: per estimator ``mean``, ``std``, ``n``),
    plots, and ``report.md`` that shows them.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -30,6 +30,8 @@ reflective, finite-difference Jacobian) from the least-squares fit (Ljung
 1999, section 10.2: an ARX estimate is the usual starting point for the
 output-error search). Unstable iterates are rejected with a large residual.
 An FIR is the case ``na = 0`` (its criterion is then linear in ``theta``).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

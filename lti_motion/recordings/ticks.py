@@ -5,6 +5,8 @@ counter that wraps (Open Interface packets 43 and 44). The counts
 are unwrapped with the shortest signed step on the 16-bit ring, which is
 correct in both directions as long as fewer than 32768 ticks (14.5 m of
 wheel travel) pass between two frames.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -149,7 +151,7 @@ def body_speeds_from_ticks(
     -------
     ndarray, shape (n - 1, 2)
         ``v = (vR + vL) / 2`` [m/s] and ``w = (vR - vL) / b`` [rad/s] over
-        each interval (READING-NOTES, Signals).
+        each interval (paper section II.B, Fig. 1).
 
     Raises
     ------

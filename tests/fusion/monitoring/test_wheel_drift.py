@@ -5,6 +5,8 @@ turns ``kappa`` per metre while both encoders count alike), the same line with a
 scale change (which must stay a scale alarm), the route with the simulator's
 ``wheel_diameter`` fault (seeds of the tests' own, not the benchmark's), the
 ``ResidualMonitor`` kind, the recalibration policy's answer and the alarm line.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 import math

@@ -1,4 +1,7 @@
-"""The paper's closed-route evaluation (Table II) on the simulator, in lock step."""
+"""The paper's closed-route evaluation (Table II) on the simulator, in lock step.
+
+The paper: ``docs/architecture.md``, "The paper".
+"""
 
 import numpy as np
 import pytest
