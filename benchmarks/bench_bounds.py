@@ -87,7 +87,7 @@ def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None
 
 def biased_drive(example, model: MotionModel, *, seed: int, rest_s: float, bias_m_s: float,
                  duration_s: float = DRIVE_S) -> tuple[FrameLog, np.ndarray, RangeBearing]:
-    """The issue's scenario on the simulator: rest, then ``examples/ekf_plugin.py``'s
+    """The scenario of test_resets.py on the simulator: rest, then ``examples/ekf_plugin.py``'s
     rounded-square route; the odometry's body speeds [m/s, rad/s] biased by ``bias_m_s`` on
     both wheels while at rest; sightings of the four corner landmarks at 10 Hz."""
     sim = Simulator("create2", n_robots=1, seed=seed, room=Room.box(5.0, 5.0),

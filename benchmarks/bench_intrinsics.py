@@ -54,7 +54,7 @@ scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 rout
     to the intrinsics each full-landmark run ended with
     (:meth:`lti_motion.model.MotionModel.with_intrinsics`), driven with route seed + 100
     (another slip realisation than the one it learned on); baseline the same filter with
-    the symmetric model on the same seeds (the issue's 0.908 m row).
+    the symmetric model on the same seeds (the 0.908 m row of docs/intrinsics.md).
 ``intrinsics.online_*_std_m``
     The standard deviations over the seeds of those closures.
 """
@@ -84,7 +84,7 @@ from lti_motion.recordings.ticks import tick_deltas, unwrap_ticks
 
 FLOOR = "tile"
 ROUTE_SEEDS = range(30)
-ONLINE_BAND = 0.002                  # the issue's 0.2% on the diameter ratio
+ONLINE_BAND = 0.002                  # the target 0.2% on the diameter ratio
 WRITEBACK_SEED_OFFSET = 100          # the write-back's second drive: other seeds, other slip
 #: The ratio state held at zero: the filter as it was before kappa (scale errors k_v, k_w)
 HELD_RATIO = ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0)

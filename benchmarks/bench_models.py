@@ -1,4 +1,4 @@
-"""Model calibration and prediction speed (core-models issue).
+"""Model calibration and prediction speed (docs/calibration.md).
 
 - ``models.arx_fit_ms``: an order-9 ARX fit (2 inputs, 2 outputs, delay 4) on
   10,000 samples, regression matrix included; baseline: the same least-squares

@@ -56,7 +56,7 @@ _log = logging.getLogger(__name__)
 ROUTE_M = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [1.5, 2.7], [0.0, 2.0], [0.0, 0.0]])
 ROUTE_M.flags.writeable = False
 
-#: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
+#: Four landmarks around the route, in a 5 m x 5 m room.
 ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
 
 

@@ -73,7 +73,7 @@ class OutputErrorOptions:
     ----------
     horizons_s : tuple of float
         Moving-sum horizons [s] besides the one-sample simulation error; the
-        issue's 1-30 s by default.
+        1-30 s by default.
     pose_horizons_s : tuple of float
         Horizons [s] of windows (one starting every second) over which the
         measured and the simulated speeds are integrated into a path from the

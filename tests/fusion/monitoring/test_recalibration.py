@@ -1,4 +1,4 @@
-"""Recalibration after the monitor's own dynamics alarms (fault-detection issue).
+"""Recalibration after the monitor's own dynamics alarms (docs/monitor.md).
 
 The policy's bookkeeping (segments at time gaps, the excitation request, automatic
 retries, the refit's steady-state gain), then a short form of the benchmark
