@@ -1,4 +1,4 @@
-"""A gyro through a ROS bag (issue 16): ``replay --bag`` with its Imu, without, from memory.
+"""A gyro through a ROS bag (docs/replay.md): ``replay --bag`` with its Imu, without, from memory.
 
 The drive (``tests/lti_motion/app/test_bag_gyro.py``'s): the create2 simulator on
 carpet (the ground turns about 5% short of the encoders) with a gyro (0.005

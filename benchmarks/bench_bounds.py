@@ -1,4 +1,4 @@
-"""Filters that cannot run away (issue 15 item 3): the bounds' accuracy and their cost.
+"""Filters that cannot run away (docs/ekf.md, bounds and resets): the' accuracy and their cost.
 
 The scenario of ``tests/fusion/ekf/test_resets.py``, over more seeds: a robot at
 rest for 30 s while its odometry reads -0.022 m/s (an encoder bias at rest),
@@ -87,7 +87,7 @@ def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None
 
 def biased_drive(example, model: MotionModel, *, seed: int, rest_s: float, bias_m_s: float,
                  duration_s: float = DRIVE_S) -> tuple[FrameLog, np.ndarray, RangeBearing]:
-    """The issue's scenario on the simulator: rest, then ``examples/ekf_plugin.py``'s
+    """The scenario of test_resets.py on the simulator: rest, then ``examples/ekf_plugin.py``'s
     rounded-square route; the odometry's body speeds [m/s, rad/s] biased by ``bias_m_s`` on
     both wheels while at rest; sightings of the four corner landmarks at 10 Hz."""
     sim = Simulator("create2", n_robots=1, seed=seed, room=Room.box(5.0, 5.0),

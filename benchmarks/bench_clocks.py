@@ -1,4 +1,4 @@
-"""Real clocks (issue 16): calibration on drives with host jitter, lost frames and clock drift.
+"""Real clocks: calibration on drives with host jitter, lost frames and clock drift.
 
 ``N_DRIVES`` simulated create2 drives (seeds 0-49, batch simulation, an empty
 room: calibration drives are on open floor, wall contact ruins any fit), each

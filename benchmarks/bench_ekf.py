@@ -1,4 +1,4 @@
-"""EKF plug-in speed (EKF issue): the calibrated model inside filterpy against the textbook filter.
+"""EKF plug-in speed (docs/ekf.md): the model inside filterpy against the textbook filter.
 
 - ``ekf.predict_update_us``: one :meth:`fusion.ekf.ModelEKF.predict` plus one
   :meth:`~fusion.ekf.ModelEKF.update_encoders` (raw counts, rollover-safe

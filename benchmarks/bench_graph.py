@@ -1,4 +1,4 @@
-"""Factor-graph speed (factor-graph issue): preintegration, and iSAM2 with model factors.
+"""Factor-graph speed (docs/factor_graph.md): preintegration, and iSAM2 with model factors.
 
 - ``graph.preintegrate_msamples_s``: :func:`fusion.graph.preintegrate`
   on one million speed samples in 0.5 s intervals (mean, covariance and

@@ -1,4 +1,4 @@
-"""A yaw-rate gyro in the model EKF (issue 16): heading and position, encoders alone and with it.
+"""A yaw-rate gyro in the model EKF (docs/ekf.md): heading and position, encoders alone and with it.
 
 ``examples/ekf_plugin.py``'s rounded-square route in a 5 m room, no landmarks, 60 s
 after a rest (10 s, or 1 s); the simulated Create 2 with a MEMS-like gyro (noise

@@ -29,8 +29,8 @@ Figures:
     motion capture (an ARX model calibrated on this robot, the route's four landmarks
     at 2 Hz): worst errors over 10 seeds, and the route closure of 5 of them (no targets).
 
-``python -m benchmarks intrinsics_online`` (issue 17 item 3: the model EKF learns the diameter
-ratio from landmarks; :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`). The same robot and
+``python -m benchmarks intrinsics_online`` (docs/intrinsics.md: the model EKF learns the
+diameter ratio from landmarks; :meth:`fusion.ekf.ModelEKF.intrinsics_estimate`). The same robot and
 floor, the ARX model of the ``landmarks_*`` figures (calibrated symmetric: the rotation
 scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 route seeds:
 
@@ -54,7 +54,7 @@ scale, no intrinsics), the demo's route with its four landmarks at 2 Hz, 30 rout
     to the intrinsics each full-landmark run ended with
     (:meth:`lti_motion.model.MotionModel.with_intrinsics`), driven with route seed + 100
     (another slip realisation than the one it learned on); baseline the same filter with
-    the symmetric model on the same seeds (the issue's 0.908 m row).
+    the symmetric model on the same seeds (the 0.908 m row of docs/intrinsics.md).
 ``intrinsics.online_*_std_m``
     The standard deviations over the seeds of those closures.
 """
@@ -84,7 +84,7 @@ from lti_motion.recordings.ticks import tick_deltas, unwrap_ticks
 
 FLOOR = "tile"
 ROUTE_SEEDS = range(30)
-ONLINE_BAND = 0.002                  # the issue's 0.2% on the diameter ratio
+ONLINE_BAND = 0.002                  # the target 0.2% on the diameter ratio
 WRITEBACK_SEED_OFFSET = 100          # the write-back's second drive: other seeds, other slip
 #: The ratio state held at zero: the filter as it was before kappa (scale errors k_v, k_w)
 HELD_RATIO = ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0)
@@ -95,7 +95,7 @@ REPEATS = 6
 
 
 def asymmetric_robot() -> RobotParams:
-    """The robot of issue 17: left wheel 1% larger, right motor 10% weaker."""
+    """The asymmetric robot: left wheel 1% larger, right motor 10% weaker (docs/intrinsics.md)."""
     return get_preset("create2", wheel_diameter_errors=(0.01, 0.0), motor_balance=0.90)
 
 

@@ -1,4 +1,4 @@
-"""Model calibration and prediction speed (core-models issue).
+"""Model calibration and prediction speed (docs/calibration.md).
 
 - ``models.arx_fit_ms``: an order-9 ARX fit (2 inputs, 2 outputs, delay 4) on
   10,000 samples, regression matrix included; baseline: the same least-squares
@@ -8,6 +8,8 @@
 - ``models.rls_samples_s``: recursive least squares, order 9, one
   ``update(u, y)`` call per sample (as an online loop uses it), and
   ``models.rls_update_many_samples_s`` for a buffered block.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

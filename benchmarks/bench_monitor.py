@@ -1,6 +1,6 @@
-"""Residual monitor (fault-detection issue): dynamics faults and false alarms on the route.
+"""Residual monitor (docs/monitor.md): dynamics faults and false alarms on the route.
 
-The experiments issue's closed route (:func:`lti_motion.app.route.drive_route`:
+The closed route (:func:`lti_motion.app.route.drive_route`:
 stop, turn in place, drive at 0.25 m/s, slow down at each checkpoint), many
 robots in lock step, steering on encoder odometry; the monitor sees commands
 and encoder counts only (the route strips the simulator's truth).
@@ -36,7 +36,7 @@ place, seed ``900 + run``), and the policy refits, validates and adopts or
 keeps. Fits [%] (mean of v and w, free run) on ``VALIDATION_S`` of fresh
 random excitation (seed ``5000 + run``): the nominal model on the nominal
 robot (before the fault), the nominal model and the model in use after the
-recalibration on the faulty robot. Target (issue): in use after minus before
+recalibration on the faulty robot. Target: in use after minus before
 the fault >= -2 percentage points. Alarms before the onset are false alarms
 (counted by ``monitor``) and are not passed on here.
 """

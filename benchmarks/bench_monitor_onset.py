@@ -1,4 +1,4 @@
-"""Faults that come together, and when the monitor says they began (issue 15, item 17).
+"""Faults that come together, and when the monitor says they began (docs/monitor.md).
 
 ``lti-motion monitor --sim`` as :mod:`benchmarks.bench_live_monitor` runs it (the
 command's model and Phase I, the monitor route, 60 s drives, the simulated

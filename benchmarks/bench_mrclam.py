@@ -1,4 +1,4 @@
-"""MRCLAM set 6, the tables of docs/mrclam.md as records (issue 18).
+"""MRCLAM set 6, the tables of docs/mrclam.md as records.
 
 Per robot: the ARX model calibrated on the first half of its run
 (:func:`lti_motion.app.mrclam.evaluate_robot`), scored on the second half
@@ -18,8 +18,8 @@ against the commands taken at face value:
 
 The ARX model is the one :data:`CRITERION` gives (``"selected"``: per robot, the
 candidate structure with the least first-half cross-validated 30 s path error, by the
-rules of docs/mrclam.md). The data are found through ``LTI_MOTION_DATA`` (default
-``../shared/data``), as the tests find them. About 2 minutes for all five robots on a
+rules of docs/mrclam.md). The data are found through ``LTI_MOTION_DATA`` (default: the
+data folder beside the working directory), as the tests do. About 2 minutes for all five robots on a
 quiet machine (the selection fits 14 candidates x 3 folds per robot).
 """
 
@@ -44,7 +44,7 @@ CRITERION = "selected"
 
 
 def dataset_path() -> Path:
-    """MRCLAM set 6 under ``LTI_MOTION_DATA`` (default ``../shared/data``)."""
+    """MRCLAM set 6 under ``LTI_MOTION_DATA`` (default: the data beside the working directory)."""
     root = Path(os.environ.get("LTI_MOTION_DATA", "../shared/data"))
     path = root / "mrclam" / "MRCLAM_Dataset6"
     if not path.is_dir():

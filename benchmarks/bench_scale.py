@@ -1,6 +1,6 @@
-"""Scale monitor (fault-detection issue): the floor changes to carpet; landmarks at 2 Hz see it.
+"""Scale monitor (docs/monitor.md): the floor changes to carpet; landmarks at 2 Hz see it.
 
-The experiments issue's closed route (:func:`lti_motion.app.route.drive_route`),
+The closed route (:func:`lti_motion.app.route.drive_route`),
 many robots in lock step, steering on encoder odometry, with the route's four
 landmarks (:data:`~lti_motion.app.route.ROUTE_LANDMARKS`) each seen at
 2 Hz (2% of range, 1 degree). The monitor (:class:`fusion.monitoring.ScaleMonitor`)

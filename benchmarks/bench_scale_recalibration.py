@@ -1,4 +1,4 @@
-"""Scale recalibration from landmarks after a carpet alarm (fault-detection issue).
+"""Scale recalibration from landmarks after a carpet alarm (docs/monitor.md).
 
 The carpet runs of ``benchmarks/bench_scale.py`` (the route, landmarks at
 2 Hz, the floor turning to carpet at an onset uniform in 15-40 s), streamed

@@ -1,6 +1,6 @@
 """Sensor tests on the route: the chi-square encoder gate against the Phase-I gate.
 
-The experiments issue's route (``benchmarks/bench_monitor.py``'s drives and
+The closed route (``benchmarks/bench_monitor.py``'s drives and
 calibration); per run a :class:`~fusion.ekf.ModelEKF` on the encoders and a
 :class:`~fusion.monitoring.ResidualMonitor` with the gate, glitch bursts and the
 stuck check (no dynamics or scale test). Two gates: the chi-square default

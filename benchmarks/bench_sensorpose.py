@@ -19,7 +19,7 @@ end of the drive, the RMS over every frame):
   centred camera's closure error in the same process (``ratio`` is the target's ratio).
 - ``sensorpose.rms_ahead_mm``: the same runs' position RMS, same target on the centred RMS.
 - ``sensorpose.closure_ignored_mm``: the 0.15 m camera's detections taken as from the axle
-  centre (the issue's failure), against the same baseline; no target.
+  centre (the mount dropped), against the same baseline; no target.
 - ``sensorpose.gated_ignored_pct``: the share of those detections the EKF gates; no target.
 
 The spread (standard deviation over the runs) is printed to stderr for the record in

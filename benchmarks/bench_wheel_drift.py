@@ -1,4 +1,4 @@
-"""Wheel-drift alarm (issue 17 item 5): one wheel's diameter grows 0.5% during a route drive.
+"""Wheel-drift alarm (docs/intrinsics.md): one wheel's diameter grows 0.5% during a route drive.
 
 The scale benchmark's route drives (:mod:`benchmarks.bench_scale`: the closed
 route, steering on encoder odometry, the four landmarks at 2 Hz, 2% of range and

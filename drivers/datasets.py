@@ -34,7 +34,7 @@ __all__ = [
     "resample_robot",
 ]
 
-#: Wheel base of the iRobot Create (1) the dataset used [m] (spec section 7.1, libcreate).
+#: Wheel base of the iRobot Create (1) the dataset used [m] (spec §7.1, :mod:`drivers.roomba.oi`).
 CREATE1_WHEEL_BASE_M = 0.258
 
 

@@ -4,11 +4,11 @@ The paper's three manoeuvres (rotation in place, one-motor steps, random excitat
 run on the simulator; the script writes four plots and the model file:
 
 - ``step_responses.png``: the FIR model's step responses, v and w to each motor
-  (as the paper's Fig. 5-6);
+  (as paper Fig. 5-6);
 - ``order_selection.png``: free-run validation error against ARX order, per delay,
   with the choice marked;
 - ``calibration_sequence.png``: the commands and encoder speeds of the excitation
-  (as the paper's Fig. 7);
+  (as paper Fig. 7);
 - ``validation.png``: a fresh drive, encoder speeds against the models' free-run output;
 - ``model_arx.json``: the calibrated ARX model.
 
@@ -18,6 +18,8 @@ It stands on the public API only (the simulator, the calibration, the model) and
 its figures with matplotlib's object-oriented API (``Figure`` and ``savefig``: no
 pyplot, no backend to choose). ``lti-motion calibrate --sim create2`` does the same from
 the command line.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Alarms and recalibration on one simulated drive: an encoder glitch, carpet, then a payload.
 
-A Create 2 drives the experiments issue's closed route (stop, turn in place,
+A Create 2 drives the closed route (stop, turn in place,
 drive at 0.25 m/s, slow down at each checkpoint; steering on its encoder
 odometry) with four landmarks seen at 2 Hz. On the way its left encoder
 spikes for a second (20 Hz of 150-tick spikes), the floor turns to carpet

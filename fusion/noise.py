@@ -103,7 +103,7 @@ class ScaleErrors:
         ``r / b``). The rotation manoeuvre measures the wheels' *mean* scale
         and says nothing of their ratio, so the prior is the tyres' own
         tolerance: 1%, i.e. 0.043 rad/m on a Create 2's 0.235 m wheel base
-        (the issue-17 robot has exactly that).
+        (the asymmetric robot of docs/intrinsics.md has exactly that).
     ratio_walk_per_sqrt_s : float
         Random-walk rate of the diameter ratio [1/sqrt(s)] (``kappa``'s is
         this over ``b``); 1e-4, as for ``(k_v, k_w)``: 0.1% in 100 s.

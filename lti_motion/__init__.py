@@ -7,6 +7,8 @@ encoder scale from a rotation (eq. 13), FIR and ARX identification, one state-sp
 Importing the package loads none of its modules: each name below loads with its
 module the first time it is used (:mod:`lti_motion.lazy`), so a program pays only
 for what it uses.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -2,6 +2,8 @@
 
 Each subclasses the matching builtin, so callers may catch either the
 specific class or ``ValueError`` / ``RuntimeError``.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

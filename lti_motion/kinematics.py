@@ -13,14 +13,16 @@ written in a chord form with no branch at ``w = 0``: with ``phi = w dt``,
     y' = y + v\\,dt\\,S(\\phi/2)\\sin(\\theta + \\phi/2), \\quad
     \\theta' = \\theta + \\phi,
 
-where :math:`S(h) = \\sin(h)/h` (and :math:`S(0) = 1`). Both branches of the
-paper's eq. 11 are this one expression: the arc of radius ``v / w`` has the
+where :math:`S(h) = \\sin(h)/h` (and :math:`S(0) = 1`). Both branches of
+paper eq. 11 are this one expression: the arc of radius ``v / w`` has the
 chord ``2 (v/w) sin(phi/2) = v dt S(phi/2)``, pointing along the mid-step
 heading.
 
 Headings are *not* wrapped during integration: ``theta`` stays continuous, so
 that differences of headings (turn counts, yaw-rate residuals, Jacobians) are
 free of 2 pi jumps. Use :func:`wrap_angle` where a wrapped angle is needed.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -113,7 +115,7 @@ def body_from_wheel(wheel_m_s: np.ndarray, *, wheel_base_m: float) -> np.ndarray
 
     Notes
     -----
-    Output equations of READING-NOTES, Signals (paper section II.A).
+    Output equations of paper section II.B (Fig. 1: outputs ``v`` and ``w``).
 
     Examples
     --------

@@ -5,6 +5,8 @@ theta [rad])`` sampled at the same instants (positions ``(..., n, 2)`` are
 accepted where headings are not needed). Leading axes are batch axes (for
 example ``N`` simulated robots); a metric over an unbatched trajectory returns
 a Python ``float``.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

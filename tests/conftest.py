@@ -22,7 +22,8 @@ def rng() -> np.random.Generator:
 
 
 def data_dir() -> Path | None:
-    """Real robot data: ``LTI_MOTION_DATA`` (the Makefile sets it), else ``../shared/data``."""
+    """Real robot data (docs/mrclam.md): ``LTI_MOTION_DATA`` (the Makefile sets it), else the
+    data folder beside the checkout, where the Makefile looks too; ``None`` if neither."""
     env = os.environ.get("LTI_MOTION_DATA")
     path = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data"
     return path if path.is_dir() else None

@@ -1,4 +1,4 @@
-"""Examples run as a user runs them, with short horizons (STYLE rule 15)."""
+"""Examples run as a user runs them, with short horizons (each is functions and a seeded main)."""
 
 
 

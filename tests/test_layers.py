@@ -1,4 +1,4 @@
-"""The layers of ``docs/architecture.md``, checked by package (STYLE rule 1).
+"""The layers of ``docs/architecture.md``, checked by package (layers go one way).
 
 - the core (``lti_motion`` outside ``lti_motion.app``) imports numpy, scipy and itself:
   neither ``fusion`` nor ``drivers``, nor an adapter's library;

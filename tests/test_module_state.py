@@ -1,4 +1,4 @@
-"""No module-level mutable state in the packages (STYLE rule 13).
+"""No module-level mutable state in the packages (state lives in objects the caller owns).
 
 Every module of ``lti_motion``, ``fusion`` and ``drivers`` is imported, and each of
 its globals and each attribute of the classes it defines is walked: a ``dict``,

@@ -7,8 +7,8 @@ signature of :meth:`drivers.sim.Simulator.step`, so calibration manoeuvres run
 unchanged on the simulator or the robot, e.g. through :func:`lti_motion.calibration.drive`.
 
 Protocol bytes come from :mod:`drivers.roomba.oi`; this module owns only the port,
-the clocks and the failure handling. Section numbers ("spec §4.1", "G17")
-refer to ``../shared/spec/roomba_oi.md``.
+the clocks and the failure handling. Section numbers ("spec §4.1") and gotchas ("G17")
+are those listed in :mod:`drivers.roomba.oi`.
 
 Failure handling, in short:
 

@@ -5,9 +5,18 @@ query-list replies, and an incremental stream-frame parser that resyncs on
 corrupt data. Nothing here touches a port, a clock or a thread; the pyserial
 driver and the virtual Roomba both build on these functions.
 
-Section numbers ("spec §4.1") refer to the project's fact sheet
-``../shared/spec/roomba_oi.md``, which cites the iRobot Create 2 Open
-Interface Specification (August 2016) by page.
+Section numbers ("spec §4.1") and gotchas ("G9") are those of the project's
+Open Interface fact sheet, which restates the iRobot Create 2 Open Interface
+Specification (August 2016) page by page: §1 the serial line (§1.3 baud rates,
+§1.4 sleep, BRC wake and charging), §2 OI modes, §3 commands (§3.1 Drive, §3.2
+Drive Direct, §3.3 bit fields, §3.4 Song), §4 sensor access (§4.1 the stream
+frame, its resync and bandwidth), §5 the sensor packets (§5.1 groups), §6
+distance and angle caveats (§6.1 firmware bugs, §6.2 non-quadrature encoders,
+§6.3 firmware version and banners), §7 encoders to odometry (§7.1 constants,
+§7.2 formulas), §8 an emulator on a pseudo-terminal (§8.1 byte 19 as XOFF,
+§8.3 modem-line ioctls, §8.5 the emulator's checklist), §9 known gotchas G1-G21
+(e.g. G3 the robot asleep or at the wrong baud, G7 Safe falling back to
+Passive, G9 a stream too large for its period, G17 the FTDI latency timer).
 
 The packet table, value codecs and byte layouts live in
 :mod:`drivers.roomba.oi_packets`; their public names are re-exported here so callers

@@ -2,8 +2,8 @@
 
 One frozen :class:`PacketSpec` per single sensor packet (ids 7-58) and one
 :class:`GroupSpec` per packet group (ids 0-6, 100, 101, 106, 107), transcribed
-from the project's fact sheet ``../shared/spec/roomba_oi.md`` (spec §5 and
-§5.1, which in turn cite the iRobot Create 2 OI Specification pp. 23-32 and
+from the project's Open Interface fact sheet (spec §5 and §5.1, listed in
+:mod:`drivers.roomba.oi`, which in turn cite the iRobot Create 2 OI Specification pp. 23-32 and
 the membership table p. 39). A group's size is *computed* from its members;
 the test suite checks it against the sizes printed in spec §5.1.
 

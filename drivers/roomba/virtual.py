@@ -9,7 +9,7 @@ by :mod:`drivers.roomba.oi`. The pyserial driver :class:`drivers.roomba.Roomba`
 opens :attr:`VirtualRoomba.device_path` exactly as it would open
 ``/dev/ttyUSB0``.
 
-Section numbers ("spec §8.1") refer to ``../shared/spec/roomba_oi.md``.
+Section numbers ("spec §8.1") are those listed in :mod:`drivers.roomba.oi`.
 
 Timing and command alignment
 ----------------------------

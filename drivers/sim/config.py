@@ -9,11 +9,13 @@ presets are the shipped files ``drivers/sim/robots/create2.toml`` and ``paper.to
 The numbers of the ``create2`` preset (also :class:`RobotParams`' defaults) come from
 the Create 2 Open Interface specification (wheel base 235 mm, wheel diameter 72 mm,
 508.8 ticks per wheel revolution, 500 mm/s top speed, 15 ms sensor period;
-``../shared/spec`` sections 4 and 7) and from plausible values for a 3.6 kg robot whose
+spec §4 and §7 in :mod:`drivers.roomba.oi`) and from plausible values for a 3.6 kg robot whose
 wheel motors are current limited. The ``paper`` preset is the paper's Roomba 560:
-18 ms sensor period, a wheel base of 0.33 m as the paper states (READING-NOTES,
-Signals) and a longer command delay; a step settles within 15 samples (paper
+18 ms sensor period, a wheel base of 0.33 m as the paper states (paper section III.A,
+eq. 13) and a longer command delay; a step settles within 15 samples (paper
 Fig. 6).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

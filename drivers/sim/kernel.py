@@ -43,12 +43,14 @@ Model, per wheel ``i`` (left 0, right 1), all at the wheel rim:
 - pose: the exact constant-speed arc over each mechanical sub-step;
 - encoders count wheel rotation in the commanded direction (up when the
   command is zero), as the Roomba's non-quadrature encoders do
-  (``../shared/spec/roomba_oi.md`` section 6.2), so slip is invisible to them.
+  (spec §6.2, :mod:`drivers.roomba.oi`), so slip is invisible to them.
 
 The mechanics is integrated with semi-implicit Euler at a quarter of the
 controller step; each wheel's update is implicit in its own slip (the traction
 force linearised about the current slip), which keeps the stiff, light wheel
 mode stable at low speed, where the slip-ratio contact is stiffest.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -124,6 +124,7 @@ positive semi-definite for any gain; predictions symmetrise ``F P F^T + Q``.
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Y. Bar-Shalom, X. R. Li, T. Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, Wiley 2001, eq. 5.2.3-18 (Joseph form) and section
 5.4.2 (NEES, NIS). D. Simon, *Optimal State Estimation*, Wiley 2006, section

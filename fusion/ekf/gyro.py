@@ -65,6 +65,7 @@ The heading keeps the encoders' account of the stop.
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Y. Bar-Shalom, X. R. Li, T. Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, Wiley 2001, section 5.2.1. S. I. Roumeliotis, J. W.
 Burdick, "Stochastic cloning: a generalized framework for processing relative

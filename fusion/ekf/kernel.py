@@ -37,6 +37,7 @@ the numpy reference would catch a stale one).
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Y. Bar-Shalom, X. R. Li, T. Kirubarajan, *Estimation with Applications to
 Tracking and Navigation*, Wiley 2001, eqs. 5.2.3-5, 5.2.3-9, 5.2.3-18.
 """

@@ -16,6 +16,8 @@ updates, their gate and their records are the model filter's
 (r, b))`` and ``update_landmarks(sightings)`` on a
 :class:`~fusion.landmark_map.LandmarkMap`, the same
 :class:`~fusion.ekf.UpdateRecord` and ``stats``.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

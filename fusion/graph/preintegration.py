@@ -72,6 +72,7 @@ columns without ``kappa``; the EKF's ``D_s``, :mod:`fusion.ekf.functions`).
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 C. Forster, L. Carlone, F. Dellaert, D. Scaramuzza, "On-Manifold
 Preintegration for Real-Time Visual-Inertial Odometry", IEEE Trans.
 Robotics 33(1), 2017, pp. 1-21: sections V-VI (preintegrated measurements,

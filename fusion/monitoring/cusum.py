@@ -39,7 +39,7 @@ def cusum_arl(k: float, h: float) -> float:
 
     Examples
     --------
-    >>> round(cusum_arl(0.5, 5.0))         # the issue's "about 930 samples"
+    >>> round(cusum_arl(0.5, 5.0))         # "about 930 samples"
     938
     """
     b = h + _SIEGMUND_OFFSET

@@ -8,7 +8,7 @@ run on each robot's windows; an alarm is raised when one crosses its
 threshold, and all restart. Windows in the first ``null.skip_windows`` after
 the monitor starts are not tested (the null was fitted without them).
 
-**Lag test.** The issue's dynamics faults act mostly as extra lag: a payload
+**Lag test.** The dynamics faults of ``docs/monitor.md`` act mostly as extra lag: a payload
 accelerates more slowly under the motors' current limit, a weakened motor
 likewise at high demand, and a command delay is a lag. A response late by
 ``theta`` periods shifts ``e`` by ``-theta s`` (``s`` the window's lag

@@ -1,6 +1,6 @@
 """The start test's evidence: a drive start from rest, its lag and its two catch-up windows.
 
-A payload (the fault-detection issue's +50%) shows only where the robot starts
+A payload (+50%, the monitor benchmark's fault) shows only where the robot starts
 from rest: under the motors' current limit the heavier robot is late in the
 start (about 3 standard deviations of a start window's lag evidence), then its
 speed loop makes up the lost travel in the next two windows (about 2 each,

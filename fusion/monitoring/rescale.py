@@ -2,7 +2,7 @@
 
 A :class:`~lti_motion.model.MotionModel` predicts *encoder* body speeds
 ``y = (v, w)``: count changes times ``m_per_tick / dt_s``, combined with the
-wheel base (paper eqs. 11 and 13). On a new floor the wheel servos still
+wheel base (paper eq. 11 and 13). On a new floor the wheel servos still
 turn the wheels as commanded (the encoders count rotation), but the ground
 moves by another distance per tick; a new ``m_per_tick`` (and, for turns, an
 effective wheel base) converts counts to ground travel. Changing only those
@@ -27,6 +27,7 @@ fit [%] of each channel is unchanged too (both measured and predicted speeds sca
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Ljung, L. (1999). System Identification: Theory for the User, 2nd ed.,
 section 4.3 (innovations form) and section 4.6 (similarity transforms).
 """

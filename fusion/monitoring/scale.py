@@ -42,8 +42,8 @@ threshold::
 
 keeps false alarms below ``F`` an hour (the union bound, as Lorden 1971's
 for the CUSUM in :mod:`fusion.monitoring.dynamics`): 1,800 starts an hour and
-``F = 0.1`` give ``h = 9.8``. The default ``F`` is 10 times below the issue's
-1 an hour because the simulated robot is not the filter's linear-Gaussian
+``F = 0.1`` give ``h = 9.8``. The default ``F`` is 10 times below the target
+of 1 an hour because the simulated robot is not the filter's linear-Gaussian
 model (measured: ``docs/monitor.md``).
 
 **Scale or curvature.** Each restart starts two shadows: a *scale* shadow,

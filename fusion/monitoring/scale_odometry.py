@@ -48,6 +48,7 @@ mirrored, ``S`` inverted in closed form; ``tests/fusion/monitoring/test_scale.py
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Larsen, T. D., Bak, M., Andersen, N. A., Ravn, O. (1998). Location
 estimation for an autonomously guided vehicle using an augmented Kalman
 filter to autocalibrate the odometry. FUSION 1998.

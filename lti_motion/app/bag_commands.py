@@ -26,6 +26,8 @@ fused by the EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNo
 defaults) with ``BagOptions(gyro=True)`` (``--gyro``); by default the Imu is not read
 (opt-in: on a hard floor with the default scale priors the gyro can cost accuracy,
 ``docs/ekf.md``).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -143,7 +145,7 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     floor : str, optional
         Floor name recorded in the model.
     validation : float
-        Held-out tail that chooses order and delay (paper III.C).
+        Held-out tail that chooses order and delay (paper section III.C).
 
     Returns
     -------

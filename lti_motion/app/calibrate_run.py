@@ -1,6 +1,6 @@
 """``lti-motion calibrate``: drive the manoeuvres, keep each log as it ends, save a healthy model.
 
-What the command promises (issue 15 items 7 and 8, docs/guide_calibrate_real_robot.md):
+What the command promises (docs/guide_calibrate_real_robot.md):
 
 * the output folder is checked for writing before anything is driven;
 * each manoeuvre's log is written to ``OUT/log_<stage>.npz`` as soon as the

@@ -22,11 +22,13 @@ virtual-roomba
     A simulated Roomba behind the Open Interface on a pseudo-terminal.
 
 This module and the experiment runners are the only part of ``lti_motion``
-allowed to import ``drivers`` and ``fusion`` (ARCHITECTURE.md, Layout).
+allowed to import ``drivers`` and ``fusion`` (docs/architecture.md, Layout and layers).
 
 Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
 and a mistyped option cost only the parser (and numpy, for the simulator's floor names;
 robot files are read when a sub-command names a robot).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -545,7 +547,7 @@ MIN_EXCITATION_S = 20.0
 
 
 def _check_args(args: argparse.Namespace) -> None:
-    """Refuse options that make no sense, before anything runs (issue 15 item 13).
+    """Refuse options that make no sense, before anything runs (cases: test_cli_nonsense.py).
 
     Raises
     ------

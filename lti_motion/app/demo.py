@@ -8,6 +8,8 @@
 3. A table like Table II beside the paper's numbers, and a report folder:
    ``metrics.json`` (``closure_offset_m``: per estimator ``mean``, ``std``, ``n``),
    plots, and ``report.md`` that shows them.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -47,9 +49,9 @@ PAPER_TABLE_II = MappingProxyType({
     "arx_sensorless": (0.258, 0.021),
 })
 
-#: Targets of the main-job issue: estimator -> (closure offset mean [m], what it is);
+#: Targets of the demo: estimator -> (closure offset mean [m], what it is);
 #: ``None`` means the odometry row's mean, a row name that row's mean (the smoother's
-#: bar is the EKF's, same landmarks and runs: this brief's, not the issue's).
+#: bar is the EKF's, same landmarks and runs).
 TARGETS = MappingProxyType({
     "arx_sensorless": (0.10, "at most 0.10 m (the paper's ARMA: 0.258 m)"),
     "ekf": (None, "at most the odometry row's mean"),

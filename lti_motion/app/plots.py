@@ -3,6 +3,8 @@
 Application layer (matplotlib): used by ``lti-motion calibrate`` and ``lti-motion demo``.
 Figures are drawn with matplotlib's object-oriented API (:class:`~matplotlib.figure.Figure`
 and ``savefig``): no pyplot, so no backend is chosen or switched, and nothing global.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -18,6 +18,8 @@ Estimators (:data:`ESTIMATORS`) read the commands, counts and sightings only.
 They start at ``initial_pose``: by default the first ground-truth pose when
 there is one (the only thing of the truth they see), else the origin. Metrics
 (:mod:`lti_motion.metrics`) compare them with the truth afterwards.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -4,13 +4,15 @@ estimator's own position, many robots in lock step.
 The robot follows numbered checkpoints with a stop-turn-drive follower that steers on
 the estimator's pose, never on the truth; at the last checkpoint (the start) it stops
 where it *believes* it started. The closure offset is the true distance between the
-true start and the true stop (paper III.D). Thirty seeded runs per estimator.
+true start and the true stop (paper section II.D). Thirty seeded runs per estimator.
 
 An *estimator* here is anything with ``reset(n_robots, initial_pose)`` and
 ``step(frame, cmd, observations) -> poses (N, 3)``: it sees the frame the robot reports
 (encoder counts, timestamps), the command just executed, and the landmark sensor's noisy
 range-bearing observations (one :class:`fusion.range_bearing.RangeBearing` per robot,
 ``index`` = the period), never the simulator's truth.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ _log = logging.getLogger(__name__)
 ROUTE_M = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [1.5, 2.7], [0.0, 2.0], [0.0, 0.0]])
 ROUTE_M.flags.writeable = False
 
-#: Four landmarks around the route, as in the EKF issue's 5 m x 5 m room.
+#: Four landmarks around the route, in a 5 m x 5 m room.
 ROUTE_LANDMARKS = LandmarkMap({1: (-1.0, -1.0), 2: (4.0, -1.0), 3: (4.0, 3.7), 4: (-1.0, 3.7)})
 
 

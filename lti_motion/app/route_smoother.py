@@ -19,6 +19,8 @@ diameter ratio (:meth:`fusion.graph.SmootherOptions.with_curvature`; then
 model EKF's :meth:`~fusion.ekf.ModelEKF.intrinsics_estimate` does).
 At a keyframe the pose jumps to the smoother's estimate. The estimator sees what the robot
 reports (commands, encoder counts) and the landmark sensor, never the simulator's truth.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 - :mod:`lti_motion.calibration.manoeuvres`: the paper's three manoeuvres run through any
   robot with ``step()`` (:func:`calibrate`, :func:`drive`), then fitted;
 - :mod:`lti_motion.calibration.encoder_scale`: the encoder scale from a rotation in place
-  (the paper's eq. 13);
+  (paper eq. 13);
 - :mod:`lti_motion.calibration.recorded`: the ARX model from any recorded drive, with an
   excitation report;
 - :mod:`lti_motion.calibration.intrinsics_fit`: both wheels' scale and the wheel base
@@ -13,6 +13,8 @@
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
 importing the door costs nothing until a name is read.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

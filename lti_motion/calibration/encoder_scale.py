@@ -39,6 +39,8 @@ detector fallback never rescued a valid record, and it returned wrong periods
 A recording of under two turns in surroundings that look alike after half a
 turn can still alias to a fraction of the period; ``period_range_ticks`` (the
 datasheet value +- 30 %) rules most such aliases out.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -117,7 +119,7 @@ def encoder_scale_m_per_tick(period_ticks: float, *, wheel_base_m: float) -> flo
 
     Notes
     -----
-    Paper eq. 13 as restated in READING-NOTES: during one turn each wheel
+    Paper eq. 13 as restated in ``docs/architecture.md``: during one turn each wheel
     travels ``pi b`` (half the circumference of the circle of diameter ``b``),
     the right one forwards and the left one backwards, so
     ``D = pi b / s - (-pi b / s) = 2 pi b / s``.

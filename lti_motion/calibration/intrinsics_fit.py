@@ -26,6 +26,7 @@ approximation (of the right order, not exact).
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 A. Censi, A. Franchi, L. Marchionni, G. Oriolo, "Simultaneous calibration of odometry
 and sensor parameters for mobile robots", IEEE T-RO 29(2):475-492, 2013, sec. V.
 J. Borenstein, L. Feng, "Measurement and correction of systematic odometry errors in

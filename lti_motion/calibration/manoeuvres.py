@@ -2,9 +2,9 @@
 
 1. Rotation in place: the encoder scale from the period of the light-bump
    signals in ticks (paper eq. 13, :mod:`lti_motion.calibration.encoder_scale`).
-2. Steps on one motor at a time: the moving-average (FIR) model (paper II.B).
+2. Steps on one motor at a time: the moving-average (FIR) model (paper section II.B).
 3. Random held normal commands: the ARX model with order and delay selection
-   (paper II.C, III.C).
+   (paper section II.C, III.C).
 
 A *robot* is anything with a sensor period ``dt_s`` [s] and a method
 ``step(cmd_m_s) -> SensorFrame`` that sends one pair of wheel commands and
@@ -13,6 +13,8 @@ each manoeuvre, that drops frames which waited unread): the simulator
 (:class:`drivers.sim.Simulator`) and the serial driver
 (:class:`drivers.roomba.Roomba`) both are. This module only
 duck-types them, so the core imports neither.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

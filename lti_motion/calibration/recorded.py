@@ -5,10 +5,12 @@ Any drive with enough excitation will do, not only the paper's manoeuvres:
 (condition of the regression, frequency content of the commands, time at
 rest, which parameters the data leave unidentified) and why it refuses data
 that cannot identify one; :func:`calibrate_recording` fits the ARX model
-(paper II.C) on it. A Roomba recording that holds a rotation in place beside
+(paper section II.C) on it. A Roomba recording that holds a rotation in place beside
 a wall measures the encoder scale (paper eq. 13, :func:`rotation_scale`);
 without one the scale comes from the robot description the caller gives,
 and the result says so.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The wheels' diameter ratio without any external reference: straight runs beside a wall
-(issue 17 item 4).
+(docs/intrinsics.md, "Without a reference").
 
 A robot whose wheels differ in diameter curves while both encoders count alike: a straight
 run of equal counts bends with the curvature ``kappa = (k_R - k_L) / (b k)`` [rad/m]

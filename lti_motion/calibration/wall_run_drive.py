@@ -1,5 +1,5 @@
 """The wall-run manoeuvre on any robot: straight runs beside a wall, each started a measured
-distance from it (issue 17 item 4; the estimator is :mod:`lti_motion.calibration.wall_run`).
+distance from it (the estimator is :mod:`lti_motion.calibration.wall_run`).
 
 The robot is anything calibration drives (:class:`lti_motion.calibration.Robot`: a sensor
 period ``dt_s`` and ``step(cmd_m_s) -> SensorFrame``), the simulator and the serial driver

@@ -5,7 +5,7 @@
 - :mod:`lti_motion.model.excitation`: the manoeuvres as command sequences and the check
   that data excites the system;
 - :mod:`lti_motion.model.fir`, :mod:`lti_motion.model.fir_steps`: the moving-average (FIR)
-  model, from least squares or from the step manoeuvre (the paper, section II.B);
+  model, from least squares or from the step manoeuvre (paper section II.B);
 - :mod:`lti_motion.model.arx`, :mod:`lti_motion.model.arx_structure`: the ARX model by SVD
   least squares, order and delay selection, RLS, its physical structure (section II.C);
 - :mod:`lti_motion.model.least_squares`, :mod:`lti_motion.model.state_space`: the least
@@ -16,6 +16,8 @@
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
 importing the door costs nothing until a name is read.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

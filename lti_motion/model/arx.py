@@ -1,4 +1,4 @@
-"""The ARX model (paper II.C, eq. 1 and 12): estimation, order selection, stability, RLS.
+"""The ARX model (paper section II.C, eq. 1 and 12): estimation, order selection, stability, RLS.
 
 The model, with full 2x2 coefficient matrices per lag, inputs ``u = (L, R)``
 [m/s] and outputs ``y = (v [m/s], w [rad/s])``:
@@ -15,6 +15,8 @@ The paper calls this model ARMA; its order 9 is ``n_a = 9``, ``n_b = 10``,
 Regression rows follow paper eq. 12: ``(u[n-d], ..., u[n-d-n_b+1], y[n-1],
 ..., y[n-n_a])``; ``theta`` stacks ``B_j^T`` then ``A_k^T`` so that
 ``y[n]^T = phi[n]^T theta`` and both outputs are solved at once.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -516,7 +518,7 @@ def select_arx(
     Parameters
     ----------
     runs : sequence of (u, y)
-        Calibration runs (random excitation, paper III.C).
+        Calibration runs (random excitation, paper section III.C).
     orders, delays : iterable of int
         The grid; order means ``na = nb``.
     validation : float or sequence of (u, y)

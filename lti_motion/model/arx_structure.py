@@ -34,6 +34,7 @@ measurements).
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Greene, W. H. (2012). Econometric Analysis, 7th ed., section 5.5.1, eq. 5-23
 (restricted least squares) and eq. 5-26 (its covariance).
 Ljung, L. (1999). System Identification, 2nd ed., section 4.2 (static gain of

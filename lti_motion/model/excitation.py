@@ -4,9 +4,9 @@ A manoeuvre is an array ``(n, 2)`` of wheel-speed commands ``(L, R)`` [m/s],
 one row per sample period ``dt_s``. Three manoeuvres come from the paper:
 
 - :func:`step_sequence`: one motor at a time, for the moving-average (FIR)
-  model (paper II.B and III.B);
+  model (paper section II.B and III.B);
 - :func:`random_held_normal`: normally distributed commands held for random
-  durations, for the ARX model (paper III.C, Fig. 7);
+  durations, for the ARX model (paper section III.C, Fig. 7);
 - :func:`rotation_in_place`: the rotation that measures the encoder scale
   (paper eq. 13).
 
@@ -14,6 +14,8 @@ Calibration data is a list of *runs*, each a pair ``(u, y)`` of commands
 ``(n, 2)`` [m/s] and measured body speeds ``(n, 2)`` = ``(v [m/s], w
 [rad/s])``. :func:`check_runs` validates them and :func:`check_excitation`
 tests that the commands are persistently exciting (Ljung 1999, section 13.2).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ def _samples(duration_s: float, dt_s: float, name: str) -> int:
 
 @dataclass(frozen=True)
 class StepSequence:
-    """The step manoeuvre of paper II.B / III.B and where its phases lie.
+    """The step manoeuvre of paper section II.B / III.B and where its phases lie.
 
     Attributes
     ----------
@@ -124,7 +126,7 @@ def step_sequence(
 
     Notes
     -----
-    Paper II.B: the impulse response is the derivative of the step response,
+    Paper section II.B: the impulse response is the derivative of the step response,
     so a step per motor gives the four responses of the transfer matrix
     (eq. 8-10); III.B lists the four phases.
 
@@ -167,7 +169,7 @@ def random_held_normal(
     max_m_s: float = 0.5,
     correlation: float = 0.0,
 ) -> np.ndarray:
-    """Normally distributed wheel commands held for random durations (paper III.C).
+    """Normally distributed wheel commands held for random durations (paper section III.C).
 
     Parameters
     ----------

@@ -10,6 +10,8 @@ Taps are stored as ``taps[i, out, in]``: ``y[n] = sum_i taps[i] @ u[n - i]``
 with ``u = (L, R)`` and ``y = (v, w)``, so ``taps[:, 0, 0]`` is the paper's
 ``h_Lv``, ``taps[:, 0, 1]`` ``h_Rv``, ``taps[:, 1, 0]`` ``h_Lw`` and
 ``taps[:, 1, 1]`` ``h_Rw``.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

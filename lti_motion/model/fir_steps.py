@@ -1,4 +1,4 @@
-"""The moving-average (FIR) model from the paper's step manoeuvre (paper II.B, eq. 2-10).
+"""The moving-average (FIR) model from the paper's step manoeuvre (paper section II.B, eq. 2-10).
 
 One motor at a time is switched on and off (:func:`~lti_motion.model.step_sequence`);
 each normalised step response, differenced, is one column of the 2x2 matrix of impulse
@@ -14,6 +14,7 @@ no yaw rate in steady state, exactly (docs/route.md).
 
 References
 ----------
+The paper: ``docs/architecture.md``, "The paper".
 Greene, W. H. (2012). Econometric Analysis, 7th ed., section 5.5.1, eq. 5-23
 (restricted least squares).
 Franklin, G. F., Powell, J. D. & Emami-Naeini, A. (2015). Feedback Control of
@@ -100,7 +101,7 @@ def fir_from_steps(
     max_taps: int | None = None,
     baseline_samples: int = 5,
 ) -> FirFit:
-    """The moving-average model from a step calibration (paper II.B, eq. 2-10).
+    """The moving-average model from a step calibration (paper section II.B, eq. 2-10).
 
     Parameters
     ----------
@@ -112,7 +113,7 @@ def fir_from_steps(
         Left on, left off, right on, right off (:func:`~lti_motion.model.step_sequence`).
     edges : {"both", "rising"}
         Average the responses to the rising and falling edges (halves the
-        noise; the PID loops make them near-symmetric, paper III.B), or use the
+        noise; the PID loops make them near-symmetric, paper section III.B), or use the
         rising edges only.
     dc_gain : {"free", "settled", "wheel_servo"}
         The FIR's steady-state gain (sum of its taps).
@@ -170,7 +171,7 @@ def fir_from_steps(
     is the settling time ``k`` of the slowest of the four step responses (the
     control-engineering definition with a band around the final value,
     e.g. Franklin, Powell & Emami-Naeini 2015, section 3.4), judged on the
-    step responses because differencing doubles their noise; paper III.B
+    step responses because differencing doubles their noise; paper section III.B
     finds about 15 taps on a Roomba. A warning is logged when the responses
     have not settled inside the recorded window.
 

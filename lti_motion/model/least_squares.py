@@ -1,9 +1,11 @@
-"""Least squares on lagged data, shared by the FIR and ARX fits (the paper's eq. 12).
+"""Least squares on lagged data, shared by the FIR and ARX fits (paper eq. 12).
 
 The regression matrix of a tall data set is reduced to its triangular factor (QR in
 chunks), then solved by SVD with a relative singular-value cut-off, so a poorly excited
 direction is reported (rank, condition number) instead of amplified (Golub & Van Loan
 2013, section 5.5).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -15,10 +15,12 @@ canonical realisation (:func:`~lti_motion.model.arx_state_space`).
 ``R``, and the calibration's metadata; everything downstream (EKF, factor
 graph, monitor) speaks only this interface.
 
-Modes of use (READING-NOTES, "Modes of use"): :meth:`MotionModel.simulate`
+Modes of use (paper section III.C and IV): :meth:`MotionModel.simulate`
 is the sensor-less free run (commands only); :meth:`MotionModel.predict_one_step`
 is the hybrid filter mode (past outputs are the measured ones);
 :meth:`MotionModel.predict_poses` integrates the predicted speeds (paper eq. 11).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -712,7 +714,7 @@ def fit_arx(
     dc_gain: Literal["free", "wheel_servo"] = "free",
     output_scale_horizons_s: Sequence[float] | None = None,
 ) -> MotionModel:
-    """Calibrate an ARX motion model from random-excitation runs (paper II.C, III.C).
+    """Calibrate an ARX motion model from random-excitation runs (paper section II.C, III.C).
 
     Parameters
     ----------
@@ -825,7 +827,7 @@ def fit_fir_from_steps(
     calibrated_at: str | None = None,
     **fir_options: Any,
 ) -> MotionModel:
-    """Calibrate the moving-average (FIR) motion model from a step manoeuvre (paper II.B).
+    """Calibrate the moving-average (FIR) motion model from a step manoeuvre (paper section II.B).
 
     Parameters
     ----------

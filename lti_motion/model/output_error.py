@@ -30,6 +30,8 @@ reflective, finite-difference Jacobian) from the least-squares fit (Ljung
 1999, section 10.2: an ARX estimate is the usual starting point for the
 output-error search). Unstable iterates are rejected with a large residual.
 An FIR is the case ``na = 0`` (its criterion is then linear in ``theta``).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ class OutputErrorOptions:
     ----------
     horizons_s : tuple of float
         Moving-sum horizons [s] besides the one-sample simulation error; the
-        issue's 1-30 s by default.
+        1-30 s by default.
     pose_horizons_s : tuple of float
         Horizons [s] of windows (one starting every second) over which the
         measured and the simulated speeds are integrated into a path from the

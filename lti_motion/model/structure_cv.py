@@ -10,6 +10,8 @@ on the other blocks and, on the held-out block, the measured and the predicted
 speeds are each integrated (paper eq. 11) over consecutive windows of
 ``horizon_s`` from a common pose; the score is the median end-of-window
 position difference [m].
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

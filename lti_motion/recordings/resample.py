@@ -44,6 +44,8 @@ period moves back into its own where that evens the travel per period
 latter (:func:`drivers.bags.bag_to_log`).
 A body twist becomes wheel speeds through the wheel base
 (:func:`lti_motion.kinematics.wheel_from_body`).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations

@@ -1,10 +1,12 @@
 """Encoder counts to wheel and body speeds.
 
 The Roomba / Create 2 reports each wheel's encoder as an unsigned 16-bit
-counter that wraps (``../shared/spec/roomba_oi.md`` section 7). The counts
+counter that wraps (Open Interface packets 43 and 44). The counts
 are unwrapped with the shortest signed step on the 16-bit ring, which is
 correct in both directions as long as fewer than 32768 ticks (14.5 m of
 wheel travel) pass between two frames.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ def tick_deltas(ticks: np.ndarray, *, axis: int = 0, counter_bits: int = 16) -> 
     -------
     ndarray of int64
         One element fewer than ``ticks`` along ``axis``:
-        ``((c - p + 32768) mod 65536) - 32768`` (spec section 7.2), on a
+        ``((c - p + 32768) mod 65536) - 32768`` (spec §7.2, :mod:`drivers.roomba.oi`), on a
         ``2**counter_bits`` ring in general: the shortest signed step.
 
     Examples
@@ -78,7 +80,7 @@ def tick_step(prev: np.ndarray, now: np.ndarray, *, counter_bits: int = 16) -> n
 
 
 def _ring_step(diff: np.ndarray, counter_bits: int) -> np.ndarray:
-    """``((diff + half) mod 2**bits) - half`` (spec section 7.2): the shortest signed step
+    """``((diff + half) mod 2**bits) - half`` (spec §7.2): the shortest signed step
     on the counters' ring; plain differences from 63 bits (counters that never wrap)."""
     if counter_bits >= 63:
         return diff
@@ -149,7 +151,7 @@ def body_speeds_from_ticks(
     -------
     ndarray, shape (n - 1, 2)
         ``v = (vR + vL) / 2`` [m/s] and ``w = (vR - vL) / b`` [rad/s] over
-        each interval (READING-NOTES, Signals).
+        each interval (paper section II.B, Fig. 1).
 
     Raises
     ------
@@ -242,8 +244,8 @@ def unfold_commanded_direction(deltas: np.ndarray, *, window: int = 12) -> np.nd
     """Restore the sign of tick increments from encoders that count in the commanded direction.
 
     The Roomba's encoders are not quadrature: they count in the direction the
-    firmware is commanding, not the direction the wheel turns (spec section
-    6.2). When a command reverses a wheel, the count runs backwards while the
+    firmware is commanding, not the direction the wheel turns (spec §6.2,
+    :mod:`drivers.roomba.oi`). When a command reverses a wheel, the count runs backwards while the
     wheel is still rolling the old way and slowing down. The true wheel speed
     is continuous through zero, so after each flip of the count direction the
     sign is put back until the count rate reaches its minimum (the wheel

@@ -1,4 +1,4 @@
-"""The MRCLAM reader on the real files (../shared/data, found through LTI_MOTION_DATA)."""
+"""The MRCLAM reader on the real files (found through LTI_MOTION_DATA, docs/mrclam.md)."""
 
 import itertools
 

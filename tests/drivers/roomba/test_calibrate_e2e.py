@@ -1,6 +1,6 @@
 """End to end over a real pseudo-terminal: the calibration manoeuvres through the real
 pyserial driver against the virtual Roomba, compared with calibrating the simulator
-directly (drivers issue: "a calibrated model whose fit matches calibrating on the
+directly (target: "a calibrated model whose fit matches calibrating on the
 simulator directly, within 1 point")."""
 
 import math

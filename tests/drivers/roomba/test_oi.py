@@ -1,7 +1,7 @@
 """Example-based tests of the Open Interface protocol layer (drivers.roomba.oi and oi_packets).
 
 Reference values are labelled with their source: "spec §N" is the project's
-fact sheet ``../shared/spec/roomba_oi.md``.
+Open Interface fact sheet, whose sections :mod:`drivers.roomba.oi` lists.
 """
 
 from __future__ import annotations

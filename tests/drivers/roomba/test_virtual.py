@@ -1,8 +1,8 @@
 """The virtual Roomba, spoken to byte by byte over a real pseudo-terminal with pyserial.
 
 These tests use no driver: they check the emulator against the Open
-Interface rules of ``../shared/spec/roomba_oi.md`` (§2 modes, §3 commands,
-§4 sensor access, §8.5 emulator checklist).
+Interface rules of the spec (§2 modes, §3 commands, §4 sensor access, §8.5
+emulator checklist; sections as listed in :mod:`drivers.roomba.oi`).
 """
 
 from __future__ import annotations

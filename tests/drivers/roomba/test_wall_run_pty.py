@@ -1,5 +1,5 @@
 """The wall run over a real pseudo-terminal: the manoeuvre through the pyserial driver
-against the virtual Roomba (issue 17 item 4 on any robot). The estimate reads only the
+against the virtual Roomba (docs/intrinsics.md, on a robot). The estimate reads only the
 driver's frames; the simulator's truth is rebuilt here, for scoring only, by running the
 commands the emulator applied through a fresh simulator of the same seed."""
 

@@ -110,7 +110,7 @@ def test_rollover_forward_and_backward_is_unwrapped():
 
 def test_encoders_count_in_the_commanded_direction():
     """Roomba encoders are not quadrature: a wheel still rolling forward counts down
-    once the command is negative (spec section 6.2)."""
+    once the command is negative (spec §6.2, :mod:`drivers.roomba.oi`)."""
     cmd = np.concatenate([_hold(0.4, 100), np.full((40, 2), -0.4)])
     log = Simulator("create2", seed=1).run(cmd)
     deltas = tick_deltas(log.ticks)

@@ -1,4 +1,4 @@
-"""The model EKF's per-wheel intrinsics (issue 17 item 3): counts mapped through the model's
+"""The model EKF's per-wheel intrinsics (docs/intrinsics.md): counts mapped through the model's
 intrinsics, the third scale error ``kappa`` (the curvature of a straight run of equal counts),
 its Jacobians against numerical derivatives, what landmarks teach it, and the write-back of
 the intrinsics it learned into a model.

@@ -1,4 +1,4 @@
-"""Monte Carlo acceptance of the EKF plug-in on the simulator (EKF issue).
+"""Monte Carlo acceptance of the EKF plug-in on the simulator (docs/ekf.md).
 
 One calibration per module; seeded batches of simulated robots drive the example's
 rounded-square route (pure pursuit on the simulator's truth, positive wheel commands)
@@ -15,9 +15,9 @@ each of four landmarks at 2 Hz).
 - Encoder spikes on both wheels and a 3 s stuck left encoder, 30 runs of 60 s: final
   error at most half of odometry's on every run; every injected spike (found by
   comparing with a twin simulator without spikes) rejected by the gate.
-- Landmark sensor 0.22 m ahead of the axle (issue 16), 10 runs of 60 s: with its mount
+- Landmark sensor 0.22 m ahead of the axle (fusion.sensor_pose), 10 runs of 60 s: with its mount
   given, position RMS error within 2 cm and at most 5% of the sightings gated, as
-  centred; the same sightings taken as from the axle centre (the issue's failure)
+  centred; the same sightings taken as from the axle centre (the mount dropped)
   are mostly gated and leave several times the error.
 - Landmarks, 10 minutes: 5 runs (not 30: 40,000 filter steps per run take about 2 s),
   position RMS error at most 5 cm, no divergence.
@@ -229,7 +229,7 @@ def test_a_sensor_ahead_of_the_axle_is_as_good_as_a_centred_one_once_its_mount_i
         mounted):
     assert mounted["rms"].max() < 0.02, mounted["rms"]
     assert mounted["gated"].max() <= 0.05, mounted["gated"]
-    # the issue's failure: the same sightings taken as from the axle centre
+    # the mount dropped: the same sightings taken as from the axle centre
     assert mounted["gated_centred"].mean() > 0.3, mounted["gated_centred"]
     assert mounted["rms_centred"].mean() > 4 * mounted["rms"].mean(), mounted["rms_centred"]
 

@@ -28,7 +28,7 @@ from lti_motion.kinematics import sinc_and_derivative
 from lti_motion.model.fir import FirFit
 from lti_motion.model.motion_model import MotionModel
 
-RTOL, ATOL = 1e-12, 1e-15       # "to rounding" (the brief's bound), over the whole run
+RTOL, ATOL = 1e-12, 1e-15       # "to rounding", over the whole run
 ROOT = Path(__file__).resolve().parents[3]
 
 

@@ -32,7 +32,7 @@ from lti_motion.kinematics import integrate_poses
 from lti_motion.model.fir import FirFit
 from lti_motion.model.motion_model import MotionModel
 
-# the scenario, shared with `python -m benchmarks bounds`: START, the four corner
+# the scenario, shared with `python -m benchmarks bounds`: START, the four corner
 # LANDMARKS, BIAS_M_S = -0.022 m/s (what the odometry reads while the robot stands still)
 
 

@@ -1,4 +1,4 @@
-"""The smoother's curvature calibration ``kappa`` (issue 17 item 3): preintegration, factors,
+"""The smoother's curvature calibration ``kappa`` (docs/factor_graph.md): preintegration, factors,
 graph, and the intrinsics it implies; every Jacobian against a numerical derivative."""
 
 import gtsam

@@ -1,4 +1,4 @@
-"""The factor-graph issue's comparison: with landmarks, the smoothed trajectory's ATE is
+"""The factor graph against the EKF: with landmarks, the smoothed trajectory's ATE is
 lower than the EKF's on the same runs, with the same observations and noise settings.
 
 20 simulated drives of 60 s in a 5 m room with four landmarks seen at 2 Hz each (range

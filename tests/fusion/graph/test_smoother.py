@@ -12,6 +12,8 @@ true one, so encoder (and model) speeds are 0.4% low. With wheels 10% larger tha
 model was calibrated with (``wheel_diameter_errors=(0.1, 0.1)``) the speed loop still
 holds the commanded wheel rotation, so every tick carries 10% more ground:
 ``s = 1.1 x 1.004 = 1.104`` in geometry; measured 1.102 (a little more slip; checked below).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 from dataclasses import dataclass, replace

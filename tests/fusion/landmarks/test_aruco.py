@@ -113,8 +113,8 @@ def test_enough_detections_and_almost_all_visible_markers_found(rendered):
 
 def test_median_range_and_bearing_errors(rendered):
     rel_range, bearing = np.abs(rendered["rel_err"]).T
-    assert np.median(rel_range) <= 0.02                # issue 8: at most 2%
-    assert np.median(bearing) <= math.radians(1.0)     # issue 8: at most 1 degree
+    assert np.median(rel_range) <= 0.02                # target: at most 2%
+    assert np.median(bearing) <= math.radians(1.0)     # target: at most 1 degree
     # What we measure, with margin (docs/aruco.md): 0.1-0.2% and a few thousandths of a degree.
     assert np.median(rel_range) < 0.004 and np.median(bearing) < math.radians(0.02)
 

@@ -1,4 +1,4 @@
-"""End to end at 5 Hz images (issue 8): simulated drive -> rendered images -> ArUco
+"""End to end at 5 Hz images (docs/aruco_end_to_end.md): simulated drive -> rendered images -> ArUco
 detection -> EKF and smoother (``examples/aruco_end_to_end.py``).
 
 One calibration per module; 3 simulated robots (simulator seed 11, image-noise seeds
@@ -64,7 +64,7 @@ def test_smoother_position_rms_within_5_cm(runs):
 
 def test_the_cameras_mount_is_what_keeps_the_ekf_on_track(example, model, runs):
     """The camera sits 0.1 m ahead of the axle; its detections taken as from the axle centre
-    (the mount dropped: issue 16's failure) grow the error tenfold, and the filter finds
+    (the mount dropped, as before fusion.sensor_pose) grow the error tenfold, and the filter finds
     itself diverged (runs of gated sightings reset it, docs/ekf.md) where with the mount it
     never does."""
     run = runs[0]

@@ -1,10 +1,12 @@
-"""Recalibration after the monitor's own dynamics alarms (fault-detection issue).
+"""Recalibration after the monitor's own dynamics alarms (docs/monitor.md).
 
 The policy's bookkeeping (segments at time gaps, the excitation request, automatic
 retries, the refit's steady-state gain), then a short form of the benchmark
 (``benchmarks/bench_monitor.py``, ``recalibration``: 20 runs per fault): route runs with
 a fault, the monitor's first alarm after the onset, an excitation manoeuvre on request,
 and the fit of the model in use on fresh faulty data against the nominal fit.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 from types import SimpleNamespace
 

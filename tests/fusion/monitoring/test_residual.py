@@ -1,4 +1,4 @@
-"""Tests of the residual monitor (fault-detection issue): synthetic streams and the simulator.
+"""Tests of the residual monitor (docs/monitor.md): synthetic streams and the simulator.
 
 Synthetic streams check each test against its closed-form threshold; the
 simulator runs (seeded, the EKF example's route, one calibration per module)
@@ -49,7 +49,7 @@ def _feed(mon, rng, n, *, t0=0.0, shift=(0.0, 0.0), cov=None):
 
 # -- threshold arithmetic ----------------------------------------------------------------------
 def test_siegmund_arl_matches_the_issue_and_inverts():
-    # the issue: k = 0.5, h = 5 on raw samples averages about 930 samples
+    # the design target: k = 0.5, h = 5 on raw samples averages about 930 samples
     assert 900 < cusum_arl(0.5, 5.0) < 960
     assert cusum_threshold(0.5, cusum_arl(0.5, 7.3)) == pytest.approx(7.3, abs=1e-9)
 
@@ -365,7 +365,7 @@ def test_after_a_dynamics_alarm_the_fit_returns_within_2_points(model, fault, ac
     # The PID loop hides payload and motor changes at this excitation: the refit validates no
     # better (gain -0.2 pp), so the old model stays. The delay changes the fit by ~10 pp; the
     # refit is adopted and saved. Either way the model in use fits fresh faulty data within
-    # 2 percentage points of the old model's fit on fresh nominal data (the issue's criterion).
+    # 2 percentage points of the old model's fit on fresh nominal data (the target).
     from fusion.monitoring.recalibration import Recalibrator
     from lti_motion.model.motion_model import MotionModel
     u, y = _excitation_speeds(model, (fault,))

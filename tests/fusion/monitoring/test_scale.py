@@ -1,8 +1,8 @@
-"""Scale-change test from landmarks (fault-detection issue: the floor turns to carpet).
+"""Scale-change test from landmarks (docs/monitor.md: the floor turns to carpet).
 
 Closed-form checks of the batched odometry filter (range-bearing model against
 the scalar functions, the transition against a numerical Jacobian, the
-log-likelihood against scipy), then the simulator: the experiments issue's
+log-likelihood against scipy), then the simulator: the closed
 route with its landmarks at 2 Hz, seeded carpet runs, the same runs without
 the fault, and one hour of nominal driving (the benchmark runs ten:
 ``benchmarks/bench_scale.py``, ``docs/monitor.md``), then bad input and the
@@ -249,7 +249,7 @@ def test_a_scale_change_on_a_straight_line_is_found_with_its_size_and_onset(rati
     a = found[0]
     # shadows start every 2 s: the onset estimate is within one start of the truth
     assert abs(a.onset_s - 6.0) <= 2.0 + 0.015
-    assert 6.0 < a.t_s < 16.0                     # within the issue's 10 s
+    assert 6.0 < a.t_s < 16.0                     # within the target's 10 s
     assert abs(a.scale_ratio - ratio) < 3.0 * a.scale_ratio_std
     assert a.scale_ratio_std < 0.01
     # the main filter went on from the alarm's estimate

@@ -1,10 +1,12 @@
-"""The wheel-drift alarm (issue 17 item 5): the scale test's curvature shadows.
+"""The wheel-drift alarm (docs/intrinsics.md): the scale test's curvature shadows.
 
 A straight line with a known curvature change (closed form: the ground heading
 turns ``kappa`` per metre while both encoders count alike), the same line with a
 scale change (which must stay a scale alarm), the route with the simulator's
 ``wheel_diameter`` fault (seeds of the tests' own, not the benchmark's), the
 ``ResidualMonitor`` kind, the recalibration policy's answer and the alarm line.
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 
 import math
@@ -74,7 +76,7 @@ def test_a_curvature_change_on_a_straight_line_is_a_curvature_alarm(kappa, rng):
     a = found[0]
     assert a.change == "curvature" and a.threshold == pytest.approx(mon.curvature_threshold)
     assert abs(a.onset_s - 6.0) <= 4.0 + 0.015              # within two shadow starts
-    assert 6.0 < a.t_s < 26.0                                # the issue's 20 s
+    assert 6.0 < a.t_s < 26.0                                # the target's 20 s
     assert abs(a.curvature_rad_per_m - kappa) < 3.0 * a.curvature_std_rad_per_m
     assert a.curvature_std_rad_per_m < 0.25 * abs(kappa)
     ref = OdometryIntrinsics.symmetric(m_per_tick=M_PER_TICK, wheel_base_m=WHEEL_BASE_M)
@@ -130,7 +132,7 @@ def m_per_tick(route_model):
 
 def test_route_wheel_drift_runs_are_found_with_the_right_kind(route_model):
     """6 runs (seeds 700-705, onsets seed 5, +0.5% on alternate wheels): all found as
-    wheel_drift within the issue's 20 s, none before the onset, the alarm's curvature
+    wheel_drift within the target's 20 s, none before the onset, the alarm's curvature
     within a quarter of the change at the median (the benchmark: 40 runs). The alarm's
     own estimate is biased away from zero (the shadow that crosses first is the one whose
     data showed the most curvature): 0.043 rad/m, twice the change, at worst in the

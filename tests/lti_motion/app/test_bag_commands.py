@@ -61,7 +61,7 @@ def test_calibrating_from_the_bag_matches_the_log_in_memory(bags, model_file):
     from_bag = fit_percent(y2, model.simulate(u2), axis=0)
     in_memory = fit_percent(y2, memory.simulate(u2), axis=0)
     assert np.all(in_memory > 50)                      # a model worth comparing
-    np.testing.assert_allclose(from_bag, in_memory, atol=1.0)      # the target
+    np.testing.assert_allclose(from_bag, in_memory, atol=1.0)      # the target: 1 point
     assert (bags["folder"] / "calibration" / "bag_fit.png").stat().st_size > 10_000
 
 

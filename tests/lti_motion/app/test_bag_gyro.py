@@ -1,4 +1,4 @@
-"""A bag's Imu yaw rate in ``lti-motion replay / monitor --bag``, and a gyro in the monitor (#16).
+"""A bag's Imu yaw rate in ``lti-motion replay / monitor --bag``, and a gyro in the monitor.
 
 The drive: the create2 simulator on carpet (the ground turns ~5% short of what the
 wheels say) with a gyro (0.005 rad/s/sqrt(Hz), bias 0.006 rad/s), 5 s at rest, then 20 s

@@ -1,4 +1,7 @@
-"""The command line, run as a user runs it (short horizons)."""
+"""The command line, run as a user runs it (short horizons).
+
+The paper: ``docs/architecture.md``, "The paper".
+"""
 
 import json
 import tomllib

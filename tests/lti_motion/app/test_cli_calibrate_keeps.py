@@ -1,5 +1,5 @@
 """``lti-motion calibrate`` keeps what it drove, resumes, stops cleanly and refuses to save
-an unhealthy model (issue 15 items 7 and 8).
+an unhealthy model (docs/guide_calibrate_real_robot.md).
 
 Ctrl-C runs on the virtual Roomba over a real pseudo-terminal (8x real time, stopped in
 the first seconds); the link that dies and the unhealthy model on the simulator, whose

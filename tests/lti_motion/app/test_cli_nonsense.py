@@ -1,4 +1,4 @@
-"""Nonsense on the command line is refused before anything runs (issue 15 item 13).
+"""Nonsense on the command line is refused before anything runs.
 
 Each case was accepted silently before (ignored, exit 0, or a failure deep inside after
 minutes of work); now: one line naming the option, exit 2, no output folder written.

@@ -2,15 +2,15 @@
 
 Calibrated on the first half of each robot's run, evaluated on the second half.
 Measured (dt 0.1 s): ARX beats the raw commands by 12.8-42 points on v and by
-20.6-55 points on w; the issue's target on w is 30 points on every robot, missed by
+20.6-55 points on w; the target on w is 30 points on every robot, missed by
 robot 1 (+20.6: its raw w fit is already 43%). Dead reckoning over 30 s windows does not
-reach the issue's 0.8 ratio (median ratios 0.88-1.42): docs/mrclam.md says why.
+reach the target 0.8 ratio (median ratios 0.88-1.42): docs/mrclam.md says why.
 
 Landmark EKFs on the second half (lti_motion.app.mrclam_filters), the same
 sightings, sighting noise and gate. With both filters' motion noise set by one rule (the
 long-run covariance of each motion's speed error on the first half, as the factor graphs
 use it): RMS 0.099-0.214 m (ARX model) and 0.125-0.223 m (raw commands), model / raw
-0.80-0.96 (mean 0.89), the issue's 0.9 met on robots 2, 3 and 4. Under the earlier rule
+0.80-0.96 (mean 0.89), the target 0.9 met on robots 2, 3 and 4. Under the earlier rule
 (the model's own one-step noise against the commands' sample covariance) the ratios were
 0.80-1.20 (mean 1.02). docs/mrclam.md.
 """

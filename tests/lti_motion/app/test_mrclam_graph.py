@@ -3,7 +3,7 @@
 Calibrated on the first half of each robot's run, smoothed on the second half with the
 landmark EKFs' sightings, sighting noise and gate (as a Huber kernel). Measured (set 6,
 dt 0.1 s, batch Levenberg-Marquardt): RMS 0.125-0.194 m with the ARX model, 0.139-0.204 m
-with the raw commands; model / raw 0.86-1.00 (mean 0.92), the issue's 0.9 met on robots
+with the raw commands; model / raw 0.86-1.00 (mean 0.92), the target 0.9 met on robots
 2, 4 and 5. Dead reckoning through the same motion factors: 0.34-1.12 m. docs/mrclam.md.
 """
 

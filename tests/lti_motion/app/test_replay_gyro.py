@@ -1,4 +1,4 @@
-"""`lti-motion replay` fuses a log's gyro (issue 16): saved, loaded and fused in the EKFs."""
+"""`lti-motion replay` fuses a log's gyro (docs/ekf.md): saved, loaded and fused in the EKFs."""
 
 import numpy as np
 import pytest

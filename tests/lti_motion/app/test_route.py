@@ -1,4 +1,7 @@
-"""The paper's closed-route evaluation (Table II) on the simulator, in lock step."""
+"""The paper's closed-route evaluation (Table II) on the simulator, in lock step.
+
+The paper: ``docs/architecture.md``, "The paper".
+"""
 
 import numpy as np
 import pytest
@@ -84,7 +87,7 @@ def test_smoother_with_landmarks_closes_the_route_like_the_ekf(cal):
     Bound: in the demo's 30 runs the paired difference smoother - EKF of the closure
     offset was -0.01 +- 0.74 mm (largest 2.1 mm), so the mean of 4 paired runs exceeds
     the EKF's by 2 mm only if the smoother is worse (> 5 standard errors). Both must also
-    meet the issue's 3 cm for a landmark row: without its landmarks the smoother would be
+    meet the target 3 cm for a landmark row: without its landmarks the smoother would be
     odometry (0.069 m) and fail.
     """
     from lti_motion.app.route import ROUTE_LANDMARKS, EkfEstimator

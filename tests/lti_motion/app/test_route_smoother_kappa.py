@@ -1,5 +1,5 @@
 """The route's smoother with the curvature kappa: it learns a diameter ratio from landmarks
-(issue 17 item 3) and hands it over as the EKF does."""
+(docs/intrinsics.md, "Online, in the smoother") and hands it over as the EKF does."""
 
 import numpy as np
 import pytest

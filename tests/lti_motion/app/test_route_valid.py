@@ -1,5 +1,5 @@
 """The route's estimators honour ``valid``: a lost frame's counts are never read, the next
-valid frame's counts span the gap (issue 16, item 2)."""
+valid frame's counts span the gap (docs/architecture.md, The flow of one frame)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Calibration by driving, on the simulator, against its ground truth.
 
-These are the acceptance runs of the core-models issue, against the issue's targets, on
+These are the acceptance runs of the models, against their targets (below), on
 a simulator that is deliberately not linear (docs/calibration.md has the spread over
 seeds and what limits the fit).
 """
@@ -91,7 +91,7 @@ def test_models_are_stable_with_positive_definite_noise(calibrated):
 
 
 def test_free_run_fit_on_validation_data(calibrated):
-    """The issue's targets: ARX >= 90%, FIR >= 85% for v and for w, free run."""
+    """The targets: ARX >= 90%, FIR >= 85% for v and for w, free run."""
     _, cal, val = calibrated
     arx_fit = np.mean([cal.arx.fit_percent([run]) for run in val], axis=0)
     fir_fit = np.mean([cal.fir.fit_percent([run]) for run in val], axis=0)

@@ -175,7 +175,7 @@ def _random_recording(seed: int, scene_factory, **kwargs) -> Recording:
     return rotate_in_place(rng, scene, ccw=bool(seed % 2), **kwargs)
 
 
-# --- the synthetic data is what the brief describes ---------------------------
+# --- the synthetic data is what the module docstring describes ---------------
 
 
 def test_generator_is_realistic():

@@ -2,7 +2,7 @@
 
 Over a serial link a host that answers late has its command applied one or more
 periods later, and the frames record the command applied (packets 41/42). The step
-phases must be found where the robot put them (issue 15: the end-to-end calibration
+phases must be found where the robot put them (before, the end-to-end calibration
 over a pseudo-terminal failed on a loaded machine with "no step of wheel L at sample 0").
 """
 

@@ -1,5 +1,5 @@
-"""The wall run (issue 17 item 4): closed-form synthetic passes, the mirror-pair square-up,
-and every error path."""
+"""The wall run (docs/intrinsics.md, "Without a reference"): closed-form synthetic passes,
+the mirror-pair square-up, and every error path."""
 
 from __future__ import annotations
 

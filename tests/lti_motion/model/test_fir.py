@@ -3,6 +3,8 @@ squares, state-space simulation.
 
 The synthetic plant is the one of test_arx.py (second-order wheels, 4-sample
 delay, v = (vR + vL) / 2, w = (vR - vL) / 0.235, white noise on v and w).
+
+The paper: ``docs/architecture.md``, "The paper".
 """
 import numpy as np
 import pytest

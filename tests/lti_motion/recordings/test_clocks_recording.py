@@ -43,7 +43,7 @@ def test_assign_periods_recovers_periods_under_jitter_loss_and_drift(rng, period
 
 
 def test_stream_clock_no_longer_raises_on_jitter_of_a_sixth_of_the_period():
-    # 3 ms of jitter at 18 ms: the case where 7 of 9 calibrations crashed
+    # 3 ms of jitter at 18 ms: the case where 7 of 9 calibrations once crashed
     rng = np.random.default_rng(11)
     _, t = _host_stamps(rng, n=10000, period_s=0.018, jitter_s=0.003, lost=0.0, drift_ppm=0.0)
     clock = stream_clock(t, 0.018)

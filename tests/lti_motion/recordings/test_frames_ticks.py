@@ -54,7 +54,7 @@ def test_framelog_batch_robot_window_and_frames_round_trip():
      (0, 32767, 32767), (32767, 0, -32767)],
 )
 def test_tick_deltas_shortest_step_on_the_ring(prev, cur, step):
-    """The checks of spec section 7.2, and the libcreate#71 backward wrap."""
+    """The checks of spec §7.2 (drivers.roomba.oi), and the backward wrap (G13)."""
     assert tick_deltas(np.array([prev, cur]))[0] == step
 
 
