@@ -45,18 +45,21 @@ from types import ModuleType
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.config import Room
-from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF
-from fusion.graph.preintegration import preintegrate_model
-from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
-from fusion.landmarks.aruco import MarkerDetector
-from fusion.landmarks.camera import CameraIntrinsics, CameraMount, SyntheticCamera
-from fusion.landmarks.marker_map import MarkerLandmark, MarkerMap
+from drivers.sim import Room, Simulator
+from fusion.ekf import ModelEKF
+from fusion.graph import IncrementalSmoother, SmootherOptions, log_keyframes, preintegrate_model
+from fusion.landmarks import (
+    CameraIntrinsics,
+    CameraMount,
+    MarkerDetector,
+    MarkerLandmark,
+    MarkerMap,
+    SyntheticCamera,
+)
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration.manoeuvres import speeds_from_log
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
+from lti_motion.calibration import speeds_from_log
+from lti_motion.model import MotionModel
+from lti_motion.recordings import FrameLog
 
 __all__ = [
     "CAMERA_RATE_HZ",

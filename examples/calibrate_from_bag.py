@@ -32,21 +32,16 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.bags.reader import read_bag
-from drivers.bags.to_log import bag_to_log
-from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag
-from drivers.sim.config import Fault, Room, get_preset
-from drivers.sim.simulator import Simulator
+from drivers.bags import BagAlarm, bag_to_log, read_bag, write_drive_bag, write_estimates_bag
+from drivers.sim import Fault, Room, Simulator, get_preset
 from fusion.ekf import ModelEKF
 from fusion.monitoring import MonitoredFilter
 from fusion.noise import GyroNoise
-from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel, integrate_poses
 from lti_motion.metrics import ate_stats, fit_percent
-from lti_motion.model.excitation import random_held_normal
-from lti_motion.model.motion_model import MotionModel, fit_arx
-from lti_motion.recordings.frames import FrameLog
-from lti_motion.recordings.ticks import tick_deltas
+from lti_motion.model import MotionModel, fit_arx, random_held_normal
+from lti_motion.recordings import FrameLog, tick_deltas
 
 WHEEL_BASE_M = 0.235                   # the Create 2's; give your robot's
 GYRO_DENSITY = 0.005                   # the stand-ins' gyro: a MEMS one [rad/s/sqrt(Hz)]

@@ -30,12 +30,17 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
-from drivers.sim.config import PRESETS, Room, get_preset
-from drivers.sim.simulator import Simulator
-from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan, speeds_from_log
-from lti_motion.model.excitation import random_held_normal
-from lti_motion.model.motion_model import MotionModel
+from drivers.sim import (
+    PRESETS,
+    Room,
+    Simulator,
+    calibrate_simulator,
+    get_preset,
+    print_progress,
+    summarize,
+)
+from lti_motion.calibration import Calibration, CalibrationPlan, speeds_from_log
+from lti_motion.model import MotionModel, random_held_normal
 
 
 def run_calibration(preset: str, *, seed: int = 0, excitation_s: float = 180.0) -> Calibration:

@@ -32,19 +32,15 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.calibration import calibrate_simulator
-from drivers.sim.config import Fault, Room
-from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF
-from fusion.ekf.updates import FilterStats
+from drivers.sim import Fault, Room, Simulator, calibrate_simulator
+from fusion.ekf import FilterStats, ModelEKF
 from fusion.landmark_map import LandmarkMap
-from fusion.landmarks.synthetic import synthetic_observations
+from fusion.landmarks import synthetic_observations
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration.manoeuvres import CalibrationPlan
+from lti_motion.calibration import CalibrationPlan
 from lti_motion.kinematics import integrate_poses, wrap_angle
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
-from lti_motion.recordings.ticks import body_speeds_from_ticks, stream_clock
+from lti_motion.model import MotionModel
+from lti_motion.recordings import FrameLog, body_speeds_from_ticks, stream_clock
 
 __all__ = [
     "LANDMARKS",

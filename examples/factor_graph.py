@@ -23,22 +23,24 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.calibration import calibrate_simulator
-from drivers.sim.config import Fault, RobotParams, Room, get_preset
-from drivers.sim.simulator import Simulator
-from fusion.graph.factors import observe_landmarks
-from fusion.graph.preintegration import compose_motions, fit_calibration, preintegrate_model
-from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
-from fusion.graph.transient_noise import (
+from drivers.sim import Fault, RobotParams, Room, Simulator, calibrate_simulator, get_preset
+from fusion.graph import (
+    IncrementalSmoother,
+    SmootherOptions,
     TransientSpeedCovariance,
+    compose_motions,
+    fit_calibration,
+    log_keyframes,
+    observe_landmarks,
+    preintegrate_model,
     transient_speed_covariance_from_data,
 )
 from fusion.landmark_map import LandmarkMap
 from fusion.range_bearing import RangeBearing
-from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.metrics import ate
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
+from lti_motion.model import MotionModel
+from lti_motion.recordings import FrameLog
 
 #: Camera model of the landmark observations: noise, reach and field of view.
 BEARING_SIGMA_RAD = 0.02

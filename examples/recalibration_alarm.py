@@ -49,14 +49,16 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.calibration import calibrate_simulator
-from drivers.sim.config import Fault, Room, get_preset
-from drivers.sim.simulator import Simulator
-from fusion.monitoring.monitored_filter import MonitoredFilter
-from fusion.monitoring.phase_one import NominalFit, fit_nominal
-from fusion.monitoring.recalibration import RecalibrationRecord, Recalibrator
-from fusion.monitoring.rescale import output_scaling
-from fusion.monitoring.residual import AlarmEvent
+from drivers.sim import Fault, Room, Simulator, calibrate_simulator, get_preset
+from fusion.monitoring import (
+    AlarmEvent,
+    MonitoredFilter,
+    NominalFit,
+    RecalibrationRecord,
+    Recalibrator,
+    fit_nominal,
+    output_scaling,
+)
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
     ROUTE_M,
@@ -64,11 +66,10 @@ from lti_motion.app.route import (
     RecordingOdometry,
     drive_route,
 )
-from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
+from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel
-from lti_motion.model.excitation import random_held_normal
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
+from lti_motion.model import MotionModel, random_held_normal
+from lti_motion.recordings import FrameLog
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",

@@ -170,3 +170,34 @@ def test_few_top_level_modules_besides_the_wings(package, most):
     assert len(modules) <= most, f"{package} has {len(modules)} top-level modules: {modules}"
     wings = [p.name for p in (ROOT / package).iterdir() if (p / "__init__.py").is_file()]
     assert wings, f"{package} has no wings"
+
+
+def _door_names() -> dict[str, set[str]]:
+    """Each wing's door and the names it re-exports (its ``__all__``)."""
+    doors = {}
+    for init in ROOT.glob("*/*/__init__.py"):
+        name = _module_name(init)
+        if name.split(".")[0] in PACKAGES and not _in_app(name):
+            tree = ast.parse(init.read_text())
+            for node in tree.body:
+                if isinstance(node, ast.Assign) and any(
+                        getattr(t, "id", None) == "__all__" for t in node.targets):
+                    doors[name] = set(ast.literal_eval(node.value))
+    return doors
+
+
+USERS = sorted([*(ROOT / "lti_motion" / "app").glob("*.py"), *(ROOT / "examples").glob("*.py")])
+
+
+@pytest.mark.parametrize("path", USERS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_the_application_and_the_examples_enter_wings_through_their_doors(path):
+    """``from lti_motion.model import MotionModel``, not ``from lti_motion.model.motion_model
+    import MotionModel``: a name the door re-exports is imported from the door."""
+    doors = _door_names()
+    behind = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            door = node.module.rpartition(".")[0]
+            public = doors.get(door, set())
+            behind += [f"{node.module}.{a.name}" for a in node.names if a.name in public]
+    assert not behind, f"{path.name} imports past the door: {behind}"

@@ -40,23 +40,27 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.bags.reader import TOPIC_TYPES, StampedSeries, bag_topics, read_bag
-from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
-from drivers.bags.writer import BagAlarm, write_estimates_bag
+from drivers.bags import (
+    CREATE2_TICKS_PER_RAD,
+    CREATE2_WHEEL_RADIUS_M,
+    TOPIC_TYPES,
+    BagAlarm,
+    StampedSeries,
+    bag_to_log,
+    bag_topics,
+    read_bag,
+    write_estimates_bag,
+)
 from drivers.exceptions import BagError
-from fusion.monitoring.monitored_filter import FrameResult
-from fusion.monitoring.residual import AlarmEvent
+from fusion.monitoring import AlarmEvent, FrameResult
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
 from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
 from lti_motion.app.replay_sources import source_from_frame_log, source_from_grid
-from lti_motion.calibration.manoeuvres import speeds_from_log
+from lti_motion.calibration import speeds_from_log
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model.motion_model import MotionModel, fit_arx
-from lti_motion.recordings.clocks import median_period_s
-from lti_motion.recordings.frames import FrameLog, SensorFrame
-from lti_motion.recordings.recording import Recording
-from lti_motion.recordings.resample import on_grid
+from lti_motion.model import MotionModel, fit_arx
+from lti_motion.recordings import FrameLog, Recording, SensorFrame, median_period_s, on_grid
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_log", "monitor_bag",
            "odometry_recording", "plot_bag_fit", "replay_bag"]

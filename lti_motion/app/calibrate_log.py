@@ -15,10 +15,9 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from lti_motion.calibration.recorded import OfflineCalibration, calibrate_recording, rotation_scale
+from lti_motion.calibration import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
-from lti_motion.recordings.logfile import load_recording
-from lti_motion.recordings.recording import Recording
+from lti_motion.recordings import Recording, load_recording
 
 __all__ = ["RobotDescription", "run_calibrate_log", "run_calibrate_recording"]
 

@@ -21,11 +21,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan
-from lti_motion.recordings.frames import FrameLog
+from lti_motion.calibration import Calibration, CalibrationPlan
+from lti_motion.recordings import FrameLog
 
 if TYPE_CHECKING:
-    from drivers.sim.config import RobotParams
+    from drivers.sim import RobotParams
 
 __all__ = [
     "HEALTHY_FIT_PERCENT",
@@ -102,7 +102,7 @@ def health_problems(cal: Calibration, *,
 
 def _recorded(out: Path, *, resume: bool) -> dict[str, FrameLog]:
     """The logs of manoeuvres driven before (``--resume``); refuse to mix runs otherwise."""
-    from lti_motion.recordings.logfile import load_log
+    from lti_motion.recordings import load_log
 
     found = [s for s in STAGES if stage_log_path(out, s).is_file()]
     if not resume:
@@ -117,9 +117,8 @@ def _recorded(out: Path, *, resume: bool) -> dict[str, FrameLog]:
 def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, FrameLog],
            after_stage: Callable[[str, FrameLog], None]) -> Calibration:
     """The manoeuvres not yet recorded, on the simulator or the robot, and the fits."""
-    from drivers.sim.calibration import calibrate_simulator, print_progress
-    from drivers.sim.config import floor_name, load_robot
-    from lti_motion.calibration.manoeuvres import calibrate
+    from drivers.sim import calibrate_simulator, floor_name, load_robot, print_progress
+    from lti_motion.calibration import calibrate
 
     described = load_robot(args.sim) if args.sim else None
     if described is not None and not args.port:
@@ -128,7 +127,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
         return calibrate_simulator(described, seed=args.seed, floor=args.floor, plan=plan,
                                    progress=print_progress, after_stage=after_stage,
                                    recorded=recorded)
-    from drivers.roomba.driver import Roomba
+    from drivers.roomba import Roomba
 
     def before_stage(stage: str) -> None:
         where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
@@ -171,7 +170,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     import sys
 
     from drivers.exceptions import PassiveModeError
-    from lti_motion.recordings.logfile import save_log
+    from lti_motion.recordings import save_log
 
     out = Path(args.out)
     check_writable_folder(out)
@@ -198,7 +197,7 @@ def _save(cal: Calibration, out: Path, *, accept_unhealthy: bool) -> int:
     """Plots always; the models only when healthy or accepted. The exit code."""
     import sys
 
-    from drivers.sim.calibration import summarize
+    from drivers.sim import summarize
     from lti_motion.app.plots import plot_calibration
 
     plots = plot_calibration(cal, out)

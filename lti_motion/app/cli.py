@@ -48,7 +48,7 @@ from pathlib import Path
 # before this module keeps its own setting.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from drivers.sim.config import FLOORS, load_robot
+from drivers.sim import FLOORS, load_robot
 from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
 from lti_motion.app.wall_run_cli import add_wall_run_arguments
 from lti_motion.exceptions import MissingEncoderScaleError
@@ -174,7 +174,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _load_model(path: str):
-    from lti_motion.model.motion_model import MotionModel
+    from lti_motion.model import MotionModel
 
     if not Path(path).is_file():
         raise FileNotFoundError(f"no model file {path}; make one with 'lti-motion calibrate'")
@@ -266,8 +266,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         if model.m_per_tick is None:          # before any drive: nothing driven, nothing lost
             raise MissingEncoderScaleError.needed_by("the monitor")
     elif args.sim:
-        from drivers.sim.calibration import calibrate_simulator, print_progress
-        from lti_motion.calibration.manoeuvres import CalibrationPlan
+        from drivers.sim import calibrate_simulator, print_progress
+        from lti_motion.calibration import CalibrationPlan
 
         print(f"no --model: calibrating the simulated {robot.name} robot first "
               f"({args.excitation_s:g} s of excitation, seed {args.seed})")
@@ -297,7 +297,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
 
 
 def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
-    from drivers.roomba.virtual import serve
+    from drivers.roomba import serve
 
     try:
         serve(preset=load_robot(args.preset), seed=args.seed, speed=args.speed, floor=args.floor,

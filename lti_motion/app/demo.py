@@ -23,8 +23,15 @@ from types import MappingProxyType
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.sim.calibration import calibrate_simulator, print_progress, summarize
-from drivers.sim.config import FloorMap, RobotParams, floor_name, load_robot
+from drivers.sim import (
+    FloorMap,
+    RobotParams,
+    calibrate_simulator,
+    floor_name,
+    load_robot,
+    print_progress,
+    summarize,
+)
 from lti_motion.app.plots import plot_calibration
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
@@ -38,7 +45,7 @@ from lti_motion.app.route import (
     drive_route,
 )
 from lti_motion.app.route_smoother import SmootherEstimator
-from lti_motion.calibration.manoeuvres import Calibration, CalibrationPlan
+from lti_motion.calibration import Calibration, CalibrationPlan
 
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from lti_motion.calibration.intrinsics_fit import IntrinsicsCalibration
+    from lti_motion.calibration import IntrinsicsCalibration
     from lti_motion.intrinsics import OdometryIntrinsics
 
 __all__ = ["add_intrinsics_arguments", "run_intrinsics_calibration", "write_into_model"]
@@ -76,7 +76,7 @@ def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out
     FileNotFoundError
         If there is no file ``model_path``.
     """
-    from lti_motion.model.motion_model import MotionModel
+    from lti_motion.model import MotionModel
 
     if not Path(model_path).is_file():
         raise FileNotFoundError(f"no model file {model_path}")
@@ -99,9 +99,8 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     """
     import numpy as np
 
-    from lti_motion.calibration.intrinsics_fit import calibrate_intrinsics
-    from lti_motion.recordings.logfile import load_log
-    from lti_motion.recordings.tum import read_tum
+    from lti_motion.calibration import calibrate_intrinsics
+    from lti_motion.recordings import load_log, read_tum
 
     if not args.reference:
         raise ValueError("--log needs --reference FILE.tum: the pose reference to calibrate "

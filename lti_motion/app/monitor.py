@@ -36,11 +36,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fusion.landmark_map import LandmarkMap
-from fusion.monitoring.dynamics import DynamicsAlarm
-from fusion.monitoring.monitored_filter import FrameResult, MonitoredFilter
-from fusion.monitoring.phase_one import NominalFit
-from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
-from fusion.monitoring.wheel_check import WheelVerdict
+from fusion.monitoring import (
+    AlarmEvent,
+    DynamicsAlarm,
+    FrameResult,
+    MonitoredFilter,
+    MonitorOptions,
+    NominalFit,
+    ResidualMonitor,
+    WheelVerdict,
+)
 from fusion.noise import GyroNoise, gate_threshold
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.monitor_setup import (
@@ -52,11 +57,11 @@ from lti_motion.app.monitor_setup import (
 )
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.kinematics import wrap_angle
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import SensorFrame
+from lti_motion.model import MotionModel
+from lti_motion.recordings import SensorFrame
 
 if TYPE_CHECKING:
-    from drivers.sim.config import FloorMap, RobotParams
+    from drivers.sim import FloorMap, RobotParams
 
 __all__ = [
     "FAULTS",
@@ -138,7 +143,7 @@ def heading_deg(theta_rad: float) -> float:
 def fault_for(choice: str, t_s: float) -> tuple[object, str | None]:
     """The simulator :class:`~drivers.sim.Fault` of a ``--fault`` choice at ``t_s`` [s],
     and the alarm kind it should raise."""
-    from drivers.sim.config import Fault
+    from drivers.sim import Fault
 
     kind, params, expected = FAULTS[choice]
     return Fault(kind, t_s=t_s, **params), expected
@@ -422,8 +427,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         ``gyro`` for a robot without a ``[gyro]``.
     """
     from drivers.logs import Recorder
-    from drivers.sim.config import Room, floor_name, load_robot
-    from drivers.sim.simulator import Simulator
+    from drivers.sim import Room, Simulator, floor_name, load_robot
 
     _require_scale(model)
     params = load_robot(robot) if isinstance(robot, str) else robot
@@ -536,7 +540,7 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
         If the model has no encoder scale (before the port is opened).
     """
     from drivers.logs import Recorder
-    from drivers.roomba.driver import Roomba
+    from drivers.roomba import Roomba
 
     _require_scale(model)
 

@@ -18,16 +18,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fusion.landmark_map import LandmarkMap
-from fusion.monitoring.phase_one import NominalFit, fit_nominal
+from fusion.monitoring import NominalFit, fit_nominal
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.kinematics import wheel_from_body, wrap_angle
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.ticks import unwrap_ticks
+from lti_motion.model import MotionModel
+from lti_motion.recordings import unwrap_ticks
 
 if TYPE_CHECKING:
-    from drivers.sim.config import FloorMap, RobotParams
-    from lti_motion.recordings.frames import FrameLog
+    from drivers.sim import FloorMap, RobotParams
+    from lti_motion.recordings import FrameLog
 
 __all__ = ["MONITOR_LANDMARKS", "monitor_route", "nominal_from_logs", "nominal_on_simulator",
            "sightings"]
@@ -95,8 +95,7 @@ def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "crea
     (default the robot's); ``robot`` is parameters, a preset name or a robot file.
     Commands and counts only go to :func:`~lti_motion.app.monitor_setup.fit_nominal`.
     """
-    from drivers.sim.config import Room, load_robot
-    from drivers.sim.simulator import Simulator
+    from drivers.sim import Room, Simulator, load_robot
 
     params = load_robot(robot) if isinstance(robot, str) else robot
     seeds = [seed + 1000 + i for i in range(n_drives)]
@@ -111,7 +110,7 @@ def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "crea
 
 def nominal_from_logs(model: MotionModel, paths: Sequence[str]) -> NominalFit:
     """Phase I from logs of nominal drives (``lti-motion monitor --record`` on the robot)."""
-    from lti_motion.recordings.logfile import load_log
+    from lti_motion.recordings import load_log
 
     drives = []
     for path in paths:

@@ -25,10 +25,16 @@ import numpy as np
 from drivers.datasets import CREATE1_WHEEL_BASE_M, MrclamRobot, MrclamSegment, resample_robot
 from lti_motion.kinematics import integrate_poses, wheel_from_body, wrap_angle
 from lti_motion.metrics import fit_percent
-from lti_motion.model.fir import estimate_fir
-from lti_motion.model.motion_model import MotionModel, fit_arx
-from lti_motion.model.output_error import OutputErrorOptions, refine_model
-from lti_motion.model.structure_cv import Candidate, fit_candidate, score_structures
+from lti_motion.model import (
+    Candidate,
+    MotionModel,
+    OutputErrorOptions,
+    estimate_fir,
+    fit_arx,
+    fit_candidate,
+    refine_model,
+    score_structures,
+)
 
 __all__ = ["CANDIDATES", "RobotResult", "evaluate_robot", "split_halves"]
 

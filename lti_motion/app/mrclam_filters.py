@@ -70,15 +70,14 @@ from drivers.datasets import (
     load_mrclam,
     resample_robot,
 )
-from fusion.ekf.model_ekf import ModelEKF
-from fusion.ekf.velocity_ekf import VelocityModelEKF
+from fusion.ekf import ModelEKF, VelocityModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_residual
 from lti_motion.app.mrclam import WARMUP_S, evaluate_robot, split_halves
 from lti_motion.app.mrclam_noise import VARIANTS, speed_covariances
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model.motion_model import COVARIANCE_JITTER, MotionModel
+from lti_motion.model import COVARIANCE_JITTER, MotionModel
 
 __all__ = ["GATE_PROBABILITY", "FilterResult", "MotionNoise", "evaluate_filters",
            "landmark_noise_from_truth", "main", "output_error_model", "sightings_in"]

@@ -55,8 +55,14 @@ from drivers.datasets import (
     load_mrclam,
     resample_robot,
 )
-from fusion.graph.preintegration import Preintegrated, compose_motions, preintegrate
-from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, smooth_batch
+from fusion.graph import (
+    IncrementalSmoother,
+    Preintegrated,
+    SmootherOptions,
+    compose_motions,
+    preintegrate,
+    smooth_batch,
+)
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
@@ -69,7 +75,7 @@ from lti_motion.app.mrclam_filters import (
 )
 from lti_motion.app.mrclam_noise import VARIANTS, predicted_speeds, speed_covariances
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model.motion_model import MotionModel, fit_arx
+from lti_motion.model import MotionModel, fit_arx
 
 __all__ = ["GATE_PROBABILITY", "HUBER_K", "GraphResult", "evaluate_graph", "main",
            "speed_covariances"]

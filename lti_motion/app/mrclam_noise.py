@@ -18,9 +18,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from drivers.datasets import CREATE1_WHEEL_BASE_M, MrclamSegment
-from fusion.graph.speed_noise import DEFAULT_BANDWIDTH_S, long_run_covariance
+from fusion.graph import DEFAULT_BANDWIDTH_S, long_run_covariance
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model.motion_model import MotionModel
+from lti_motion.model import MotionModel
 
 __all__ = ["VARIANTS", "predicted_speeds", "speed_covariances"]
 

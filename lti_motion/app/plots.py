@@ -15,8 +15,8 @@ import matplotlib
 import numpy as np
 from matplotlib.figure import Figure
 
-from lti_motion.calibration.manoeuvres import Calibration, speeds_from_log
-from lti_motion.model.motion_model import MotionModel
+from lti_motion.calibration import Calibration, speeds_from_log
+from lti_motion.model import MotionModel
 
 __all__ = [
     "plot_calibration",

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf import ModelEKF
 from fusion.noise import GyroNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.replay_sources import (
@@ -49,9 +49,8 @@ from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, rpe
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.ticks import tick_deltas
-from lti_motion.recordings.tum import write_tum
+from lti_motion.model import MotionModel
+from lti_motion.recordings import tick_deltas, write_tum
 
 __all__ = [
     "ESTIMATORS",

@@ -21,11 +21,8 @@ from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wheel_from_body
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
-from lti_motion.recordings.logfile import load_log
-from lti_motion.recordings.resample import GridSignals
-from lti_motion.recordings.ticks import stream_clock
+from lti_motion.model import MotionModel
+from lti_motion.recordings import FrameLog, GridSignals, load_log, stream_clock
 
 __all__ = [
     "ESTIMATORS",
@@ -392,7 +389,7 @@ def fit_mrclam_model(path: str | os.PathLike, *, robot: int, dt_s: float = 0.1
     """
     from drivers.datasets import CREATE1_WHEEL_BASE_M, resample_robot
     from lti_motion.app.mrclam import split_halves
-    from lti_motion.model.motion_model import fit_arx
+    from lti_motion.model import fit_arx
 
     _, rec = _mrclam_robot(path, robot)
     segments = resample_robot(rec, dt_s=dt_s)

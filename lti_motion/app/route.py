@@ -24,17 +24,15 @@ from typing import Protocol
 
 import numpy as np
 
-from drivers.sim.config import FloorMap, RobotParams, Room
-from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF
+from drivers.sim import FloorMap, RobotParams, Room, Simulator
+from fusion.ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, pose_step, wheel_from_body, wrap_angle
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import SensorFrame
-from lti_motion.recordings.ticks import tick_deltas, tick_step
+from lti_motion.model import MotionModel
+from lti_motion.recordings import SensorFrame, tick_deltas, tick_step
 
 __all__ = [
     "ROUTE_LANDMARKS",

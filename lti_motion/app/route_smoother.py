@@ -32,17 +32,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from fusion.graph.preintegration import preintegrate_model
-from fusion.graph.smoother import IncrementalSmoother, SmootherOptions
+from fusion.graph import IncrementalSmoother, SmootherOptions, preintegrate_model
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from fusion.scale_errors import IntrinsicsEstimate
 from lti_motion.exceptions import MissingEncoderScaleError, ShapeError
 from lti_motion.kinematics import body_from_wheel, pose_step
-from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import SensorFrame
-from lti_motion.recordings.ticks import tick_deltas
+from lti_motion.model import MotionModel
+from lti_motion.recordings import SensorFrame, tick_deltas
 
 __all__ = ["ROUTE_SMOOTHER_OPTIONS", "SmootherEstimator"]
 

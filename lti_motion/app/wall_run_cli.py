@@ -16,9 +16,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from drivers.sim.config import RobotParams
-    from lti_motion.calibration.wall_run import WallRunCalibration
-    from lti_motion.calibration.wall_run_drive import WallRunDrive
+    from drivers.sim import RobotParams
+    from lti_motion.calibration import WallRunCalibration, WallRunDrive
     from lti_motion.intrinsics import OdometryIntrinsics
 
 __all__ = ["add_wall_run_arguments", "run_wall_run"]
@@ -45,7 +44,7 @@ def _intrinsics_in_use(args: argparse.Namespace, described: RobotParams | None
     ``--into-model`` (e.g. the rotation manoeuvre's scale), else the robot's nominal ones."""
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.intrinsics import OdometryIntrinsics
-    from lti_motion.model.motion_model import MotionModel
+    from lti_motion.model import MotionModel
 
     if args.into_model:
         if not Path(args.into_model).is_file():
@@ -58,7 +57,7 @@ def _intrinsics_in_use(args: argparse.Namespace, described: RobotParams | None
     elif described is not None:
         scale, source = described.m_per_tick, f"the nominal ones of {args.sim}"
     else:
-        from drivers.sim.config import get_preset
+        from drivers.sim import get_preset
 
         scale, source = get_preset("create2").m_per_tick, "a Create 2's nominal ones"
     return (OdometryIntrinsics.symmetric(m_per_tick=scale,
@@ -68,7 +67,7 @@ def _intrinsics_in_use(args: argparse.Namespace, described: RobotParams | None
 
 def _check(args: argparse.Namespace) -> None:
     """Refuse, before anything is driven, what cannot give a wall run."""
-    from lti_motion.calibration.wall_run import MIN_RUN_M
+    from lti_motion.calibration import MIN_RUN_M
 
     if args.log or args.bag:
         raise ValueError("--wall-run drives the robot: give --sim NAME_OR_FILE or --port DEV, "
@@ -83,16 +82,16 @@ def _check(args: argparse.Namespace) -> None:
 def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: RobotParams | None
            ) -> WallRunDrive:
     """The manoeuvre on the simulator or on the robot at ``--port``."""
-    from lti_motion.calibration.wall_run_drive import drive_wall_run
+    from lti_motion.calibration import drive_wall_run
 
     if described is not None and not args.port:
-        from drivers.sim.calibration import wall_run_simulator
+        from drivers.sim import wall_run_simulator
 
         print(f"wall run of the simulated {described.name} robot, 0.5 m in front of a wall "
               f"(seed {args.seed})")
         sim = wall_run_simulator(described, seed=args.seed, floor=args.floor)
         return drive_wall_run(sim, known, run_m=args.wall_run_m)
-    from drivers.roomba.driver import Roomba
+    from drivers.roomba import Roomba
 
     print(f"next: the wall run. Put the robot on hard floor facing a straight, plain wall "
           f"0.2-1.5 m ahead, with {args.wall_run_m + 0.5:g} m clear along the wall on both "
@@ -108,8 +107,7 @@ def _summary(cal: WallRunCalibration, drive: WallRunDrive, known: OdometryIntrin
              source: str) -> list[str]:
     import numpy as np
 
-    from lti_motion.calibration.wall_run import run_path
-    from lti_motion.calibration.wall_run_drive import wall_passes
+    from lti_motion.calibration import run_path, wall_passes
 
     over = (" (its first run curved towards the wall on its left)"
             if drive.wall_side == "right" else "")
@@ -146,14 +144,13 @@ def run_wall_run(args: argparse.Namespace) -> int:
     """
     import sys
 
-    from drivers.sim.config import load_robot
+    from drivers.sim import load_robot
     from lti_motion.app.calibrate_run import check_writable_folder
     from lti_motion.app.intrinsics_cli import write_into_model
-    from lti_motion.calibration.wall_run import calibrate_wall_run
-    from lti_motion.calibration.wall_run_drive import wall_passes
+    from lti_motion.calibration import calibrate_wall_run, wall_passes
     from lti_motion.exceptions import CurvedIntoWallError
     from lti_motion.persistence import atomic_write
-    from lti_motion.recordings.logfile import save_log
+    from lti_motion.recordings import save_log
 
     _check(args)
     out = Path(args.out)

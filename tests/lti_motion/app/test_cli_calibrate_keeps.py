@@ -85,16 +85,16 @@ def test_a_dead_link_keeps_the_rotation_and_resume_drives_only_the_rest(tmp_path
 
 
 def test_ctrl_c_stops_the_wheels_and_says_what_was_kept(tmp_path, capsys, monkeypatch):
-    import drivers.sim.calibration as sim_calibration
+    import drivers.sim
 
-    original = sim_calibration.print_progress
+    original = drivers.sim.print_progress
 
     def interrupted(stage, done, total):
         if done >= 200:                                  # 3 s into the rotation
             raise KeyboardInterrupt
         original(stage, done, total)
 
-    monkeypatch.setattr(sim_calibration, "print_progress", interrupted)
+    monkeypatch.setattr(drivers.sim, "print_progress", interrupted)    # what the command reads
     out = tmp_path / "cal"
     with VirtualRoomba(seed=1, speed=8.0, room=Room.cluttered(),
                        initial_pose=Room.CALIBRATION_SPOT) as vr:

@@ -100,7 +100,7 @@ def test_a_recorded_drive_is_not_a_wall_run(tmp_path, capsys):
 
 
 def test_no_wall_ahead(lefty, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(drivers.sim.calibration, "wall_run_simulator",
+    monkeypatch.setattr(drivers.sim, "wall_run_simulator",
                         lambda robot, **_: Simulator(robot, room=Room.empty()))
     _refused(capsys, ["--sim", str(lefty), "--out", str(tmp_path)],
              r"no wall found: no bump within 1\.5 m .*facing a straight wall")
@@ -125,7 +125,7 @@ class _NoLightBumps:
 
 
 def test_no_light_bump_signals(lefty, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(drivers.sim.calibration, "wall_run_simulator",
+    monkeypatch.setattr(drivers.sim, "wall_run_simulator",
                         lambda robot, **_: _NoLightBumps(Simulator(
                             robot, room=Room.single_wall(), initial_pose=(0, 0.5, -np.pi / 2))))
     _refused(capsys, ["--sim", str(lefty), "--out", str(tmp_path)],
