@@ -46,22 +46,15 @@ from pathlib import Path
 # before this module keeps its own setting.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from drivers.sim.config import FLOORS, load_robot
+from drivers.sim.config import load_robot
+from lti_motion.app.bag_options import add_bag_options
 from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
+from lti_motion.app.robot_options import FLOOR_HELP, FLOOR_NAMES, ROBOT_HELP
 from lti_motion.app.wall_run_cli import add_wall_run_arguments
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
 
-#: The simulator's floors, the choices of --floor.
-FLOOR_NAMES = tuple(FLOORS)
-#: --robot of demo, calibrate, monitor and virtual-roomba (old spellings --preset, --sim
-#: kept as aliases, same dest); replay's --robot is a robot index (docs/robot_file.md).
-#: The preset names are written out, not read from the robot files, so that start-up
-#: reads no file (tests/lti_motion/app/test_cli.py checks they are all named).
-ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
-              "(.toml or .json, docs/robot_file.md)")
-FLOOR_HELP = "simulated floor (default: the robot's)"
 
 
 def _cmd_calibrate_log(args: argparse.Namespace) -> int:
@@ -313,45 +306,6 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = False) -> None:
-    """The options of --bag: topics where a bag holds several of a kind, joints, encoder.
-
-    ``shared_with_log``: ``calibrate`` already has ``--wheel-radius`` and ``--encoders`` (for
-    ``--log``); they mean the same for a bag and are not added twice."""
-    group = parser.add_argument_group(
-        "ROS bag (--bag)", "topics are found by message type when the bag has one of each")
-    for kind, what in (("cmd", "Twist or TwistStamped commands"),
-                       ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
-                       ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
-        group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
-    group.add_argument("--truth-parent", metavar="FRAME",
-                       help="reference poses from tf: the parent frame (default the first "
-                            "of world, map, odom with the child frame)")
-    group.add_argument("--truth-child", metavar="FRAME",
-                       help="reference poses from tf: the robot's frame (default base_link, "
-                            "else base_footprint)")
-    group.add_argument("--left-joint", default="left", metavar="PATTERN",
-                       help="left wheel joint: its name or a pattern (default 'left')")
-    group.add_argument("--right-joint", default="right", metavar="PATTERN",
-                       help="right wheel joint: its name or a pattern (default 'right')")
-    group.add_argument("--ticks-per-rad", type=float, default=None,
-                       help="encoder counts per wheel radian (default: calibrate --robot's "
-                            "description, else the Create 2's, 80.98)")
-    if not shared_with_log:
-        group.add_argument("--wheel-radius", type=float, default=None,
-                           help="nominal wheel radius [m] (default the Create 2's, 0.036)")
-        group.add_argument("--encoders", choices=["commanded", "quadrature"],
-                           default="commanded",
-                           help="commanded: the angles count in the commanded direction "
-                                "(Roomba, Create 2; default); quadrature: they know the way "
-                                "the wheel turns")
-    group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
-                       help="refuse wheel speeds above this as impossible [m/s] (default 20)")
-    group.add_argument("--dt", type=float, default=None,
-                       help="sensor period [s] (default: calibrate from the wheel stamps, "
-                            "replay and monitor the model's)")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lti-motion``."""
     parser = argparse.ArgumentParser(
@@ -426,7 +380,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--accept-unhealthy", action="store_true",
                      help="save the model even if its held-out fit is below the healthy 85%% "
                           "(docs/guide_calibrate_real_robot.md)")
-    _add_bag_options(cal, shared_with_log=True)
+    add_bag_options(cal, shared_with_log=True)
     cal.set_defaults(func=_cmd_calibrate)
 
     rp = sub.add_parser(
@@ -466,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the EKF fuses the log's gyro or the bag's Imu yaw rate (bias "
                          "estimated; it helps where the wheels slip, and can cost on a hard "
                          "floor: docs/ekf.md)")
-    _add_bag_options(rp)
+    add_bag_options(rp)
     rp.set_defaults(func=_cmd_replay)
 
     mo = sub.add_parser(
@@ -519,7 +473,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the EKF fuses the robot file's [gyro] or the bag's Imu yaw rate "
                          "(bias estimated; it helps where the wheels slip, and can cost on a "
                          "hard floor: docs/ekf.md)")
-    _add_bag_options(mo)
+    add_bag_options(mo)
     mo.set_defaults(func=_cmd_monitor)
 
     vr = sub.add_parser(
