@@ -24,9 +24,12 @@ virtual-roomba
 This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (docs/architecture.md, Layout and layers).
 
-Each sub-command imports its machinery inside its handler, so ``lti-motion --help``
-and a mistyped option cost only the parser (and numpy, for the simulator's floor names;
-robot files are read when a sub-command names a robot).
+Each sub-command's options are added by its own light module (``demo_cli``,
+``calibrate_cli``, ``replay_cli``, ``monitor_cli``, ``virtual_roomba_cli``; with
+``robot_options`` and ``bag_options`` that several share); this module creates the
+sub-parsers and dispatches. Each sub-command imports its machinery inside its handler, so
+``lti-motion --help`` and a mistyped option cost only the parser (and numpy, for the
+simulator's floor names; robot files are read when a sub-command names a robot).
 
 The paper: ``docs/architecture.md``, "The paper".
 """
@@ -48,22 +51,18 @@ from pathlib import Path
 # before this module keeps its own setting.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from drivers.sim import FLOORS, load_robot
-from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
-from lti_motion.app.wall_run_cli import add_wall_run_arguments
+from drivers.sim import load_robot
+from lti_motion.app import (
+    calibrate_cli,
+    demo_cli,
+    monitor_cli,
+    replay_cli,
+    virtual_roomba_cli,
+)
 from lti_motion.exceptions import MissingEncoderScaleError
 
 __all__ = ["main"]
 
-#: The simulator's floors, the choices of --floor.
-FLOOR_NAMES = tuple(FLOORS)
-#: --robot of demo, calibrate, monitor and virtual-roomba (old spellings --preset, --sim
-#: kept as aliases, same dest); replay's --robot is a robot index (docs/robot_file.md).
-#: The preset names are written out, not read from the robot files, so that start-up
-#: reads no file (tests/lti_motion/app/test_cli.py checks they are all named).
-ROBOT_HELP = ("the simulated robot: a preset (create2, paper) or a robot file "
-              "(.toml or .json, docs/robot_file.md)")
-FLOOR_HELP = "simulated floor (default: the robot's)"
 
 
 def _cmd_calibrate_log(args: argparse.Namespace) -> int:
@@ -315,229 +314,30 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = False) -> None:
-    """The options of --bag: topics where a bag holds several of a kind, joints, encoder.
-
-    ``shared_with_log``: ``calibrate`` already has ``--wheel-radius`` and ``--encoders`` (for
-    ``--log``); they mean the same for a bag and are not added twice."""
-    group = parser.add_argument_group(
-        "ROS bag (--bag)", "topics are found by message type when the bag has one of each")
-    for kind, what in (("cmd", "Twist or TwistStamped commands"),
-                       ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
-                       ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
-        group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
-    group.add_argument("--truth-parent", metavar="FRAME",
-                       help="reference poses from tf: the parent frame (default the first "
-                            "of world, map, odom with the child frame)")
-    group.add_argument("--truth-child", metavar="FRAME",
-                       help="reference poses from tf: the robot's frame (default base_link, "
-                            "else base_footprint)")
-    group.add_argument("--left-joint", default="left", metavar="PATTERN",
-                       help="left wheel joint: its name or a pattern (default 'left')")
-    group.add_argument("--right-joint", default="right", metavar="PATTERN",
-                       help="right wheel joint: its name or a pattern (default 'right')")
-    group.add_argument("--ticks-per-rad", type=float, default=None,
-                       help="encoder counts per wheel radian (default: calibrate --robot's "
-                            "description, else the Create 2's, 80.98)")
-    if not shared_with_log:
-        group.add_argument("--wheel-radius", type=float, default=None,
-                           help="nominal wheel radius [m] (default the Create 2's, 0.036)")
-        group.add_argument("--encoders", choices=["commanded", "quadrature"],
-                           default="commanded",
-                           help="commanded: the angles count in the commanded direction "
-                                "(Roomba, Create 2; default); quadrature: they know the way "
-                                "the wheel turns")
-    group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
-                       help="refuse wheel speeds above this as impossible [m/s] (default 20)")
-    group.add_argument("--dt", type=float, default=None,
-                       help="sensor period [s] (default: calibrate from the wheel stamps, "
-                            "replay and monitor the model's)")
+#: The sub-commands, in the order ``lti-motion --help`` lists them: the name, the light
+#: module that adds its options (``HELP``, ``DESCRIPTION``, ``add_arguments``), the handler.
+_SUB_COMMANDS = (
+    ("demo", demo_cli, _cmd_demo),
+    ("calibrate", calibrate_cli, _cmd_calibrate),
+    ("replay", replay_cli, _cmd_replay),
+    ("monitor", monitor_cli, _cmd_monitor),
+    ("virtual-roomba", virtual_roomba_cli, _cmd_virtual_roomba),
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``lti-motion``."""
+    """The argument parser of ``lti-motion``: one sub-parser per sub-command, whose options
+    its own light module adds (``SUB_cli.add_arguments``), and the handler it dispatches to."""
     parser = argparse.ArgumentParser(
         prog="lti-motion",
         description="Self-calibrating LTI motion models for differential-drive robots.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="run the main job on the simulator",
-                          description="Calibrate the simulated robot as the paper does, "
-                                      "then drive the paper's closed route with every "
-                                      "estimator; writes report.md, metrics.json and plots.")
-    demo.add_argument("--out", default="out/demo", help="report folder (default: out/demo)")
-    demo.add_argument("--seed", type=int, default=0, help="simulator seed (default: 0)")
-    demo.add_argument("--robot", "--preset", dest="preset", default="create2",
-                      metavar="NAME_OR_FILE", help=f"{ROBOT_HELP} (default: create2)")
-    demo.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
-    demo.add_argument("--runs", type=int, default=30, help="route runs per estimator (30)")
-    demo.add_argument("--excitation-s", type=float, default=180.0,
-                      help="length of the calibration's random excitation [s] (180)")
-    demo.set_defaults(func=_cmd_demo)
-
-    cal = sub.add_parser(
-        "calibrate", help="calibrate the encoder scale, FIR and ARX models by driving",
-        description="Runs the paper's manoeuvres (rotation in place, one-motor steps, "
-                    "random excitation) on the simulator or a robot, keeps each drive as "
-                    "log_<manoeuvre>.npz as it ends (--resume goes on from them), fits the "
-                    "models, writes plots, and model_arx.json and model_fir.json when the "
-                    "model is healthy; or fits the ARX model offline from a recorded drive "
-                    "(--log). See docs/guide_calibrate_real_robot.md.")
-    cal.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
-                     help=f"calibrate {ROBOT_HELP}; with --port or --log, the robot's "
-                          "description (wheel base; with --log also its encoder scale and "
-                          "wheel radius)")
-    where = cal.add_mutually_exclusive_group()
-    where.add_argument("--port", help="serial device of a Roomba / Create 2, e.g. /dev/ttyUSB0")
-    where.add_argument("--log", metavar="FILE",
-                       help="calibrate the ARX model offline from a recorded drive of any "
-                            "differential drive (.npz, docs/log_format.md); prints an "
-                            "excitation report; the encoder scale then comes from "
-                            "--m-per-tick, --wheel-radius or --robot; with --reference, both "
-                            "wheels' scale and the wheel base instead (docs/intrinsics.md)")
-    cal.add_argument("--m-per-tick", type=float, default=None,
-                     help="with --log: encoder scale [m/tick] from the robot description")
-    cal.add_argument("--wheel-radius", type=float, default=None,
-                     help="with --log or --bag: wheel radius [m] for wheel angles or speeds "
-                          "in rad/s (default: the --robot description's; --bag without "
-                          "--robot: the Create 2's, 0.036)")
-    where.add_argument("--bag", help="a recorded ROS bag (ROS 1 .bag, or a ROS 2 folder with a "
-                                     ".db3 or .mcap file): fit the ARX model on its drive "
-                                     "(docs/guide_ros_bags.md)")
-    add_intrinsics_arguments(cal)
-    add_wall_run_arguments(cal)
-    cal.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    cal.add_argument("--clock-rate", type=float, default=1.0,
-                     help="robot seconds per wall second: 1 for a real robot, the --speed "
-                          "of a faster virtual Roomba")
-    cal.add_argument("--wheel-base", type=float, default=None,
-                     help="nominal wheel base [m] (default: the --robot description's, else "
-                          "0.235, the Create 2)")
-    cal.add_argument("--floor", help="floor name recorded in the model (default: hard, or "
-                     f"the robot's) and simulated with --robot: {', '.join(FLOOR_NAMES)}")
-    cal.add_argument("--seed", type=int, default=0, help="seed of the random excitation")
-    cal.add_argument("--excitation-s", type=float, default=180.0,
-                     help="length of the random excitation [s] (default 180)")
-    cal.add_argument("--out", default="out/calibration", help="output folder")
-    cal.add_argument("--yes", action="store_true",
-                     help="do not wait for Enter between manoeuvres (robot already placed)")
-    cal.add_argument("--resume", action="store_true",
-                     help="use the drives an earlier, stopped run kept in --out "
-                          "(log_<manoeuvre>.npz) and drive only the rest")
-    cal.add_argument("--accept-unhealthy", action="store_true",
-                     help="save the model even if its held-out fit is below the healthy 85%% "
-                          "(docs/guide_calibrate_real_robot.md)")
-    _add_bag_options(cal, shared_with_log=True)
-    cal.set_defaults(func=_cmd_calibrate)
-
-    rp = sub.add_parser(
-        "replay", help="run the estimators on a recorded log or an MRCLAM robot",
-        description="Runs the estimators (encoder odometry, commands, the model sensor-less, "
-                    "the model's EKF with encoders, and with landmarks where there are "
-                    "sightings) on an lti-motion log (.npz, docs/log_format.md) or an MRCLAM "
-                    "data set folder; prints ATE / RPE where there is ground truth; writes one "
-                    "TUM trajectory per estimator (and groundtruth.tum) for evo, "
-                    "metrics.json and plots. See docs/replay.md.")
-    rp.add_argument("source", metavar="LOG_OR_DATASET", nargs="?",
-                    help="an .npz log, or an MRCLAM_Dataset folder (or give --bag)")
-    rp.add_argument("--bag", help="a recorded ROS bag instead (docs/guide_ros_bags.md)")
-    rp.add_argument("--out-bag", metavar="NEW_BAG",
-                    help="--bag: also write the EKF's estimates (nav_msgs/Odometry with "
-                         "covariance) into this new bag (.bag: ROS 1; else a ROS 2 folder)")
-    rp.add_argument("--model", help="model file from 'lti-motion calibrate' (model_arx.json)")
-    rp.add_argument("--fit-first-half", action="store_true",
-                    help="MRCLAM only, instead of --model: fit an ARX model on the first half "
-                         "of the robot's run and replay the second half")
-    rp.add_argument("--robot", type=int, default=None,
-                    help="MRCLAM robot number 1-5 (default 1), or robot index of a batch log "
-                         "(default 0)")
-    rp.add_argument("--out", default="out/replay", help="output folder (default out/replay)")
-    rp.add_argument("--estimators", nargs="+", metavar="NAME",
-                    choices=["odometry", "commands", "sensorless", "ekf", "ekf_landmarks"],
-                    help="which to run: odometry commands sensorless ekf ekf_landmarks "
-                         "(default: every one the recording can feed)")
-    rp.add_argument("--start-s", type=float, default=0.0,
-                    help="skip this much of the recording [s] (default 0)")
-    rp.add_argument("--duration-s", type=float, default=None,
-                    help="replay only this long [s] (default: to the end)")
-    rp.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"),
-                    help="start pose [m m rad] (default: the first ground-truth pose, else 0 0 0)")
-    rp.add_argument("--rpe-s", type=float, default=1.0, help="RPE step [s] (default 1)")
-    rp.add_argument("--gyro", action="store_true",
-                    help="the EKF fuses the log's gyro or the bag's Imu yaw rate (bias "
-                         "estimated; it helps where the wheels slip, and can cost on a hard "
-                         "floor: docs/ekf.md)")
-    _add_bag_options(rp)
-    rp.set_defaults(func=_cmd_replay)
-
-    mo = sub.add_parser(
-        "monitor", help="drive (or listen), run the EKF and the residual monitor, print alarms",
-        description="Drives a rounded-rectangle route with speed changes (the simulator or a "
-                    "robot; --listen only reads a robot), runs the model's EKF on the encoders "
-                    "with the residual monitor (gate and glitch bursts, stuck encoder, dynamics "
-                    "tests after a Phase-I fit on nominal drives, and on the simulator the "
-                    "landmark "
-                    "scale test), and prints each alarm as it is raised (time, "
-                    "kind, test, statistic > threshold, onset) and a summary. Without --model, "
-                    "--robot calibrates the simulated robot first; --port needs --model. See "
-                    "docs/guide_alarms.md.")
-    mwhere = mo.add_mutually_exclusive_group(required=True)
-    mwhere.add_argument("--robot", "--sim", dest="sim", metavar="NAME_OR_FILE",
-                        help=f"monitor {ROBOT_HELP}")
-    mwhere.add_argument("--port", help="serial device of a Roomba / Create 2")
-    mwhere.add_argument("--bag", help="a recorded ROS bag: monitor its drive, alarms with bag "
-                                      "time (needs --model)")
-    mo.add_argument("--out-bag", metavar="NEW_BAG",
-                    help="--bag: write the estimates (nav_msgs/Odometry with covariance) and "
-                         "the alarms (diagnostic_msgs/DiagnosticArray) into this new bag")
-    mo.add_argument("--model", help="model file (model_arx.json from 'lti-motion calibrate')")
-    mo.add_argument("--duration", type=float, default=30.0,
-                    help="robot seconds to drive or listen (default 30)")
-    mo.add_argument("--fault", choices=["stuck-encoder", "stall", "spikes", "payload", "motor",
-                                        "delay", "carpet", "wheel-drift"],
-                    help="--robot only: inject this simulator fault (stall: the left wheel "
-                         "blocked for 2 s; wheel-drift: the left wheel's diameter +0.5%%)")
-    mo.add_argument("--nominal-drives", type=int, default=20,
-                    help="--robot: nominal drives of the same length first, for the dynamics "
-                         "null and the encoder gate (default 20; 0: dynamics tests off)")
-    mo.add_argument("--nominal", nargs="+", metavar="LOG.npz",
-                    help="--port: logs of nominal drives (--record) for the dynamics null and "
-                         "the encoder gate (without: dynamics tests off)")
-    mo.add_argument("--fault-at", type=float, default=None,
-                    help="onset of --fault [s] (default: half the duration)")
-    mo.add_argument("--seed", type=int, default=0, help="simulator and route seed (default 0)")
-    mo.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
-    mo.add_argument("--excitation-s", type=float, default=60.0,
-                    help="--robot without --model: calibration excitation [s] (default 60)")
-    mo.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
-    mo.add_argument("--clock-rate", type=float, default=1.0,
-                    help="robot seconds per wall second (the --speed of a virtual Roomba)")
-    mo.add_argument("--listen", action="store_true",
-                    help="--port only: send no wheel command, only read the stream")
-    mo.add_argument("--record", metavar="FILE.npz",
-                    help="also write the frames as a log that 'lti-motion replay' reads")
-    mo.add_argument("--gyro", action="store_true",
-                    help="the EKF fuses the robot file's [gyro] or the bag's Imu yaw rate "
-                         "(bias estimated; it helps where the wheels slip, and can cost on a "
-                         "hard floor: docs/ekf.md)")
-    _add_bag_options(mo)
-    mo.set_defaults(func=_cmd_monitor)
-
-    vr = sub.add_parser(
-        "virtual-roomba", help="a simulated Roomba on a pseudo-terminal",
-        description="Starts the simulator behind the Roomba Open Interface on a "
-                    "pseudo-terminal and prints its device path; connect with "
-                    "'lti-motion calibrate --port PATH'. Ctrl-C stops it.")
-    vr.add_argument("--robot", "--preset", dest="preset", default="create2",
-                    metavar="NAME_OR_FILE", help=f"{ROBOT_HELP} (default: create2)")
-    vr.add_argument("--seed", type=int, default=0)
-    vr.add_argument("--speed", type=float, default=1.0,
-                    help="simulated seconds per wall-clock second (default 1: real time)")
-    vr.add_argument("--floor", choices=FLOOR_NAMES, help=FLOOR_HELP)
-    vr.add_argument("--duration", type=float, default=None,
-                    help="stop after this many wall-clock seconds (default: run until Ctrl-C)")
-    vr.set_defaults(func=_cmd_virtual_roomba)
+    for name, options, handler in _SUB_COMMANDS:
+        command = sub.add_parser(name, help=options.HELP, description=options.DESCRIPTION)
+        options.add_arguments(command)
+        command.set_defaults(func=handler)
     return parser
 
 

@@ -26,6 +26,7 @@ from drivers.roomba.oi import (
     PACKETS,
     Opcode,
     PacketLayout,
+    PacketSpec,
     StreamFrame,
     StreamParser,
     baud,
@@ -112,6 +113,15 @@ def test_packet_table_matches_spec(pid: int) -> None:
     assert spec.size == (2 if pid in TWO_BYTE_IDS else 1)
     assert spec.signed == (pid in SIGNED_IDS)
     assert spec.name.isidentifier() and spec.unit and spec.description
+
+
+def test_a_packet_spec_takes_its_fields_by_keyword_only() -> None:
+    # a boolean is never positional: the signedness cannot slide into another slot
+    with pytest.raises(TypeError, match="positional"):
+        PacketSpec(7, "bumps_wheel_drops", 1, False, "bits", "bumps")  # type: ignore[misc]
+    spec = PACKETS[19]
+    assert PacketSpec(id=19, name=spec.name, size=2, signed=True, unit=spec.unit,
+                      description=spec.description) == spec
 
 
 def test_packet_table_has_exactly_7_to_58() -> None:
