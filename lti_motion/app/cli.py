@@ -325,6 +325,24 @@ _SUB_COMMANDS = (
 )
 
 
+#: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help=kwargs.get("help"))
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        from importlib.metadata import version
+
+        print(f"lti-motion {version('lti-motion')}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lti-motion``: one sub-parser per sub-command, whose options
     its own light module adds (``SUB_cli.add_arguments``), and the handler it dispatches to."""
@@ -333,6 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Self-calibrating LTI motion models for differential-drive robots.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--version", action=_Version, help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
     for name, options, handler in _SUB_COMMANDS:
         command = sub.add_parser(name, help=options.HELP, description=options.DESCRIPTION)
@@ -359,9 +378,11 @@ def _check_args(args: argparse.Namespace) -> None:
             raise ValueError(f"{option} must be a positive number, got {value:g}")
 
     excitation_s = getattr(args, "excitation_s", None)
-    if excitation_s is not None and not excitation_s >= MIN_EXCITATION_S:
-        raise ValueError(f"--excitation-s must be at least {MIN_EXCITATION_S:g} s (the model's "
-                         f"order is chosen on its last 30%), got {excitation_s:g}")
+    if excitation_s is not None and not (math.isfinite(excitation_s)
+                                         and excitation_s >= MIN_EXCITATION_S):
+        raise ValueError(f"--excitation-s must be a finite number of seconds, at least "
+                         f"{MIN_EXCITATION_S:g} (the model's order is chosen on its last 30%), "
+                         f"got {excitation_s:g}")
     if args.command == "calibrate":
         _check_calibrate_args(args, positive)
     elif args.command == "monitor":
@@ -431,6 +452,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         one_line = " ".join(str(exc).split())             # the README promises one line
         print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # sub-commands that drive a robot or keep a recording answer Ctrl-C themselves (what
+        # was kept, the wheels stopped); every other one stops here, in one line
+        print(f"\nlti-motion {args.command}: stopped by Ctrl-C", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _no_encoder_scale(args: argparse.Namespace) -> str:

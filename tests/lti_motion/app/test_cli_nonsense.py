@@ -30,8 +30,11 @@ CASES = [
     (["calibrate", "--port", "/dev/nonexistent-roomba", "--clock-rate", "0"],
      "--clock-rate must be a positive number, got 0"),
     (["calibrate", "--sim", "create2", "--excitation-s", "1"],
-     "--excitation-s must be at least 20 s"),
-    (["demo", "--excitation-s", "1"], "--excitation-s must be at least 20 s"),
+     "--excitation-s must be a finite number of seconds, at least 20"),
+    (["demo", "--excitation-s", "1"], "--excitation-s must be a finite number of seconds, at "
+     "least 20"),
+    (["calibrate", "--sim", "create2", "--excitation-s", "inf"],
+     "30%), got inf"),
     (["demo", "--runs", "0"], "--runs must be 1 or more, got 0"),
     (["monitor", "--sim", "create2", "--model", "{model}", "--duration", "-3"],
      "--duration must be a positive number, got -3"),
