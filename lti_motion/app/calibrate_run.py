@@ -128,6 +128,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
                                    progress=print_progress, after_stage=after_stage,
                                    recorded=recorded)
     from drivers.roomba import Roomba
+    from lti_motion.app.prompts import wait_until_placed
 
     def before_stage(stage: str) -> None:
         where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
@@ -135,7 +136,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
                  "excitation": "on open floor, 2 m clear all round"}[stage]
         print(f"next: {stage}. Put the robot {where}.")
         if not args.yes:
-            input("press Enter when it is there (Ctrl-C stops the robot) ")
+            wait_until_placed()
 
     options = {"wheel_base_m": nominal_wheel_base_m(args, described),
                "plan": plan, "floor": args.floor or "hard", "progress": print_progress,
