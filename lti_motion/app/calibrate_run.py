@@ -174,6 +174,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from lti_motion.recordings import save_log
 
     out = Path(args.out)
+    created = not out.exists()
     check_writable_folder(out)
     recorded = _recorded(out, resume=args.resume)
     if recorded:
@@ -189,9 +190,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"\nlti-motion calibrate: stopped by Ctrl-C; the wheels were commanded to "
               f"stop; {_kept_text(out)}", file=sys.stderr)
+        _remove_if_empty(out, created=created)
         return EXIT_INTERRUPTED
     except (OSError, ValueError, PassiveModeError) as exc:
+        _remove_if_empty(out, created=created)
         raise OSError(f"{exc}; {_kept_text(out)}") from exc
+
+
+def _remove_if_empty(out: Path, *, created: bool) -> None:
+    """A run that failed before keeping anything leaves no empty ``--out`` it created."""
+    if created and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
 
 
 def _save(cal: Calibration, out: Path, *, accept_unhealthy: bool) -> int:

@@ -419,6 +419,9 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
                          "--log FILE or --bag PATH (a recorded drive)")
     if args.reference and not args.log:
         raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
+    if args.into_model and not (args.reference or args.wall_run):
+        raise ValueError("--into-model writes the intrinsics that --reference or --wall-run "
+                         "calibrates into a copy of a model: give one of them")
     described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
     recorded = args.log or args.bag
     if described and not (args.port or recorded) and args.wheel_base is not None:

@@ -35,6 +35,8 @@ CASES = [
      "least 20"),
     (["calibrate", "--sim", "create2", "--excitation-s", "inf"],
      "30%), got inf"),
+    (["calibrate", "--sim", "create2", "--into-model", "{model}"],
+     "--into-model writes the intrinsics that --reference or --wall-run calibrates"),
     (["demo", "--runs", "0"], "--runs must be 1 or more, got 0"),
     (["monitor", "--sim", "create2", "--model", "{model}", "--duration", "-3"],
      "--duration must be a positive number, got -3"),
@@ -70,3 +72,17 @@ def test_nonsense_is_one_line_and_exit_2(argv, message, files, tmp_path, capsys)
     assert message in err, err
     assert "Traceback" not in err and "Error" not in err
     assert not out.exists()                              # refused before any work
+
+
+def test_a_failed_port_leaves_no_empty_out_folder_behind(tmp_path, capsys):
+    out = tmp_path / "never-written"
+    assert main(["calibrate", "--port", str(tmp_path / "no-such-tty"), "--out", str(out)]) == 2
+    assert "nothing kept" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_failed_port_leaves_an_existing_out_folder_alone(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    assert main(["calibrate", "--port", str(tmp_path / "no-such-tty"), "--out", str(out)]) == 2
+    assert out.is_dir()
