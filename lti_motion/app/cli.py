@@ -40,6 +40,7 @@ import argparse
 import logging
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -377,6 +378,7 @@ def _check_args(args: argparse.Namespace) -> None:
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ValueError(f"{option} must be a positive number, got {value:g}")
 
+    _check_link_and_joints(args)
     excitation_s = getattr(args, "excitation_s", None)
     if excitation_s is not None and not (math.isfinite(excitation_s)
                                          and excitation_s >= MIN_EXCITATION_S):
@@ -409,6 +411,26 @@ def _check_args(args: argparse.Namespace) -> None:
     elif args.command == "virtual-roomba":
         positive("--speed", args.speed)
         positive("--duration", args.duration)
+
+
+def _check_link_and_joints(args: argparse.Namespace) -> None:
+    """A serial rate the robot speaks; wheel-joint patterns that are regular expressions."""
+    if getattr(args, "port", None) and getattr(args, "baud", None) is not None:
+        from drivers.roomba import BAUD_RATES
+
+        if args.baud not in BAUD_RATES:
+            raise ValueError(f"--baud {args.baud} is not a rate the Open Interface speaks: "
+                             f"give one of {', '.join(map(str, BAUD_RATES))} (a Create 2 "
+                             "talks at 115200 unless it was told otherwise)")
+    for option in ("left_joint", "right_joint"):
+        pattern = getattr(args, option, None)
+        if pattern is not None:
+            try:
+                re.compile(pattern)
+            except re.error as exc:
+                raise ValueError(f"--{option.replace('_', '-')} {pattern!r} is not a valid "
+                                 f"joint name pattern (a regular expression): {exc}; give the "
+                                 "joint's name") from None
 
 
 def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
