@@ -46,7 +46,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
+from drivers.bags.reader import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
 from drivers.exceptions import BagError
 from lti_motion.kinematics import body_from_wheel, integrate_poses
 from lti_motion.recordings.frames import FrameLog

@@ -121,37 +121,40 @@ def _bag_options(args: argparse.Namespace):
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, odometry_recording, plot_bag_fit
+    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.app.plots import plot_order_selection
 
     out = Path(args.out)
     described = load_robot(args.sim) if args.sim else None
-    options = _bag_options(args)
-    odometry = odometry_recording(args.bag, options=options)
-    if odometry is not None:             # no wheel angles: the robot's own odometry
-        from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_recording
-
+    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
+                                  options=_bag_options(args), floor=args.floor)
+    model, grid = cal.model, cal.grid
+    if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
-              f"nav_msgs/Odometry twist on {odometry.meta['topics']['odom']} as body speeds")
-        robot = RobotDescription(wheel_base_m=nominal_wheel_base_m(args, described),
-                                 m_per_tick=None, wheel_radius_m=None,
-                                 source="the robot's odometry (body speeds)")
-        for line in run_calibrate_recording(odometry, robot, out=out, floor=args.floor)[1]:
-            print(line)
-        return 0
-    model, log = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                    options=options, floor=args.floor)
+              f"nav_msgs/Odometry twist on {rec.source.topics['wheel']} as body speeds")
+    lost = int((~grid.closed).sum())              # periods no wheel message closed
+    print(f"calibrated from {args.bag}: {len(grid.closed)} frames of {model.dt_s * 1e3:g} ms "
+          f"({lost} lost), topics {dict(rec.source.topics)}")
+    from lti_motion.persistence import atomic_write
+
+    scale = ("none needed (body speeds)" if cal.m_per_tick is None else
+             f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    lines = [*cal.report.lines(),
+             f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
+             f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
+             f"w {cal.fit_percent[1]:.1f} %"]
+    for line in lines:
+        print(line)
     out.mkdir(parents=True, exist_ok=True)
     path = model.save(out / "model_arx.json")
-    print(f"calibrated from {args.bag}: {len(log)} frames of {log.dt_s * 1e3:g} ms "
-          f"({log.meta['lost_frames']} lost), topics {log.meta['topics']}")
-    print(f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
-          f"{model.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    with atomic_write(out / "excitation.txt", text=True) as fh:
+        fh.write("\n".join(lines) + "\n")
     plot_order_selection(model, out / "order_selection.png")
-    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders)
+    fit = plot_bag_fit(model, grid, out / "bag_fit.png")
     print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
-    print(f"wrote {path}, {out / 'order_selection.png'} and {out / 'bag_fit.png'}")
+    print(f"wrote {path}, {out / 'order_selection.png'}, {out / 'bag_fit.png'} and "
+          f"{out / 'excitation.txt'}")
     return 0
 
 
