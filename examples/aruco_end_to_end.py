@@ -47,6 +47,7 @@ from matplotlib.figure import Figure
 
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.graph.preintegration import preintegrate_model
 from fusion.graph.smoother import IncrementalSmoother, SmootherOptions, log_keyframes
@@ -226,7 +227,8 @@ def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_ma
     correlation kept; the default), else with its diagonal.
     """
     ekf = ModelEKF(model, initial_pose=initial_pose, pose_std=pose_std,
-                   initial_ticks=log.ticks[0], landmarks=marker_map.to_landmark_map(), history=0)
+                   initial_ticks=log.ticks[0], landmarks=marker_map.to_landmark_map(),
+                   options=EKFOptions(history=0))
     n = len(log.t_s)
     poses = np.empty((n, 3))
     poses[0] = ekf.x[:3]

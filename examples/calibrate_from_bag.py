@@ -38,6 +38,7 @@ from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf import ModelEKF
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.monitoring import MonitoredFilter
 from fusion.noise import GyroNoise
 from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
@@ -103,8 +104,8 @@ def _ekf_poses(model: MotionModel, log: FrameLog, start: np.ndarray,
                gyro: np.ndarray | None) -> np.ndarray:
     """The model's EKF over the frames: encoders, and the gyro's readings when given."""
     ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=log.ticks[0], history=0,
-                   gyro=None if gyro is None else GyroNoise())
+                   initial_ticks=log.ticks[0],
+                   options=EKFOptions(history=0, gyro=None if gyro is None else GyroNoise()))
     poses = np.empty((len(log), 3))
     poses[0] = ekf.pose
     for k in range(1, len(log)):
@@ -139,13 +140,12 @@ def monitor(path: Path, model: MotionModel, out_bag: Path) -> list[str]:
     """The EKF and the residual monitor over a bag; alarms with bag time into a new bag."""
     log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
     start_ns = log.meta["bag_start_ns"] + round(log.t_s[0] * 1e9)
-    gyro = _gyro_readings(log)
     mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005),
-                         gyro=None if gyro is None else GyroNoise())
+                         ekf_options=EKFOptions(history=0, gyro=None if log.yaw_rate_rad_s is None
+                                                else GyroNoise()))
     poses, covs = np.zeros((len(log), 3)), np.zeros((len(log), 3, 3))
     for k in range(len(log)):
-        result = mf.step(log.ticks[k], log.cmd_m_s[k], valid=bool(log.valid[k]),
-                         yaw_rate_rad_s=None if gyro is None else float(gyro[k]))
+        result = mf.step(log.frame(k))          # a lost frame's gyro reading is not used
         poses[k], covs[k] = result.pose, mf.ekf.P[:3, :3]
     alarms = [BagAlarm(start_ns + round(e.t_s * 1e9), f"lti_motion/{e.kind}",
                        f"{e.kind}: {e.test} statistic {e.statistic:.3g} > {e.threshold:.3g}",

@@ -68,7 +68,7 @@ from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel
 from lti_motion.model.excitation import random_held_normal
 from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.frames import FrameLog
+from lti_motion.recordings.frames import FrameLog, SensorFrame
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",
@@ -141,8 +141,10 @@ class MonitoredDrive(Odometry):
     def step(self, frame, cmd_m_s, observations=None):
         pose = super().step(frame, cmd_m_s, observations)       # steering odometry
         cmd = np.asarray(cmd_m_s, float)[0]
-        res = self.filter.step(np.asarray(frame.ticks)[0], cmd,
-                               sightings=None if observations is None else observations[0])
+        # the first robot's frame, with the command as steered
+        own = SensorFrame.of_counts(float(np.ravel(frame.t_s)[0]), np.asarray(frame.ticks)[0],
+                                    cmd)
+        res = self.filter.step(own, sightings=None if observations is None else observations[0])
         if res.encoders is None:                                 # the first frame anchors
             return pose
         t, d, record = res.t_s, res.tick_deltas, res.encoders

@@ -24,6 +24,7 @@ import numpy as np
 
 from drivers.sim.config import FloorMap, RobotParams, Room
 from drivers.sim.simulator import Simulator
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
@@ -232,7 +233,7 @@ class EkfEstimator:
             self.filters = [
                 ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
                          initial_ticks=t if ok else None, landmarks=self.landmarks,
-                         landmark_noise=self.landmark_noise, history=0)
+                         options=EKFOptions(landmark_noise=self.landmark_noise, history=0))
                 for pose, t, ok in zip(self.pose, ticks, valid, strict=True)]
             return self.pose
         for i, ekf in enumerate(self.filters):

@@ -27,6 +27,7 @@ from fusion.monitoring.residual import (
     one_step_innovations,
     whiten,
 )
+from lti_motion.recordings.frames import SensorFrame
 
 DT = 0.015
 N_RUNS, FAULT_AT_S, DURATION_S = 20, 20.0, 30.0
@@ -280,7 +281,7 @@ def _monitor_run(model, log, start_pose, until_s=math.inf):
     mf = MonitoredFilter(model, initial_pose=start_pose, pose_std=(0.005,) * 3,
                          initial_ticks=log.ticks[0])
     for k in range(1, int(np.searchsorted(log.t_s, until_s, side="right"))):
-        mf.step(log.ticks[k], log.cmd_m_s[k])
+        mf.step(SensorFrame.of_counts(log.t_s[k], log.ticks[k], log.cmd_m_s[k]))
     return mf.monitor
 
 
