@@ -55,6 +55,7 @@ from drivers.sim.simulator import Simulator
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import NominalFit, fit_nominal
 from fusion.monitoring.recalibration import RecalibrationRecord, Recalibrator
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.rescale import output_scaling
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.app.route import (
@@ -126,9 +127,10 @@ class MonitoredDrive(Odometry):
         super().__init__(m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
         self.model = model
         self.excitation_requests: list[AlarmEvent] = []
-        self.recal = Recalibrator(model, min_samples=3000, save_path=save_path,
+        self.recal = Recalibrator(model, save_path=save_path,
                                   request_excitation=self.excitation_requests.append,
-                                  request_rotation=lambda event: None)
+                                  request_rotation=lambda event: None,
+                                  options=RecalibrationOptions(min_samples=3000))
         # the model EKF, the sensor tests, the dynamics tests (Phase I) and the scale test
         # (landmarks), one call per frame; the landmarks feed the scale test only
         self.filter = MonitoredFilter(model, nominal=nominal, landmarks=ROUTE_LANDMARKS,
