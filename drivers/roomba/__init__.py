@@ -2,7 +2,8 @@
 
 - :mod:`drivers.roomba.oi`, :mod:`drivers.roomba.oi_packets`: the protocol as pure
   functions (commands, packets, the stream parser);
-- :mod:`drivers.roomba.driver`: :class:`Roomba`, the pyserial robot;
+- :mod:`drivers.roomba.driver`: :class:`Roomba`, the pyserial robot, with its options
+  (:class:`RoombaOptions`, :mod:`drivers.roomba.roomba_options`);
 - :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba`, the simulator behind the
   protocol on a pseudo-terminal;
 - :mod:`drivers.roomba.stream_clock`: sensor-period time from host arrival times.
@@ -38,6 +39,7 @@ __all__ = [
     "PacketSpec",
     "ReceivedCommand",
     "Roomba",
+    "RoombaOptions",
     "StreamClock",
     "StreamFrame",
     "StreamParser",
@@ -73,6 +75,7 @@ __all__ = [
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
+        "drivers.roomba.roomba_options": ("RoombaOptions",),
         "drivers.roomba.driver": (
             "LinkCounters",
             "Roomba",
@@ -182,6 +185,7 @@ if TYPE_CHECKING:
         lookup_packet,
         query_reply_size,
     )
+    from drivers.roomba.roomba_options import RoombaOptions
     from drivers.roomba.stream_clock import StreamClock
     from drivers.roomba.virtual import (
         DEFAULT_BANNER,

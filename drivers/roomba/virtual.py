@@ -774,7 +774,8 @@ def serve(
                  f"speed x{speed:g}) "
                  f"listening on {robot.device_path}")
         print_fn(f"connect with: lti-motion calibrate --port {robot.device_path} --clock-rate "
-                 f"{speed:g}, or Roomba({robot.device_path!r}, clock_rate={speed:g})")
+                 f"{speed:g}, or Roomba({robot.device_path!r}, "
+                 f"options=RoombaOptions(clock_rate={speed:g}))")
         print_fn("it stands beside furniture (to rotate); press Enter here to carry it to "
                  "open floor and back; Ctrl-C stops it")
         deadline = None if duration_s is None else time.monotonic() + duration_s

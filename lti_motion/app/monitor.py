@@ -526,7 +526,7 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
         If the model has no encoder scale (before the port is opened).
     """
     from drivers.logs import Recorder
-    from drivers.roomba.driver import Roomba
+    from drivers.roomba.driver import Roomba, RoombaOptions
 
     _require_scale(model)
 
@@ -541,8 +541,9 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     what = "listening to" if listen else "driving"
     print_fn(f"{what} the robot on {port} for {duration_s:g} s"
              + ("" if listen else " (needs 2 m x 2 m of clear floor; Ctrl-C stops it)"))
-    with Roomba(port, baud=baud, clock_rate=clock_rate, open_timeout_s=3.0,
-                stall_periods=max(5, math.ceil(0.3 * clock_rate / model.dt_s))) as robot:
+    options = RoombaOptions(baud_bps=baud, clock_rate=clock_rate, open_timeout_s=3.0,
+                            stall_periods=max(5, math.ceil(0.3 * clock_rate / model.dt_s)))
+    with Roomba(port, options=options) as robot:
 
         def frames() -> Iterator[SensorFrame]:
             try:

@@ -92,7 +92,7 @@ def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: Robot
               f"(seed {args.seed})")
         sim = wall_run_simulator(described, seed=args.seed, floor=args.floor)
         return drive_wall_run(sim, known, run_m=args.wall_run_m)
-    from drivers.roomba.driver import Roomba
+    from drivers.roomba.driver import Roomba, RoombaOptions
 
     print(f"next: the wall run. Put the robot on hard floor facing a straight, plain wall "
           f"0.2-1.5 m ahead, with {args.wall_run_m + 0.5:g} m clear along the wall on both "
@@ -100,7 +100,8 @@ def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: Robot
     if not args.yes:
         input("press Enter when it is there (Ctrl-C stops the robot) ")
     print(f"driving the wall run on {args.port} at {args.baud} baud")
-    with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+    options = RoombaOptions(baud_bps=args.baud, clock_rate=args.clock_rate)
+    with Roomba(args.port, options=options) as robot:
         return drive_wall_run(robot, known, run_m=args.wall_run_m)
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from drivers.roomba.driver import Roomba
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
@@ -44,8 +45,10 @@ def both():
     # counts frames (latency_tolerance_s=inf). With 0.6 s, 295 periods were taken for lost on
     # a quiet machine and 726 on a loaded one, and the fit fell 1.2 and 2.4 points below
     # the direct calibration's (5,124 and 76 points with another test run beside it).
-    with vr, Roomba(vr.device_path, clock_rate=SPEED, open_timeout_s=3.0,
-                    latency_tolerance_s=math.inf, write_timeout_s=2.0) as robot:
+    with vr, Roomba(vr.device_path,
+                    options=RoombaOptions(clock_rate=SPEED, open_timeout_s=3.0,
+                                          latency_tolerance_s=math.inf,
+                                          write_timeout_s=2.0)) as robot:
         over_pty = calibrate(robot, wheel_base_m=0.235, plan=PLAN, floor="hard",
                              before_stage=lambda s: s != "rotation" and vr.place(Room.OPEN_FLOOR))
         counters = robot.counters

@@ -14,6 +14,7 @@ the driver's ticks, light bumps, bumps and requested velocities exactly.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import select
@@ -35,6 +36,7 @@ from drivers.exceptions import (
 from drivers.roomba import oi
 from drivers.roomba.driver import LinkCounters, Roomba, StreamClock
 from drivers.roomba.oi import Opcode
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
@@ -58,7 +60,7 @@ def roomba(vr: VirtualRoomba, **options) -> Roomba:
     opts = {"clock_rate": vr.speed, "latency_tolerance_s": 0.1 * vr.speed,
             "write_timeout_s": 2.0, "open_timeout_s": 3.0}
     opts.update(options)
-    return Roomba(vr.device_path, **opts)
+    return Roomba(vr.device_path, options=RoombaOptions(**opts))
 
 
 def random_commands(rng: np.random.Generator, n: int, *, hold: int = 10) -> np.ndarray:
@@ -219,21 +221,23 @@ def test_a_gap_shorter_than_the_wall_floor_is_no_stall_at_a_high_clock_rate():
     """Issue 15 item 6: at 10x the default 5 periods are 7.5 ms of wall time; a 40 ms gap
     (a loaded host, or the virtual Roomba's thread descheduled) stopped the drive."""
     with VirtualRoomba(seed=2, speed=10.0, stall_at_s=0.6, stall_duration_s=0.4) as vr:
-        with Roomba(vr.device_path, clock_rate=10.0, open_timeout_s=3.0) as robot:
+        with Roomba(vr.device_path,
+                    options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0)) as robot:
             log = run_commands(robot, np.full((100, 2), 0.1))
             c = robot.counters
-    assert robot.stall_periods == 5 and len(log) == 100 and c.stalls == 0
+    assert robot.options.stall_periods == 5 and len(log) == 100 and c.stalls == 0
     assert np.max(np.diff(log.t_s)) > 0.3              # the 0.4 s robot-time gap is in the log
 
 
 def test_a_stall_window_floor_of_zero_keeps_the_period_window():
     with VirtualRoomba(seed=2, speed=10.0, stall_at_s=0.6, stall_duration_s=0.4) as vr:
         with pytest.raises(StreamStalledError, match=r"for 0.0075 s of wall time"):
-            with Roomba(vr.device_path, clock_rate=10.0, open_timeout_s=3.0,
-                        stall_floor_s=0.0) as robot:
+            with Roomba(vr.device_path,
+                        options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0,
+                                              stall_floor_s=0.0)) as robot:
                 run_commands(robot, np.full((100, 2), 0.1))
     with pytest.raises(ValueError, match="stall_floor_s"):
-        Roomba("/dev/x", stall_floor_s=-1.0)
+        Roomba("/dev/x", options=RoombaOptions(stall_floor_s=-1.0))
 
 
 def test_stream_stall_with_reconnect_resumes_and_timestamps_show_the_gap():
@@ -379,11 +383,11 @@ def test_out_of_range_speed_is_refused_before_anything_is_sent():
 
 def test_unknown_packet_id_and_bandwidth_are_checked_before_opening():
     with pytest.raises(UnknownPacketError, match="unknown sensor packet id 99"):
-        Roomba("/dev/does-not-exist", stream_ids=(43, 44, 99))
+        Roomba("/dev/does-not-exist", options=RoombaOptions(stream_ids=(43, 44, 99)))
     with pytest.raises(StreamBandwidthError, match="19200 baud"):
-        Roomba("/dev/does-not-exist", baud=19200)
+        Roomba("/dev/does-not-exist", options=RoombaOptions(baud_bps=19200))
     with pytest.raises(ProtocolError, match="lack encoder packet 44"):
-        Roomba("/dev/does-not-exist", stream_ids=(7, 43))
+        Roomba("/dev/does-not-exist", options=RoombaOptions(stream_ids=(7, 43)))
 
 
 def test_missing_port_raises_port_error_naming_it():
@@ -404,7 +408,7 @@ def test_silent_port_times_out_naming_port_and_baud_and_still_says_goodbye():
     try:
         path = os.ttyname(slave)
         with pytest.raises(StreamStalledError, match=f"{path} at 115200 baud.*baud rate"):
-            Roomba(path, open_timeout_s=0.2, settle_s=0.0).open()
+            Roomba(path, options=RoombaOptions(open_timeout_s=0.2, settle_s=0.0)).open()
         goodbye = (oi.drive_direct(0, 0) + oi.pause_resume_stream(resume=False)
                    + oi.start() + oi.stop())
         sent = b""
@@ -469,11 +473,26 @@ def test_counters_start_at_zero_and_options_are_validated():
     assert robot.m_per_tick == pytest.approx(0.444565e-3, rel=1e-5)   # spec §7.1
     robot.close()                                    # closing a closed driver is a no-op
     with pytest.raises(ValueError, match="mode"):
-        Roomba("/dev/x", mode="passive")
+        Roomba("/dev/x", options=RoombaOptions(mode="passive"))
     with pytest.raises(ValueError, match="clock_rate"):
-        Roomba("/dev/x", clock_rate=0.0)
+        Roomba("/dev/x", options=RoombaOptions(clock_rate=0.0))
     with pytest.raises(ValueError, match="stall_periods"):
-        Roomba("/dev/x", stall_periods=0)
+        Roomba("/dev/x", options=RoombaOptions(stall_periods=0))
     with pytest.raises(PortError, match="not open"):
         robot.read_frame()
     assert time.monotonic() > 0
+
+
+def test_the_options_are_one_frozen_object_checked_when_made():
+    options = RoombaOptions(clock_rate=4.0, stream_ids=[7, 43, 44])
+    assert options.stream_ids == (7, 43, 44)                   # kept as a tuple
+    robot = Roomba("/dev/does-not-exist", options=options)
+    assert robot.options is options and robot.read_timeout_s == pytest.approx(0.05)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.clock_rate = 1.0
+    with pytest.raises(TypeError):
+        RoombaOptions(115200)                                   # keyword-only
+    with pytest.raises(ValueError, match="read_timeout_s must be a finite positive"):
+        RoombaOptions(read_timeout_s=0.0)
+    with pytest.raises(ValueError, match="options must be a RoombaOptions, got dict"):
+        Roomba("/dev/x", options={"clock_rate": 4.0})

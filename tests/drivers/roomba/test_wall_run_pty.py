@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_intrinsics import straight_line_truth
-from drivers.roomba.driver import Roomba
+from drivers.roomba.driver import Roomba, RoombaOptions
 from drivers.roomba.oi import DEFAULT_STREAM_IDS
 from drivers.roomba.virtual import VirtualRoomba
 from drivers.sim.config import Room, get_preset
@@ -29,8 +29,10 @@ SCENE = {"seed": 4, "floor": "tile", "room": Room.single_wall(),
 
 def _roomba(vr: VirtualRoomba, **options) -> Roomba:
     # a pty loses nothing: count frames (docs/driver.md, latency_tolerance_s=math.inf)
-    return Roomba(vr.device_path, clock_rate=SPEED, open_timeout_s=3.0,
-                  latency_tolerance_s=math.inf, write_timeout_s=2.0, **options)
+    return Roomba(vr.device_path,
+                  options=RoombaOptions(clock_rate=SPEED, open_timeout_s=3.0,
+                                        latency_tolerance_s=math.inf, write_timeout_s=2.0,
+                                        **options))
 
 
 def test_the_wall_run_over_the_serial_driver_finds_the_ratio():
