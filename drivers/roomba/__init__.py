@@ -4,7 +4,8 @@
   functions (commands, packets, the stream parser);
 - :mod:`drivers.roomba.driver`: :class:`Roomba`, the pyserial robot, with its options
   (:class:`RoombaOptions`, :mod:`drivers.roomba.roomba_options`);
-- :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba`, the simulator behind the
+- :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba` (its options:
+  :class:`VirtualRoombaOptions`, :mod:`drivers.roomba.virtual_options`), the simulator behind the
   protocol on a pseudo-terminal;
 - :mod:`drivers.roomba.stream_clock`: sensor-period time from host arrival times.
 
@@ -44,6 +45,7 @@ __all__ = [
     "StreamFrame",
     "StreamParser",
     "VirtualRoomba",
+    "VirtualRoombaOptions",
     "baud",
     "check_stream_bandwidth",
     "checksum",
@@ -132,6 +134,7 @@ __getattr__, __dir__ = lazy_exports(
             "EmulatorStats",
             "ReceivedCommand",
             "VirtualRoomba",
+            "VirtualRoombaOptions",
             "serve",
         ),
     },
@@ -193,5 +196,6 @@ if TYPE_CHECKING:
         EmulatorStats,
         ReceivedCommand,
         VirtualRoomba,
+        VirtualRoombaOptions,
         serve,
     )

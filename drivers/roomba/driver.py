@@ -32,9 +32,10 @@ Drive a virtual Roomba on a pseudo-terminal through the real driver:
 
 >>> from drivers.roomba.virtual import VirtualRoomba
 >>> from lti_motion.calibration.manoeuvres import drive
+>>> from drivers.roomba.virtual import VirtualRoombaOptions
 >>> options = RoombaOptions(clock_rate=5.0, stall_periods=100)
->>> with VirtualRoomba(seed=3, speed=5.0) as vr, Roomba(vr.device_path,
-...                                                      options=options) as robot:
+>>> vr = VirtualRoomba(seed=3, options=VirtualRoombaOptions(speed=5.0))
+>>> with vr, Roomba(vr.device_path, options=options) as robot:
 ...     log = drive(robot, np.full((20, 2), 0.1))
 >>> len(log), log.dt_s
 (20, 0.015)

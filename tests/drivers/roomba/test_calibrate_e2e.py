@@ -11,6 +11,7 @@ import pytest
 from drivers.roomba.driver import Roomba
 from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration.manoeuvres import CalibrationPlan, calibrate, speeds_from_log
@@ -37,8 +38,8 @@ def both():
                            initial_pose=Room.CALIBRATION_SPOT)
     direct = calibrate(direct_sim, wheel_base_m=0.235, plan=PLAN, floor="hard",
                        before_stage=lambda s: s != "rotation" and direct_sim.place(Room.OPEN_FLOOR))
-    vr = VirtualRoomba("create2", seed=1, speed=SPEED, room=Room.cluttered(),
-                       initial_pose=Room.CALIBRATION_SPOT)
+    vr = VirtualRoomba("create2", seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT,
+                       options=VirtualRoombaOptions(speed=SPEED))
     # the stall window is the driver's wall-time floor (0.3 s): at 20x, 5 periods are 3.75 ms.
     # A pty loses nothing, and the emulator's thread, held off by a loaded host, sends frames
     # late and slips its schedule (overruns), which a robot's clock never does: the driver
