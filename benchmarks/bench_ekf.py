@@ -32,6 +32,7 @@ from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf import functions as ef
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from lti_motion.calibration.manoeuvres import CalibrationPlan
@@ -123,7 +124,7 @@ def ekf() -> list[Figure]:
     z_meas = np.zeros(2)
 
     def ours() -> None:
-        f = ModelEKF(model, initial_ticks=ticks[0], history=1000)
+        f = ModelEKF(model, initial_ticks=ticks[0], options=EKFOptions(history=1000))
         for k in range(1, N_STEPS + 1):
             f.predict(cmd[k])
             f.update_encoders(ticks[k])
@@ -151,7 +152,7 @@ def ekf() -> list[Figure]:
                      args=(fm,), hx_args=(fm,))
 
     lm = LandmarkMap({0: (3.0, 1.0)})
-    lekf = ModelEKF(model, landmarks=lm, gate_probability=None)
+    lekf = ModelEKF(model, landmarks=lm, options=EKFOptions(gate_probability=None))
     obs = np.array([math.hypot(3.0, 1.0), math.atan2(1.0, 3.0)])
 
     def landmark() -> None:

@@ -41,6 +41,7 @@ import numpy as np
 from benchmarks.harness import Figure, benchmark, load_example
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import GyroNoise, ScaleErrors
 from lti_motion.kinematics import wrap_angle
@@ -74,8 +75,9 @@ def filter_run(model: MotionModel, log: FrameLog, *, gyro: GyroNoise | None,
                scales: ScaleErrors | None = None) -> dict[str, float | np.ndarray]:
     """One filter over one robot's frames: poses, heading variances, final bias."""
     ekf = ModelEKF(model, initial_pose=START, pose_std=(0.005,) * 3,
-                   initial_ticks=log.ticks[0], history=0, gyro=gyro,
-                   counter_bits=log.counter_bits, scales=scales)
+                   initial_ticks=log.ticks[0],
+                   options=EKFOptions(history=0, gyro=gyro, counter_bits=log.counter_bits,
+                                      scales=scales))
     n = len(log.t_s)
     poses, var = np.empty((n, 3)), np.empty(n)
     poses[0], var[0] = ekf.pose, ekf.P[2, 2]

@@ -71,6 +71,7 @@ from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import RobotParams, Room, get_preset
 from drivers.sim.motion_capture import intrinsics_drive, motion_capture
 from drivers.sim.simulator import Simulator
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.functions import SCALES
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import LandmarkNoise, ScaleErrors
@@ -254,7 +255,8 @@ class LearningEkf(EkfEstimator):
             self.filters = [
                 ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
                          initial_ticks=t if ok else None, landmarks=self.landmarks,
-                         landmark_noise=self.landmark_noise, history=0, scales=self.scales)
+                         options=EKFOptions(landmark_noise=self.landmark_noise, history=0,
+                                            scales=self.scales))
                 for pose, t, ok in zip(self.pose, ticks, valid, strict=True)]
             return self.pose
         self.k += 1

@@ -67,6 +67,7 @@ from fusion.monitoring.dynamics_start import (
     start_threshold_from_maxima,
 )
 from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.residual import MonitorOptions, ResidualMonitor
 from lti_motion.app.route import RecordingOdometry, drive_route
 from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
@@ -299,8 +300,8 @@ def _one_recalibration(model: MotionModel, null: DynamicsNull, cmd: np.ndarray,
                        save_path: Path) -> tuple[str, MotionModel]:
     """Stream one route run until the first alarm after the onset; answer it (module doc)."""
     asked = []
-    rc = Recalibrator(model, min_samples=3000, save_path=save_path,
-                      request_excitation=asked.append)
+    rc = Recalibrator(model, save_path=save_path, request_excitation=asked.append,
+                      options=RecalibrationOptions(min_samples=3000))
     mon = ResidualMonitor(MonitorOptions(dt_s=model.dt_s), m_per_tick=model.m_per_tick,
                           dynamics=DynamicsMonitor(model, null))
     y = _route_speeds(model, deltas)

@@ -35,6 +35,7 @@ from benchmarks.bench_scale import Drives, route_drives, true_ratio
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.config import Fault, get_preset
 from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.residual import AlarmEvent
 from fusion.monitoring.scale import ScaleMonitor
 from lti_motion.app.route import ROUTE_LANDMARKS, ROUTE_M
@@ -83,8 +84,9 @@ def scale_recalibration_runs(model: MotionModel, *, n: int = 20, seed0: int = 30
                        initial_pose=np.tile([*ROUTE_M[0], 0.0], (n, 1)),
                        pose_std=(0.005, 0.005, 0.005))
     rotations: list[int] = [0] * n
-    policies = [Recalibrator(model, max_scale_std=max_scale_std, scale_settle_s=scale_settle_s,
-                             request_rotation=lambda e, i=i: rotations.__setitem__(i, 1))
+    policies = [Recalibrator(model, request_rotation=lambda e, i=i: rotations.__setitem__(i, 1),
+                             options=RecalibrationOptions(max_scale_std=max_scale_std,
+                                                          scale_settle_s=scale_settle_s))
                 for i in range(n)]
     for k in range(drives.deltas.shape[1]):
         t = (k + 1) * p.period_s

@@ -123,8 +123,8 @@ def pty_table(seeds: range = range(10), *, speed: float = 10.0) -> None:
     """
     import math
 
-    from drivers.roomba.driver import Roomba
-    from drivers.roomba.virtual import VirtualRoomba
+    from drivers.roomba.driver import Roomba, RoombaOptions
+    from drivers.roomba.virtual import VirtualRoomba, VirtualRoombaOptions
 
     params = asymmetric_robot()
     known = known_intrinsics(params, FLOOR)
@@ -134,9 +134,10 @@ def pty_table(seeds: range = range(10), *, speed: float = 10.0) -> None:
                    + np.random.default_rng([seed, 0x3A11]).uniform(-1, 1) * np.deg2rad(3))
         scene = {"seed": seed, "floor": FLOOR, "initial_pose": (2.5, 0.5, heading),
                  "room": Room(np.array([[-6.0, 0.0, 6.0, 0.0, 1.0]]))}
-        virtual = VirtualRoomba(params, speed=speed, **scene)
-        with virtual, Roomba(virtual.device_path, clock_rate=speed, open_timeout_s=3.0,
-                             latency_tolerance_s=math.inf, write_timeout_s=2.0) as robot:
+        virtual = VirtualRoomba(params, **scene, options=VirtualRoombaOptions(speed=speed))
+        options = RoombaOptions(clock_rate=speed, open_timeout_s=3.0,
+                                latency_tolerance_s=math.inf, write_timeout_s=2.0)
+        with virtual, Roomba(virtual.device_path, options=options) as robot:
             drive = drive_wall_run(robot, known)
         cal = calibrate_wall_run(wall_passes(drive, known), known, wall_side=drive.wall_side)
         replay = Simulator(params, **scene).run(virtual.applied_commands_m_s)

@@ -46,7 +46,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from drivers.sim import Room, Simulator
-from fusion.ekf import ModelEKF
+from fusion.ekf import EKFOptions, ModelEKF
 from fusion.graph import IncrementalSmoother, SmootherOptions, log_keyframes, preintegrate_model
 from fusion.landmarks import (
     CameraIntrinsics,
@@ -229,7 +229,8 @@ def run_ekf(model: MotionModel, log: FrameLog, detections: Detections, marker_ma
     correlation kept; the default), else with its diagonal.
     """
     ekf = ModelEKF(model, initial_pose=initial_pose, pose_std=pose_std,
-                   initial_ticks=log.ticks[0], landmarks=marker_map.to_landmark_map(), history=0)
+                   initial_ticks=log.ticks[0], landmarks=marker_map.to_landmark_map(),
+                   options=EKFOptions(history=0))
     n = len(log.t_s)
     poses = np.empty((n, 3))
     poses[0] = ekf.x[:3]

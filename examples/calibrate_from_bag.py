@@ -43,14 +43,14 @@ from drivers.bags import (
     write_estimates_bag,
 )
 from drivers.sim import Fault, Room, Simulator, get_preset
-from fusion.ekf import ModelEKF
+from fusion.ekf import EKFOptions, ModelEKF
 from fusion.monitoring import MonitoredFilter
 from fusion.noise import GyroNoise
 from lti_motion.calibration import CalibrationPlan, calibrate_recording
 from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, fit_percent
 from lti_motion.model import MotionModel, random_held_normal
-from lti_motion.recordings import GridSignals, frame_stamps, poses_at, snap_period_s
+from lti_motion.recordings import GridSignals, SensorFrame, frame_stamps, poses_at, snap_period_s
 
 WHEEL_BASE_M = 0.235                   # the Create 2's; give your robot's
 GYRO_DENSITY = 0.005                   # the stand-ins' gyro: a MEMS one [rad/s/sqrt(Hz)]
@@ -123,13 +123,20 @@ class Frames:
     def __len__(self) -> int:
         return len(self.t_s)
 
+    def frame(self, k: int) -> SensorFrame:
+        """Frame ``k`` as the monitored filter takes it (a lost one's gyro reading unused)."""
+        rate = None if self.yaw_rate_rad_s is None else float(self.yaw_rate_rad_s[k])
+        return SensorFrame.of_counts(float(self.t_s[k]), self.ticks[k], self.cmd_m_s[k],
+                                     valid=bool(self.valid[k]), yaw_rate_rad_s=rate)
+
 
 def _ekf_poses(model: MotionModel, frames: Frames, start: np.ndarray,
                gyro: np.ndarray | None) -> np.ndarray:
     """The model's EKF over the frames: encoders, and the gyro's readings when given."""
     ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=frames.ticks[0], history=0, counter_bits=64,
-                   gyro=None if gyro is None else GyroNoise())
+                   initial_ticks=frames.ticks[0],
+                   options=EKFOptions(history=0, counter_bits=64,
+                                      gyro=None if gyro is None else GyroNoise()))
     poses = np.empty((len(frames), 3))
     poses[0] = ekf.pose
     for k in range(1, len(frames)):
@@ -163,12 +170,12 @@ def monitor(path: Path, model: MotionModel, out_bag: Path) -> list[str]:
     frames = Frames(path, model)
     start_ns = frames.start_ns + round(frames.t_s[0] * 1e9)
     gyro = frames.yaw_rate_rad_s
-    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005), counter_bits=64,
-                         gyro=None if gyro is None else GyroNoise())
+    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005),
+                         ekf_options=EKFOptions(history=0, counter_bits=64,
+                                                gyro=None if gyro is None else GyroNoise()))
     poses, covs = np.zeros((len(frames), 3)), np.zeros((len(frames), 3, 3))
     for k in range(len(frames)):
-        result = mf.step(frames.ticks[k], frames.cmd_m_s[k], valid=bool(frames.valid[k]),
-                         yaw_rate_rad_s=None if gyro is None else float(gyro[k]))
+        result = mf.step(frames.frame(k))       # a lost frame's gyro reading is not used
         poses[k], covs[k] = result.pose, mf.ekf.P[:3, :3]
     alarms = [BagAlarm(start_ns + round(e.t_s * 1e9), f"lti_motion/{e.kind}",
                        f"{e.kind}: {e.test} statistic {e.statistic:.3g} > {e.threshold:.3g}",

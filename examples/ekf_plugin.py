@@ -25,15 +25,14 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
 from drivers.sim import Fault, Room, Simulator, calibrate_simulator
-from fusion.ekf import FilterStats, ModelEKF
+from fusion.ekf import EKFOptions, FilterStats, ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks import synthetic_observations
 from fusion.range_bearing import RangeBearing
@@ -212,13 +211,15 @@ class FilterRun:
 def run_filter(model: MotionModel, log: FrameLog, *, initial_pose: Sequence[float],
                observations: RangeBearing | None = None, landmarks: LandmarkMap | None = None,
                pose_std: tuple[float, float, float] = (0.005, 0.005, 0.005),
-               **options: Any) -> FilterRun:
+               options: EKFOptions | None = None) -> FilterRun:
     """Run :class:`ModelEKF` over one robot's frames (and landmark observations).
 
-    ``options`` go to :class:`ModelEKF` (``slip``, ``gate_probability`` ...).
+    ``options`` are the filter's (:class:`~fusion.ekf.EKFOptions`: ``slip``,
+    ``gate_probability`` ...); it keeps no update records.
     """
     ekf = ModelEKF(model, initial_pose=initial_pose, pose_std=pose_std,
-                   initial_ticks=log.ticks[0], landmarks=landmarks, history=0, **options)
+                   initial_ticks=log.ticks[0], landmarks=landmarks,
+                   options=replace(options or EKFOptions(), history=0))
     n = len(log.t_s)
     poses = np.empty((n, 3))
     covs = np.empty((n, 3, 3))

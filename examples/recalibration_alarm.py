@@ -54,6 +54,7 @@ from fusion.monitoring import (
     AlarmEvent,
     MonitoredFilter,
     NominalFit,
+    RecalibrationOptions,
     RecalibrationRecord,
     Recalibrator,
     fit_nominal,
@@ -69,7 +70,7 @@ from lti_motion.app.route import (
 from lti_motion.calibration import CalibrationPlan, speeds_from_log
 from lti_motion.kinematics import body_from_wheel
 from lti_motion.model import MotionModel, random_held_normal
-from lti_motion.recordings import FrameLog
+from lti_motion.recordings import FrameLog, SensorFrame
 
 #: Which fault each alarm kind answers (for the delay column).
 FAULT_OF_KIND = {"glitch_burst": "encoder_spikes", "stuck_encoder": "stuck_encoder",
@@ -127,9 +128,10 @@ class MonitoredDrive(Odometry):
         super().__init__(m_per_tick=model.m_per_tick, wheel_base_m=model.wheel_base_m)
         self.model = model
         self.excitation_requests: list[AlarmEvent] = []
-        self.recal = Recalibrator(model, min_samples=3000, save_path=save_path,
+        self.recal = Recalibrator(model, save_path=save_path,
                                   request_excitation=self.excitation_requests.append,
-                                  request_rotation=lambda event: None)
+                                  request_rotation=lambda event: None,
+                                  options=RecalibrationOptions(min_samples=3000))
         # the model EKF, the sensor tests, the dynamics tests (Phase I) and the scale test
         # (landmarks), one call per frame; the landmarks feed the scale test only
         self.filter = MonitoredFilter(model, nominal=nominal, landmarks=ROUTE_LANDMARKS,
@@ -142,8 +144,10 @@ class MonitoredDrive(Odometry):
     def step(self, frame, cmd_m_s, observations=None):
         pose = super().step(frame, cmd_m_s, observations)       # steering odometry
         cmd = np.asarray(cmd_m_s, float)[0]
-        res = self.filter.step(np.asarray(frame.ticks)[0], cmd,
-                               sightings=None if observations is None else observations[0])
+        # the first robot's frame, with the command as steered
+        own = SensorFrame.of_counts(float(np.ravel(frame.t_s)[0]), np.asarray(frame.ticks)[0],
+                                    cmd)
+        res = self.filter.step(own, sightings=None if observations is None else observations[0])
         if res.encoders is None:                                 # the first frame anchors
             return pose
         t, d, record = res.t_s, res.tick_deltas, res.encoders

@@ -2,8 +2,10 @@
 
 - :mod:`drivers.roomba.oi`, :mod:`drivers.roomba.oi_packets`: the protocol as pure
   functions (commands, packets, the stream parser);
-- :mod:`drivers.roomba.driver`: :class:`Roomba`, the pyserial robot;
-- :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba`, the simulator behind the
+- :mod:`drivers.roomba.driver`: :class:`Roomba`, the pyserial robot, with its options
+  (:class:`RoombaOptions`, :mod:`drivers.roomba.roomba_options`);
+- :mod:`drivers.roomba.virtual`: :class:`VirtualRoomba` (its options:
+  :class:`VirtualRoombaOptions`, :mod:`drivers.roomba.virtual_options`), the simulator behind the
   protocol on a pseudo-terminal;
 - :mod:`drivers.roomba.stream_clock`: sensor-period time from host arrival times.
 
@@ -38,10 +40,12 @@ __all__ = [
     "PacketSpec",
     "ReceivedCommand",
     "Roomba",
+    "RoombaOptions",
     "StreamClock",
     "StreamFrame",
     "StreamParser",
     "VirtualRoomba",
+    "VirtualRoombaOptions",
     "baud",
     "check_stream_bandwidth",
     "checksum",
@@ -122,14 +126,18 @@ __getattr__, __dir__ = lazy_exports(
             "lookup_packet",
             "query_reply_size",
         ),
+        "drivers.roomba.roomba_options": ("RoombaOptions",),
         "drivers.roomba.stream_clock": ("StreamClock",),
         "drivers.roomba.virtual": (
-            "DEFAULT_BANNER",
-            "DEFAULT_CHARGER_TEXT",
             "EmulatorStats",
             "ReceivedCommand",
             "VirtualRoomba",
             "serve",
+        ),
+        "drivers.roomba.virtual_options": (
+            "DEFAULT_BANNER",
+            "DEFAULT_CHARGER_TEXT",
+            "VirtualRoombaOptions",
         ),
     },
     __all__,
@@ -182,12 +190,11 @@ if TYPE_CHECKING:
         lookup_packet,
         query_reply_size,
     )
+    from drivers.roomba.roomba_options import RoombaOptions
     from drivers.roomba.stream_clock import StreamClock
-    from drivers.roomba.virtual import (
+    from drivers.roomba.virtual import EmulatorStats, ReceivedCommand, VirtualRoomba, serve
+    from drivers.roomba.virtual_options import (
         DEFAULT_BANNER,
         DEFAULT_CHARGER_TEXT,
-        EmulatorStats,
-        ReceivedCommand,
-        VirtualRoomba,
-        serve,
+        VirtualRoombaOptions,
     )

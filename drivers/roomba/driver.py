@@ -17,11 +17,11 @@ Failure handling, in short:
   parser and counted (G10, G21), never fatal;
 * no valid frame for ``stall_periods`` periods raises
   :class:`StreamStalledError` after commanding the wheels to stop
-  (``reconnect=True`` first re-requests the stream once);
+  (``RoombaOptions(reconnect=True)`` first re-requests the stream once);
 * packet 35 reporting Off or Passive while Safe/Full is expected (wheel drop,
   cliff, charger; spec §2, G7) raises :class:`PassiveModeError` after
-  commanding the wheels to stop (``reassert_mode=True`` re-sends Safe/Full
-  once per episode, with a warning, instead);
+  commanding the wheels to stop (``RoombaOptions(reassert_mode=True)`` re-sends
+  Safe/Full once per episode, with a warning, instead);
 * :meth:`Roomba.close` always stops the wheels, pauses the stream and sends
   Start then Stop (G18), also when the ``with`` body raises, and never raises
   for a dead port.
@@ -32,8 +32,10 @@ Drive a virtual Roomba on a pseudo-terminal through the real driver:
 
 >>> from drivers.roomba.virtual import VirtualRoomba
 >>> from lti_motion.calibration.manoeuvres import drive
->>> with VirtualRoomba(seed=3, speed=5.0) as vr, Roomba(vr.device_path, clock_rate=5.0,
-...                                                      stall_periods=100) as robot:
+>>> from drivers.roomba.virtual import VirtualRoombaOptions
+>>> options = RoombaOptions(clock_rate=5.0, stall_periods=100)
+>>> vr = VirtualRoomba(seed=3, options=VirtualRoombaOptions(speed=5.0))
+>>> with vr, Roomba(vr.device_path, options=options) as robot:
 ...     log = drive(robot, np.full((20, 2), 0.1))
 >>> len(log), log.dt_s
 (20, 0.015)
@@ -49,15 +51,12 @@ import struct
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
-from typing import Literal
 
 import numpy as np
 import serial
 
 from drivers.exceptions import PassiveModeError, PortError, ProtocolError, StreamStalledError
 from drivers.roomba.oi import (
-    DEFAULT_BAUD_BPS,
-    DEFAULT_STREAM_IDS,
     STREAM_PERIOD_S,
     OIMode,
     PacketLayout,
@@ -72,10 +71,11 @@ from drivers.roomba.oi import (
     stop,
     stream,
 )
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.stream_clock import StreamClock
 from lti_motion.recordings.frames import N_LIGHT_BUMPS, SensorFrame
 
-__all__ = ["LinkCounters", "Roomba", "StreamClock"]
+__all__ = ["LinkCounters", "Roomba", "RoombaOptions", "StreamClock"]
 
 _log = logging.getLogger(__name__)
 
@@ -123,27 +123,6 @@ class LinkCounters:
 # ---------------------------------------------------------------------- the driver
 
 
-def _check_options(*, mode: str, clock: str, cmd_source: str, stall_periods: object,
-                   positive: dict[str, float], non_negative: dict[str, float]) -> None:
-    """Raise ValueError for a bad :class:`Roomba` option, naming it and its value."""
-    if mode not in ("safe", "full"):
-        raise ValueError(f"mode must be 'safe' or 'full', got {mode!r}")
-    if clock not in ("stream", "host"):
-        raise ValueError(f"clock must be 'stream' or 'host', got {clock!r}")
-    if cmd_source not in ("requested", "sent"):
-        raise ValueError(f"cmd_source must be 'requested' or 'sent', got {cmd_source!r}")
-    if isinstance(stall_periods, bool) or not (isinstance(stall_periods, int)
-                                               and stall_periods >= 1):
-        raise ValueError(f"stall_periods must be an int >= 1, got {stall_periods!r}")
-    for name, v in positive.items():
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{name} must be a finite positive number, got {v!r}")
-    for name, v in non_negative.items():
-        if not (math.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
-
-
-
 class Roomba:
     """A Roomba 600 / Create 2 on a serial port, streaming sensor frames.
 
@@ -151,82 +130,32 @@ class Roomba:
     ----------
     port : str
         Serial device, e.g. ``"/dev/ttyUSB0"`` or a virtual Roomba's ``device_path``.
-    baud : int
-        Bits per second (115200 for the Create 2 and Roomba 500/600; spec §1.3, G15).
-    mode : {"safe", "full"}
-        OI mode to drive in (spec §2). Safe keeps the cliff, wheel-drop and
-        charger safeties, which fall back to Passive (see ``reassert_mode``).
-    stream_ids : sequence of int
-        Packets to stream; must contain the encoders 43 and 44. Bumps 7,
-        light bumps 46-51, mode 35 and requested velocities 41/42 are used
-        when present (zeros / ``None`` / the sent command otherwise). Never
-        distance/angle 19/20 (spec §6.1).
-    read_timeout_s : float, optional
-        pyserial read timeout [s]: how often a waiting read re-checks its
-        deadline. Default: a quarter of the stall window, at most 0.05 s.
-    write_timeout_s : float
-        pyserial write timeout [s].
-    open_timeout_s : float
-        Wall time [s] allowed for the first valid frame after opening.
-    stall_periods : int
-        A read that sees no valid frame for this many stream periods (robot
-        time, i.e. ``stall_periods * 0.015 / clock_rate`` wall seconds), and
-        for at least ``stall_floor_s`` of wall time, raises
-        :class:`StreamStalledError`.
-    stall_floor_s : float
-        Shortest stall window in wall time [s], >= 0 (default 0.3 s). A loaded
-        host, or a virtual Roomba sharing its cores, leaves gaps of tens of
-        milliseconds between frames; at a high ``clock_rate`` the window of
-        ``stall_periods`` alone shrinks to a few milliseconds (7.5 ms at 10x)
-        and such a gap would stop the drive. On a robot (``clock_rate=1``) the
-        window is ``max(0.075, 0.3)`` s by default.
-    reconnect : bool
-        On a stall, re-send the stream request once and wait up to
-        ``reconnect_timeout_s`` (robot time) before raising.
-    reconnect_timeout_s : float
-        See ``reconnect`` (robot time, and at least ``stall_floor_s`` of wall time).
-    reassert_mode : bool
-        On a fall to Passive, re-send Safe/Full once (logged as a warning and
-        counted) instead of raising; raises if the mode is still wrong
-        ``stall_periods`` frames later. Off by default: never silent.
-    clock : {"stream", "host"}
-        Frame timestamps: ``"stream"`` gives ``k * 0.015`` s with ``k`` the
-        stream period counted by :class:`StreamClock` (frame 0 is the one that
-        confirmed the stream); ``"host"`` gives the host arrival time
-        ``(time.monotonic() - t0) * clock_rate``. Both start at 0 at frame 0,
-        whose host time is :attr:`t0_monotonic_s`.
-    clock_rate : float
-        Robot seconds per wall second: 1.0 for a robot, the ``speed`` of a
-        faster-than-real-time virtual Roomba. Scales every robot-time window.
-    latency_tolerance_s : float
-        Largest arrival latency [robot s] the stream clock does not take for a
-        lost frame (covers FTDI bursts, G17); ``math.inf``: frames are counted,
-        lateness is never taken for loss (a lossless link such as a
-        pseudo-terminal to :class:`~drivers.roomba.VirtualRoomba`).
-    mode_report_offset : int
-        Subtracted from packet 35 before use: 1 for Roombas that report the
-        mode off by one (G8). Values still outside 0..3 are counted and ignored.
-    cmd_source : {"requested", "sent"}
-        Where a frame's ``cmd_m_s`` comes from: packets 42/41 (the command the
-        robot applied in that period) when streamed, or the last command this
-        driver sent.
-    wake : bool
-        Pulse RTS (wired to BRC on the official cable) on open; best effort,
-        a pseudo-terminal refuses it (spec §1.4, §8.3, G3).
-    settle_s : float
-        Pause after Start and after the mode command [robot s].
-    wheel_diameter_m, ticks_per_rev, wheel_base_m : float
-        Nominal geometry (spec §7.1), for :attr:`m_per_tick`; the driver itself
-        reports raw ticks.
+    options : RoombaOptions, optional
+        How the driver talks to the robot (:class:`~drivers.roomba.RoombaOptions`:
+        baud rate, OI mode, streamed packets, timeouts, the stall window,
+        reconnect and mode re-assertion, the clocks, the nominal geometry);
+        default ``RoombaOptions()``.
+
+    Attributes
+    ----------
+    port : str
+        The serial device.
+    options : RoombaOptions
+        The driver's options.
+    dt_s : float
+        The stream period, 0.015 s.
+    read_timeout_s : float
+        The pyserial read timeout in use [s] (``options.read_timeout_s`` or
+        derived from the stall window).
 
     Raises
     ------
     UnknownPacketError
-        If ``stream_ids`` holds an unknown packet id (before any port is opened).
+        If ``options.stream_ids`` holds an unknown packet id (before any port is opened).
     StreamBandwidthError
         If the frame does not fit one period at ``baud`` (spec §4.1, G9).
     ValueError
-        For other bad options.
+        For options that are not a :class:`RoombaOptions`, or lack the encoder packets.
 
     Notes
     -----
@@ -237,69 +166,22 @@ class Roomba:
     robot actually applied.
     """
 
-    def __init__(
-        self,
-        port: str,
-        *,
-        baud: int = DEFAULT_BAUD_BPS,
-        mode: Literal["safe", "full"] = "safe",
-        stream_ids: Sequence[int] = DEFAULT_STREAM_IDS,
-        read_timeout_s: float | None = None,
-        write_timeout_s: float = 0.5,
-        open_timeout_s: float = 1.0,
-        stall_periods: int = 5,
-        stall_floor_s: float = 0.3,
-        reconnect: bool = False,
-        reconnect_timeout_s: float = 1.0,
-        reassert_mode: bool = False,
-        clock: Literal["stream", "host"] = "stream",
-        clock_rate: float = 1.0,
-        latency_tolerance_s: float = 0.02,
-        mode_report_offset: int = 0,
-        cmd_source: Literal["requested", "sent"] = "requested",
-        wake: bool = True,
-        settle_s: float = 0.05,
-        wheel_diameter_m: float = 0.072,
-        ticks_per_rev: float = 508.8,
-        wheel_base_m: float = 0.235,
-    ) -> None:
-        _check_options(mode=mode, clock=clock, cmd_source=cmd_source,
-                       stall_periods=stall_periods,
-                       positive={"clock_rate": clock_rate, "write_timeout_s": write_timeout_s,
-                                 "open_timeout_s": open_timeout_s,
-                                 "reconnect_timeout_s": reconnect_timeout_s,
-                                 "wheel_diameter_m": wheel_diameter_m,
-                                 "ticks_per_rev": ticks_per_rev, "wheel_base_m": wheel_base_m},
-                       non_negative={"settle_s": settle_s, "stall_floor_s": stall_floor_s})
+    def __init__(self, port: str, *, options: RoombaOptions | None = None) -> None:
+        opts = RoombaOptions() if options is None else options
+        if not isinstance(opts, RoombaOptions):
+            raise ValueError(f"options must be a RoombaOptions, got {type(opts).__name__}")
         self.port = str(port)
-        self.baud = int(baud)
-        self.mode = mode
-        self._index_fields(stream_ids, cmd_source=cmd_source)
+        self.options = opts
+        self._index_fields(opts.stream_ids, cmd_source=opts.cmd_source)
         self.dt_s = STREAM_PERIOD_S
-        self.clock = clock
-        self.clock_rate = float(clock_rate)
-        self.stall_periods = stall_periods
-        self.reconnect = bool(reconnect)
-        self.reconnect_timeout_s = float(reconnect_timeout_s)
-        self.reassert_mode = bool(reassert_mode)
-        self.mode_report_offset = int(mode_report_offset)
-        self.latency_tolerance_s = float(latency_tolerance_s)
-        self.open_timeout_s = float(open_timeout_s)
-        self.write_timeout_s = float(write_timeout_s)
-        self.wake_on_open = bool(wake)
-        self.settle_s = float(settle_s)
-        self.wheel_diameter_m = float(wheel_diameter_m)
-        self.ticks_per_rev = float(ticks_per_rev)
-        self.wheel_base_m = float(wheel_base_m)
-        self.stall_floor_s = float(stall_floor_s)
-        self._set_timeouts(read_timeout_s)
+        self._set_timeouts(opts.read_timeout_s)
         self._init_link_state()
 
     def _index_fields(self, stream_ids: Sequence[int], *, cmd_source: str) -> None:
         """The stream layout, and where the packets the driver reads sit in a frame."""
         self.layout = PacketLayout.from_ids(stream_ids, what="Stream (148)")
         self.layout.require_streamable()
-        check_stream_bandwidth(self.layout.ids, baud_bps=self.baud)
+        check_stream_bandwidth(self.layout.ids, baud_bps=self.options.baud_bps)
         fields = self.layout.field_ids
         for pid in (43, 44):
             if pid not in fields:
@@ -315,20 +197,18 @@ class Roomba:
 
     def _set_timeouts(self, read_timeout_s: float | None) -> None:
         """The stall window [wall s] and the pyserial read timeout derived from it."""
-        self._stall_window_s = max(self.stall_periods * STREAM_PERIOD_S / self.clock_rate,
-                                   self.stall_floor_s)
+        opts = self.options
+        self._stall_window_s = max(opts.stall_periods * STREAM_PERIOD_S / opts.clock_rate,
+                                   float(opts.stall_floor_s))
         self.read_timeout_s = (min(0.05, max(5e-4, self._stall_window_s / 4))
                                if read_timeout_s is None else float(read_timeout_s))
-        if not (math.isfinite(self.read_timeout_s) and self.read_timeout_s > 0):
-            raise ValueError(f"read_timeout_s must be a finite positive number, "
-                             f"got {read_timeout_s!r}")
 
     def _init_link_state(self) -> None:
         """A closed port, an empty parser, queue and stream clock, zero counters."""
         self._ser: serial.Serial | None = None
         self._parser = StreamParser(self.layout.ids)
-        self._clock = StreamClock(clock_rate=self.clock_rate,
-                                  latency_tolerance_s=self.latency_tolerance_s)
+        self._clock = StreamClock(clock_rate=self.options.clock_rate,
+                                  latency_tolerance_s=self.options.latency_tolerance_s)
         self._pending: deque[tuple[StreamFrame, int, float]] = deque()
         self._sent_m_s = (0.0, 0.0)
         self._stalls = 0
@@ -347,13 +227,14 @@ class Roomba:
 
     def log_meta(self) -> dict:
         """What :func:`lti_motion.calibration.drive` records about this link in a log's meta."""
-        return {"port": self.port, "baud": self.baud, "mode": self.mode, "clock": self.clock,
+        opts = self.options
+        return {"port": self.port, "baud": opts.baud_bps, "mode": opts.mode, "clock": opts.clock,
                 "counters": dataclasses.asdict(self.counters)}
 
     @property
     def m_per_tick(self) -> float:
         """Nominal wheel travel per encoder tick, ``pi D / ticks_per_rev`` [m] (spec §7.1)."""
-        return math.pi * self.wheel_diameter_m / self.ticks_per_rev
+        return math.pi * self.options.wheel_diameter_m / self.options.ticks_per_rev
 
     @property
     def counters(self) -> LinkCounters:
@@ -368,7 +249,8 @@ class Roomba:
 
     def __repr__(self) -> str:
         state = "open" if self.is_open else "closed"
-        return f"Roomba({self.port!r}, baud={self.baud}, mode={self.mode!r}, {state})"
+        return (f"Roomba({self.port!r}, baud_bps={self.options.baud_bps}, "
+                f"mode={self.options.mode!r}, {state})")
 
     # ------------------------------------------------------------------ open / close
 
@@ -404,20 +286,21 @@ class Roomba:
         if self._ser is not None:
             return self
         try:
-            ser = serial.Serial(self.port, baudrate=self.baud, timeout=self.read_timeout_s,
-                                write_timeout=self.write_timeout_s, exclusive=True)
+            ser = serial.Serial(self.port, baudrate=self.options.baud_bps,
+                                timeout=self.read_timeout_s,
+                                write_timeout=self.options.write_timeout_s, exclusive=True)
         except (serial.SerialException, OSError) as exc:
             raise PortError(f"cannot open serial port {self.port!r}: {exc}. Check that the "
                             "device exists and that no other program (or another Roomba "
                             "object) holds it") from exc
         self._ser = ser
         try:
-            if self.wake_on_open:
+            if self.options.wake:
                 self.wake()
             self._reset_input(ser)
             self._write(start())
             self._settle()
-            self._write(safe() if self.mode == "safe" else full())
+            self._write(safe() if self.options.mode == "safe" else full())
             self._settle()
             self._reset_input(ser)
             self._pending.clear()
@@ -426,7 +309,7 @@ class Roomba:
         except BaseException:
             self.close()
             raise
-        _log.info("Roomba on %s: %s mode, streaming %s", self.port, self.mode,
+        _log.info("Roomba on %s: %s mode, streaming %s", self.port, self.options.mode,
                   list(self.layout.ids))
         return self
 
@@ -555,13 +438,14 @@ class Roomba:
         while not self._pending:
             if time.monotonic() >= deadline and not self._take_waiting(ser):
                 self._stalls += 1
-                if self.reconnect and not reconnected:
+                if self.options.reconnect and not reconnected:
                     reconnected = True
                     _log.warning("Roomba on %s: no frame for %d periods; re-requesting the "
-                                 "stream", self.port, self.stall_periods)
+                                 "stream", self.port, self.options.stall_periods)
                     self._write(stream(self.layout.ids))
-                    deadline = time.monotonic() + max(self.reconnect_timeout_s / self.clock_rate,
-                                                      self.stall_floor_s)
+                    opts = self.options
+                    deadline = time.monotonic() + max(opts.reconnect_timeout_s / opts.clock_rate,
+                                                      opts.stall_floor_s)
                     continue
                 self._stop_wheels_quietly()
                 raise self._stall_error(reconnected=reconnected)
@@ -632,8 +516,8 @@ class Roomba:
             raise PortError(f"cannot flush {self.port}: {exc}") from exc
 
     def _settle(self) -> None:
-        if self.settle_s > 0:
-            time.sleep(self.settle_s / self.clock_rate)
+        if self.options.settle_s > 0:
+            time.sleep(self.options.settle_s / self.options.clock_rate)
 
     def _receive(self, ser: serial.Serial) -> tuple[bytes, float, bool]:
         """One read: (bytes, host time, whether the host was waiting for them)."""
@@ -674,15 +558,15 @@ class Roomba:
     def _stall_error(self, *, reconnected: bool) -> StreamStalledError:
         c = self.counters
         return StreamStalledError(
-            f"no valid stream frame from {self.port} ({self.baud} baud) for "
-            f"{self._stall_window_s:.3g} s of wall time (at least {self.stall_periods} "
+            f"no valid stream frame from {self.port} ({self.options.baud_bps} baud) for "
+            f"{self._stall_window_s:.3g} s of wall time (at least {self.options.stall_periods} "
             f"periods{', after one re-request' if reconnected else ''}); "
             f"{c.frames} frames so far, {c.checksum_failures} checksum failures. The "
             "wheels were commanded to stop. Check the cable, that the robot is on and "
             "awake, and the baud rate (spec §1.3, G3, G15)")
 
     def _await_first_frame(self, ser: serial.Serial) -> None:
-        deadline = time.monotonic() + self.open_timeout_s
+        deadline = time.monotonic() + self.options.open_timeout_s
         wrong_modes: list[int] = []
         while time.monotonic() < deadline:
             chunk, host_s, _ = self._receive(ser)
@@ -702,13 +586,14 @@ class Roomba:
         if wrong_modes:
             raise PassiveModeError(
                 f"Roomba on {self.port} stays in OI mode {wrong_modes[-1]} "
-                f"({OIMode(wrong_modes[-1]).name}) after the {self.mode.capitalize()} command "
+                f"({OIMode(wrong_modes[-1]).name}) after the "
+                f"{self.options.mode.capitalize()} command "
                 f"({len(wrong_modes)} frames): is it on the charger or lifted (wheel drop)? "
                 "(spec §2, G7)")
         c = self.counters
         raise StreamStalledError(
-            f"no valid stream frame from {self.port} at {self.baud} baud within "
-            f"{self.open_timeout_s:g} s of requesting the stream ({c.bytes_dropped} bytes "
+            f"no valid stream frame from {self.port} at {self.options.baud_bps} baud within "
+            f"{self.options.open_timeout_s:g} s of requesting the stream ({c.bytes_dropped} bytes "
             "skipped). Check that the robot is switched on and awake (press Clean), the cable "
             "(TX/RX, ground), and the baud rate: 115200 for a Create 2 / Roomba 500-600, "
             "57600 for a Create 1 (spec §1.3, G3, G15)")
@@ -716,7 +601,7 @@ class Roomba:
     def _mode_of(self, sf: StreamFrame) -> int | None:
         if self._i_mode is None:
             return None
-        mode = sf.values[self._i_mode] - self.mode_report_offset
+        mode = sf.values[self._i_mode] - self.options.mode_report_offset
         if not 0 <= mode <= 3:
             self._invalid_modes += 1
             _log.debug("Roomba on %s: invalid OI mode report %d (G8)", self.port,
@@ -735,8 +620,8 @@ class Roomba:
             cmd = self._sent_m_s
         else:
             cmd = (v[self._i_req[0]] / 1000.0, v[self._i_req[1]] / 1000.0)
-        t_s = (k * STREAM_PERIOD_S if self.clock == "stream"
-               else (host_s - self.t0_monotonic_s) * self.clock_rate)
+        t_s = (k * STREAM_PERIOD_S if self.options.clock == "stream"
+               else (host_s - self.t0_monotonic_s) * self.options.clock_rate)
         fields = self.layout.field_ids
         current = (np.array((v[fields.index(54)], v[fields.index(55)]), dtype=float) / 1000.0
                    if 54 in fields and 55 in fields else None)
@@ -759,24 +644,24 @@ class Roomba:
             self._reassert_left = None
             return
         self._stop_wheels_quietly()
-        if self.reassert_mode:
+        if self.options.reassert_mode:
             if self._reassert_left is None:
-                self._reassert_left = self.stall_periods
+                self._reassert_left = self.options.stall_periods
                 self._reasserts += 1
                 _log.warning("Roomba on %s: OI fell to mode %d (%s); re-sending %s as "
-                             "reassert_mode=True asks", self.port, mode, OIMode(mode).name,
-                             self.mode.capitalize())
-                self._write(safe() if self.mode == "safe" else full())
+                             "RoombaOptions(reassert_mode=True) asks", self.port, mode,
+                             OIMode(mode).name, self.options.mode.capitalize())
+                self._write(safe() if self.options.mode == "safe" else full())
                 return
             if self._reassert_left > 0:
                 self._reassert_left -= 1
                 return
         raise PassiveModeError(
             f"Roomba on {self.port} reports OI mode {mode} ({OIMode(mode).name}) while the "
-            f"driver expects {self.mode.upper()}"
-            f"{' even after re-sending it' if self.reassert_mode else ''}: the robot fell back "
-            "(wheel drop, cliff, charger; spec §2, G7). The wheels were commanded to stop. "
-            "Lift the cause, then reopen, or pass reassert_mode=True")
+            f"driver expects {self.options.mode.upper()}"
+            f"{' even after re-sending it' if self.options.reassert_mode else ''}: the robot "
+            "fell back (wheel drop, cliff, charger; spec §2, G7). The wheels were commanded to "
+            "stop. Lift the cause, then reopen, or pass RoombaOptions(reassert_mode=True)")
 
     def _stop_wheels_quietly(self) -> None:
         with contextlib.suppress(PortError):

@@ -40,7 +40,7 @@ while the host does not read (up to 1 MiB).
 
 Examples
 --------
->>> with VirtualRoomba(seed=1, speed=10.0) as robot:
+>>> with VirtualRoomba(seed=1, options=VirtualRoombaOptions(speed=10.0)) as robot:
 ...     robot.device_path.startswith("/dev/")
 True
 """
@@ -50,7 +50,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import logging
-import math
 import os
 import select
 import struct
@@ -73,6 +72,11 @@ from drivers.roomba.oi import (
     Opcode,
     PacketLayout,
 )
+from drivers.roomba.virtual_options import (
+    DEFAULT_BANNER,
+    DEFAULT_CHARGER_TEXT,
+    VirtualRoombaOptions,
+)
 from drivers.sim.config import Fault, FloorMap, RobotParams, Room, floor_name, load_robot
 from drivers.sim.simulator import Simulator
 
@@ -82,16 +86,11 @@ __all__ = [
     "EmulatorStats",
     "ReceivedCommand",
     "VirtualRoomba",
+    "VirtualRoombaOptions",
     "serve",
 ]
 
 _log = logging.getLogger(__name__)
-
-#: Boot banner printed after Reset (7), assembled from real banners quoted in spec §6.3.
-DEFAULT_BANNER = ("bl-start\r\nSTR730\r\n2007-05-14-1715-L   \r\nRoomba by iRobot!\r\n"
-                  "r3_robot/tags/release-3.2.6:4975 CLEAN\r\nbattery-current-zero 253\r\n")
-#: Unsolicited charging-status text of a robot on its charger (spec §6.3, G21).
-DEFAULT_CHARGER_TEXT = "bat:   min 0  sec 12  mV 15605  mA 1203  deg-C 26  mAH 2100  state 5\r\n"
 
 _WHEEL_BASE_MM = 235.0          # Drive (137) kinematics, spec §3.1
 _MAX_OUT_QUEUE = 1 << 20        # bytes held for a host that does not read
@@ -165,41 +164,27 @@ class VirtualRoomba:
         faults (:attr:`~drivers.sim.RobotParams.faults`) happen as scheduled.
     seed : int
         Seed of the simulator and (through a separate generator) of the line faults.
-    speed : float
-        Wall-clock speed-up: 1.0 is real time; 20.0 sends a frame every
-        0.75 ms of wall time. Give the driver ``clock_rate=speed``.
     floor, room, initial_pose, faults
         Passed to :class:`~drivers.sim.Simulator` (``floor`` defaults to the robot's;
         ``faults`` are the
         simulator's own: floor changes, payload, lost frames, ...).
-    corrupt_probability : float
-        Probability that each outgoing byte gets one random bit flipped.
-    drop_probability : float
-        Probability that each outgoing byte is dropped.
-    stall_at_s, stall_duration_s : float or None, float
-        Robot time [s] at which the stream falls silent, and for how long
-        (the robot keeps running and keeps reading commands).
-    passive_at_s, passive_duration_s : float or None, float
-        Robot time [s] of a wheel drop that forces the OI to Passive and stops
-        the motors (spec §2); the wheel-drop bits of packet 7 stay set for
-        ``passive_duration_s``, during which Safe falls back to Passive again
-        (Full holds, its safeties being off). Applied in Full too, so a test
-        of the driver's fallback does not depend on the mode.
-    banner_text : str
-        ASCII printed after Reset (7) (spec §6.3).
-    charger_text_at_s, charger_text : float or None, str
-        Robot time [s] at which unsolicited charger text is sent (G21).
-    light_bumper_threshold : int
-        Signal above which a light-bumper bit of packet 45 is set.
-    mode_report_offset : int
-        Added to the reported OI mode, to emulate the off-by-one firmware (G8).
-    max_catch_up_periods : int
-        Lateness, in periods, beyond which the schedule is re-anchored.
+    options : VirtualRoombaOptions, optional
+        Its pace against the wall clock and its line's faults and quirks
+        (:class:`~drivers.roomba.VirtualRoombaOptions`: ``speed``, corrupted and
+        dropped bytes, a silent stream, a fall to Passive, banner and charger
+        text, the off-by-one mode report); default ``VirtualRoombaOptions()``.
+
+    Attributes
+    ----------
+    options : VirtualRoombaOptions
+        Its options.
+    speed : float
+        ``options.speed``: robot seconds per wall second.
 
     Raises
     ------
     ValueError
-        For a speed, probability or time out of range.
+        For options that are not a :class:`VirtualRoombaOptions`.
     SimulatorError
         For a bad preset, floor, pose or fault.
 
@@ -218,49 +203,22 @@ class VirtualRoomba:
         robot: str | RobotParams = "create2",
         *,
         seed: int = 0,
-        speed: float = 1.0,
         floor: str | FloorMap | None = None,
         room: Room | None = None,
         initial_pose: Sequence[float] | None = None,
         faults: Sequence[Fault] = (),
-        corrupt_probability: float = 0.0,
-        drop_probability: float = 0.0,
-        stall_at_s: float | None = None,
-        stall_duration_s: float = 0.5,
-        passive_at_s: float | None = None,
-        passive_duration_s: float = 1.0,
-        banner_text: str = DEFAULT_BANNER,
-        charger_text_at_s: float | None = None,
-        charger_text: str = DEFAULT_CHARGER_TEXT,
-        light_bumper_threshold: int = 100,
-        mode_report_offset: int = 0,
-        max_catch_up_periods: int = 100,
+        options: VirtualRoombaOptions | None = None,
     ) -> None:
-        if not (math.isfinite(speed) and speed > 0):
-            raise ValueError(f"speed must be a finite positive factor, got {speed!r}")
-        for name, p in (("corrupt_probability", corrupt_probability),
-                        ("drop_probability", drop_probability)):
-            if not 0.0 <= p <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {p!r}")
-        for name, v in (("stall_duration_s", stall_duration_s),
-                        ("passive_duration_s", passive_duration_s)):
-            if not v > 0:
-                raise ValueError(f"{name} must be > 0 s, got {v!r}")
+        opts = VirtualRoombaOptions() if options is None else options
+        if not isinstance(opts, VirtualRoombaOptions):
+            raise ValueError(f"options must be a VirtualRoombaOptions, got "
+                             f"{type(opts).__name__}")
+        self.options = opts
         self.sim = Simulator(robot, seed=seed, floor=floor, room=room,
                              initial_pose=initial_pose, faults=faults)
         self.dt_s = float(self.sim.dt_s)
-        self.speed = float(speed)
         self.seed = int(seed)
         self._rng = np.random.default_rng([int(seed), 0x4C494E45])  # "LINE": own stream
-        self.corrupt_probability = float(corrupt_probability)
-        self.drop_probability = float(drop_probability)
-        self.stall_at_s, self.stall_duration_s = stall_at_s, float(stall_duration_s)
-        self.passive_at_s, self.passive_duration_s = passive_at_s, float(passive_duration_s)
-        self.banner_text = banner_text
-        self.charger_text_at_s, self.charger_text = charger_text_at_s, charger_text
-        self.light_bumper_threshold = int(light_bumper_threshold)
-        self.mode_report_offset = int(mode_report_offset)
-        self.max_catch_up_periods = int(max_catch_up_periods)
         # OI state: touched only by the thread once started
         self.mode = OIMode.OFF
         self._wheels_mm_s = (0, 0)          # (left, right) from Drive Direct / Drive
@@ -289,6 +247,11 @@ class VirtualRoomba:
         self._thread: threading.Thread | None = None
         self._stop_event = threading.Event()
         self._error: BaseException | None = None
+
+    @property
+    def speed(self) -> float:
+        """Robot seconds per wall second (``options.speed``)."""
+        return float(self.options.speed)
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -435,7 +398,7 @@ class VirtualRoomba:
                     if writable:
                         self._flush_output()
                     continue
-                if -wait > self.max_catch_up_periods * period:
+                if -wait > self.options.max_catch_up_periods * period:
                     with self._lock:
                         self._counts["overruns"] += 1
                     next_tick = now
@@ -491,17 +454,17 @@ class VirtualRoomba:
 
     def _send(self, data: bytes) -> None:
         """Queue outgoing bytes through the line faults."""
-        if self.corrupt_probability > 0 or self.drop_probability > 0:
+        if self.options.corrupt_probability > 0 or self.options.drop_probability > 0:
             arr = np.frombuffer(data, dtype=np.uint8).copy()
-            if self.corrupt_probability > 0:
-                hit = self._rng.random(arr.size) < self.corrupt_probability
+            if self.options.corrupt_probability > 0:
+                hit = self._rng.random(arr.size) < self.options.corrupt_probability
                 bits = self._rng.integers(0, 8, arr.size)
                 arr[hit] ^= (1 << bits[hit]).astype(np.uint8)
                 corrupted = int(hit.sum())
             else:
                 corrupted = 0
-            if self.drop_probability > 0:
-                keep = self._rng.random(arr.size) >= self.drop_probability
+            if self.options.drop_probability > 0:
+                keep = self._rng.random(arr.size) >= self.options.drop_probability
                 dropped = int(arr.size - keep.sum())
                 arr = arr[keep]
             else:
@@ -550,7 +513,7 @@ class VirtualRoomba:
         if opcode == Opcode.RESET:
             self._enter_off()
             self._layout = None
-            self._send(self.banner_text.encode("ascii", "replace"))
+            self._send(self.options.banner_text.encode("ascii", "replace"))
         elif opcode == Opcode.START:
             self.mode = OIMode.PASSIVE
             self._wheels_mm_s = (0, 0)
@@ -611,15 +574,15 @@ class VirtualRoomba:
         active = self.mode in (OIMode.SAFE, OIMode.FULL)
         left, right = self._wheels_mm_s if active else (0, 0)
         v = self._values
-        v[35] = min(max(int(self.mode) + self.mode_report_offset, 0), 255)
+        v[35] = min(max(int(self.mode) + self.options.mode_report_offset, 0), 255)
         v[41], v[42] = right, left
         v[39], v[40] = self._drive
         return left, right
 
     def _tick(self) -> None:
         t = self.sim.t_s
-        drop_on = (self.passive_at_s is not None
-                   and self.passive_at_s - 1e-9 <= t < self.passive_at_s + self.passive_duration_s)
+        at, duration = self.options.passive_at_s, self.options.passive_duration_s
+        drop_on = at is not None and at - 1e-9 <= t < at + duration
         first = drop_on and not self._passive_fired
         if first or (drop_on and self.mode == OIMode.SAFE):
             if first:
@@ -628,10 +591,10 @@ class VirtualRoomba:
             if self.mode != OIMode.OFF:
                 self.mode = OIMode.PASSIVE  # wheel drop: Safe reverts, motors stop (spec §2)
             self._wheels_mm_s = (0, 0)
-        if (self.charger_text_at_s is not None and not self._charger_sent
-                and t >= self.charger_text_at_s - 1e-9):
+        if (self.options.charger_text_at_s is not None and not self._charger_sent
+                and t >= self.options.charger_text_at_s - 1e-9):
             self._charger_sent = True
-            self._send(self.charger_text.encode("ascii", "replace"))
+            self._send(self.options.charger_text.encode("ascii", "replace"))
         if self._texts:
             with self._lock:
                 texts, self._texts = self._texts, []
@@ -651,7 +614,7 @@ class VirtualRoomba:
         light = [int(x) for x in frame.light_bump]
         for i, signal in enumerate(light):
             v[46 + i] = signal
-        v[45] = sum(1 << i for i, s in enumerate(light) if s > self.light_bumper_threshold)
+        v[45] = sum(1 << i for i, s in enumerate(light) if s > self.options.light_bumper_threshold)
         v[8] = (v[45] >> 5) & 1
         v[27] = min(light[5], 1023)
         # the simulated motors' currents [mA, int16] and overcurrent flags (packet 14)
@@ -662,8 +625,8 @@ class VirtualRoomba:
         v[23] = -(300 + abs(v[54]) + abs(v[55]))
         moving = frame.true_body_m_s is not None and abs(float(frame.true_body_m_s[0])) > 0.01
         v[58] = (k & 1) if moving else 0
-        stalled = (self.stall_at_s is not None
-                   and self.stall_at_s - 1e-9 <= t < self.stall_at_s + self.stall_duration_s)
+        at, duration = self.options.stall_at_s, self.options.stall_duration_s
+        stalled = at is not None and at - 1e-9 <= t < at + duration
         sent = False
         if self._streaming and self._layout is not None:
             v[38] = min(len(self._layout.ids), 255)
@@ -753,8 +716,9 @@ def serve(
     """
     params = load_robot(preset) if isinstance(preset, str) else preset
     floor = params.floor if floor is None else floor
-    robot = VirtualRoomba(params, seed=seed, speed=speed, floor=floor, room=Room.cluttered(),
-                          initial_pose=Room.CALIBRATION_SPOT)
+    robot = VirtualRoomba(params, seed=seed, floor=floor, room=Room.cluttered(),
+                          initial_pose=Room.CALIBRATION_SPOT,
+                          options=VirtualRoombaOptions(speed=speed))
     spots = [Room.OPEN_FLOOR, Room.CALIBRATION_SPOT]
 
     def carry() -> None:
@@ -774,7 +738,8 @@ def serve(
                  f"speed x{speed:g}) "
                  f"listening on {robot.device_path}")
         print_fn(f"connect with: lti-motion calibrate --port {robot.device_path} --clock-rate "
-                 f"{speed:g}, or Roomba({robot.device_path!r}, clock_rate={speed:g})")
+                 f"{speed:g}, or Roomba({robot.device_path!r}, "
+                 f"options=RoombaOptions(clock_rate={speed:g}))")
         print_fn("it stands beside furniture (to rotate); press Enter here to carry it to "
                  "open floor and back; Ctrl-C stops it")
         deadline = None if duration_s is None else time.monotonic() + duration_s

@@ -1,6 +1,8 @@
 """The EKF wing: the calibrated model inside a filterpy Extended Kalman Filter.
 
-- :class:`ModelEKF` (:mod:`fusion.ekf.model_ekf`): the filterpy subclass;
+- :class:`ModelEKF` (:mod:`fusion.ekf.model_ekf`): the filterpy subclass, with its options
+  (:class:`EKFOptions`, :mod:`fusion.ekf.ekf_options`) and the raw counts it holds between
+  frames (:class:`EncoderCounts`, :mod:`fusion.ekf.encoder_counts`);
 - :mod:`fusion.ekf.functions`: the same maths as plain functions, for a user's own
   filterpy EKF or UKF (:class:`FilterModel` lays a model out for a filter);
 - :mod:`fusion.ekf.kernel`: the per-step arithmetic of the prediction and the encoder
@@ -32,6 +34,8 @@ __all__ = [
     "POSE",
     "SCALES",
     "DivergenceWatch",
+    "EKFOptions",
+    "EncoderCounts",
     "FilterModel",
     "FilterReset",
     "FilterStats",
@@ -43,6 +47,7 @@ __all__ = [
     "UpdateReason",
     "UpdateRecord",
     "VelocityModelEKF",
+    "check_counter_bits",
     "clone_heading",
     "discrepancy",
     "encoder_jacobian",
@@ -88,6 +93,11 @@ __all__ = [
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
+        "fusion.ekf.ekf_options": ("EKFOptions",),
+        "fusion.ekf.encoder_counts": (
+            "EncoderCounts",
+            "check_counter_bits",
+        ),
         "fusion.ekf.functions": (
             "FilterModel",
             "GYRO_BIAS",
@@ -160,6 +170,8 @@ __getattr__, __dir__ = lazy_exports(
 )
 
 if TYPE_CHECKING:
+    from fusion.ekf.ekf_options import EKFOptions
+    from fusion.ekf.encoder_counts import EncoderCounts, check_counter_bits
     from fusion.ekf.functions import (
         GYRO_BIAS,
         HEADING_CLONE,

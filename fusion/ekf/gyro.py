@@ -91,7 +91,8 @@ __all__ = ["clone_heading", "gyro_cov", "gyro_jacobian", "gyro_measurement",
 def _check_gyro(fm: FilterModel) -> None:
     if fm.gyro is None:
         raise FilterOptionError("this filter has no gyro states; give gyro=GyroNoise(...) to "
-                                "ModelEKF or FilterModel")
+                                "FilterModel, or options=EKFOptions(gyro=GyroNoise(...)) to "
+                                "ModelEKF")
 
 
 def gyro_measurement(x: np.ndarray, fm: FilterModel, window_s: float) -> np.ndarray:

@@ -13,7 +13,7 @@ One sensor period ``k`` (frame ``k`` closes period ``k``, whose command
     ekf.update_encoders(ticks_k)       # raw 16-bit counts of frame k
     ekf.update_landmarks(sightings_k)  # the landmarks seen at frame k (a RangeBearing)
     ekf.update_pose(pose, cov)         # optional absolute fix
-    ekf.update_gyro(yaw_rate_k)        # optional gyro (gyro=GyroNoise(...)), fusion.ekf.gyro
+    ekf.update_gyro(yaw_rate_k)        # optional gyro (EKFOptions(gyro=...)), fusion.ekf.gyro
 
 Every update returns an :class:`~fusion.ekf.UpdateRecord` (innovation,
 its covariance, NIS, accepted flag, kind, time, reason) and appends it to
@@ -51,12 +51,13 @@ import logging
 import math
 from collections import deque
 from collections.abc import Hashable, Mapping
-from typing import Literal
 
 import filterpy
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
+from fusion.ekf.ekf_options import EKFOptions
+from fusion.ekf.encoder_counts import EncoderCounts
 from fusion.ekf.functions import (
     GYRO_BIAS,
     SCALES,
@@ -93,7 +94,7 @@ from fusion.ekf.resets import (
 from fusion.ekf.updates import GatedUpdates, UpdateKind, UpdateReason, UpdateRecord
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
-from fusion.noise import GyroNoise, LandmarkNoise, ScaleErrors, SlipNoise
+from fusion.noise import ScaleErrors, SlipNoise
 from fusion.scale_errors import IntrinsicsEstimate, intrinsics_estimate
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model.motion_model import MotionModel
@@ -124,69 +125,29 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         :meth:`MotionModel.state_from_data`).
     z_cov : ndarray, optional
         Covariance of ``z0`` (default the model's ``Q``).
-    slip : SlipNoise, optional
-        White ground-versus-encoder speed noise (:mod:`fusion.ekf.functions`).
-    scales : ScaleErrors, optional
-        Prior, drift and plausibility bound of the scale-error states
-        ``(k_v, k_w, kappa)`` (:mod:`fusion.ekf.resets`).
-    encoder_std : tuple of 2 float
-        Floor of the encoder reading noise ``(v [m/s], w [rad/s])``.
+    options : EKFOptions, optional
+        How the filter filters (:class:`~fusion.ekf.EKFOptions`: noise, gate,
+        span and divergence judgement, counter width, records, gyro); default
+        ``EKFOptions()``.
     m_per_tick : float, optional
-        Encoder scale of both wheels, if the model has none (it replaces the
-        model's intrinsics).
-    gate_probability : float or None
-        Chi-square gate of every update (0.999: a good reading is rejected
-        once in a thousand); ``None`` fuses everything.
+        Encoder scale of both wheels [m/tick], if the model has none (it
+        replaces the model's intrinsics).
     landmarks : LandmarkMap or mapping, optional
         Known landmark positions, for :meth:`update_landmark` and
         :meth:`update_landmarks`.
-    landmark_noise : LandmarkNoise, optional
-        Range-bearing noise of sightings without a covariance of their own
-        (default 2% of range, 1 degree).
-    unknown_landmarks : {"count", "raise"}
-        What a sighting of an id not in the map does.
     initial_ticks : array_like, shape (2,), optional
         Raw encoder counts at the start; otherwise the first
         :meth:`update_encoders` call only sets the reference.
     t0_s : float
         Filter time at the start [s]; each :meth:`predict` adds ``dt_s``.
-    history : int
-        How many update records :attr:`records` keeps (0: none).
-    reanchor_periods : int
-        When an encoder reading is still outside the gate after spanning
-        this many periods, the span is judged
-        (:func:`~fusion.ekf.span_verdict`): a wheel flat while
-        predicted to turn (stuck) renews the count reference and gives up the
-        motion since; both wheels counting steadily means the model misses a
-        transient (a start from rest), and the counts are fused anyway
-        (``"forced"``); a frame whose increment jumps (a spike) waits for the
-        next frame; a jump earlier in the span (a spike, a frozen wheel that
-        resumed) also renews the reference. Fewer periods than this, and the
-        next reading still sums from the last fused counts, which recovers
-        single-frame spikes.
-    max_jump_ticks : float
-        Largest change of a frame's tick increment from the last frame's that
-        still counts as steady, for the judgement above [ticks].
-    max_periods : int
-        Most periods one encoder reading may span after gated or lost ones
-        (500 periods of 15 ms at 0.5 m/s stay far from the 16-bit counter's
-        half range).
-    diverged_after : int or None
-        Absolute readings (landmark sightings, pose fixes) outside the gate in
-        a row, of at least two landmarks, after which the filter is judged
-        diverged: its scale states are reset and its pose covariance widened
-        (:mod:`fusion.ekf.resets`); ``None`` never judges.
-    counter_bits : int
-        Width of the encoder counters [bits], 8..64 (16: the Open Interface's);
-        counts are differenced as the shortest signed step on their
-        ``2**counter_bits`` ring (63, 64: they never wrap).
-    gyro : GyroNoise, optional
-        A yaw-rate gyro to fuse with :meth:`update_gyro` (noise, bias prior,
-        walk and bound): adds its bias and the period's yaw slip to the state
-        (:mod:`fusion.ekf.gyro`); default none.
 
     Attributes
     ----------
+    options : EKFOptions
+        The filter's options.
+    encoder_counts : EncoderCounts
+        The raw counts it holds: the reference (last fused frame), the last
+        frame and its step (the frame delta) on the counters' ring.
     resets : collections.deque of FilterReset
         The latest resets (up to 1,000), oldest first.
     n_resets : int
@@ -230,55 +191,33 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self,
         model: MotionModel,
         *,
+        options: EKFOptions | None = None,
         initial_pose: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 0.0),
         pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
         z0: np.ndarray | None = None,
         z_cov: np.ndarray | None = None,
-        slip: SlipNoise | None = None,
-        scales: ScaleErrors | None = None,
-        encoder_std: tuple[float, float] = (1e-5, 1e-4),
         m_per_tick: float | None = None,
-        gate_probability: float | None = 0.999,
         landmarks: LandmarkMap | Mapping[Hashable, tuple[float, float]] | None = None,
-        landmark_noise: LandmarkNoise | None = None,
-        unknown_landmarks: Literal["count", "raise"] = "count",
         initial_ticks: np.ndarray | tuple[int, int] | None = None,
         t0_s: float = 0.0,
-        history: int = 10_000,
-        reanchor_periods: int = 16,
-        max_periods: int = 500,
-        max_jump_ticks: float = 10.0,
-        diverged_after: int | None = 20,
-        counter_bits: int = 16,
-        gyro: GyroNoise | None = None,
     ) -> None:
-        fm = FilterModel(model, slip=slip or SlipNoise(), scales=scales or ScaleErrors(),
-                         encoder_std=encoder_std, m_per_tick=m_per_tick, gyro=gyro)
+        opts = EKFOptions() if options is None else options
+        if not isinstance(opts, EKFOptions):
+            raise FilterOptionError(f"options must be an EKFOptions, got {type(opts).__name__}")
+        gyro = opts.gyro
+        fm = FilterModel(model, slip=opts.slip or SlipNoise(), scales=opts.scales or ScaleErrors(),
+                         encoder_std=opts.encoder_std, m_per_tick=m_per_tick, gyro=gyro)
         super().__init__(dim_x=fm.n, dim_z=2, dim_u=2)
-        self._init_updates(gate_probability=gate_probability, landmarks=landmarks,
-                           landmark_noise=landmark_noise, unknown_landmarks=unknown_landmarks,
-                           history=history)
+        self._init_updates(gate_probability=opts.gate_probability, landmarks=landmarks,
+                           landmark_noise=opts.landmark_noise,
+                           unknown_landmarks=opts.unknown_landmarks, history=opts.history)
         self.fm = fm
-        for name, value in (("reanchor_periods", reanchor_periods), ("max_periods", max_periods)):
-            if not (isinstance(value, int) and value >= 1):
-                raise FilterOptionError(f"{name} must be a positive int, got {value!r}")
-        self.reanchor_periods = reanchor_periods
-        self.max_periods = max_periods
-        if not max_jump_ticks > 0:
-            raise FilterOptionError(f"max_jump_ticks must be positive, got {max_jump_ticks!r}")
-        self.max_jump_ticks = float(max_jump_ticks)
-        if not (isinstance(counter_bits, int) and 8 <= counter_bits <= 64):
-            raise FilterOptionError(f"counter_bits must be an int in 8..64 (16 for a Roomba), "
-                                    f"got {counter_bits!r}")
-        self.counter_bits = counter_bits
-        # shortest signed step on the counters' ring: (d + half) % modulus - half
-        self._half = 0 if counter_bits >= 63 else 1 << (counter_bits - 1)
-        self._modulus = 0 if counter_bits >= 63 else 1 << counter_bits
+        self.options = opts
         self._bound = ScaleBound.from_scales(
             fm.scales, wheel_base_m=model.wheel_base_m if fm.intrinsics is None
             else fm.intrinsics.wheel_base_m)
         self._inv_prior_var = tuple(1.0 / v for v in self._bound.prior_var)
-        self._watch = DivergenceWatch(diverged_after)
+        self._watch = DivergenceWatch(opts.diverged_after)
         self.resets: deque[FilterReset] = deque(maxlen=1000)
         self.n_resets = 0
         self._scales_since_s = float(t0_s)        # start of the scales' prior spread
@@ -297,11 +236,6 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self._dt_s = fm.dt_s
         self._speed_at = fm.n - 2
         self._t2s = None if fm.ticks_to_speeds is None else fm.ticks_to_speeds.tolist()
-        # counts (left, right) of the last fused (or anchoring) frame; the current frame's are
-        # _last_frame (set by _frame_jump)
-        self._ref_ticks = (0, 0)
-        self._have_ref = False
-        self._periods_since_ref = 0
         self._n_predicts = 0
         self._gyro_read_at = -1         # the prediction of the last gyro reading
         self._gyro_window = (0.0, 0, 0)     # (sum of y dt [rad], predictions at start, count)
@@ -318,18 +252,13 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             gyro.window_s / fm.dt_s - 0.5 - 1e-9))
         self._settling, self._settling_at = False, -(1 << 62)
         self.n_rest_updates = 0
-        # the previous frame's counts and increment, for the single-frame jump test
-        self._last_frame = (0, 0)
-        self._last_delta = (0, 0)
-        self._have_last = self._have_last_delta = False
-        self._span_jump = 0.0       # largest frame jump since the last fused counts [ticks]
+        first = None
         if initial_ticks is not None:
             first = self._check_ticks(initial_ticks)
             if not np.all(np.isfinite(first)):
                 raise FilterOptionError(f"initial_ticks must be finite, got {initial_ticks}")
-            self._have_ref = True
-            self._last_frame = self._ref_ticks = (int(first[0]), int(first[1]))
-            self._have_last = True
+        # the reference (last fused) and the last frame's counts, and the frame delta
+        self.encoder_counts = EncoderCounts(counter_bits=opts.counter_bits, initial_ticks=first)
         # F buffers must hold the constant blocks (predict_terms writes only the pose rows)
         self._buffers = (np.array(fm.F_template), np.empty((fm.n, fm.n)))
 
@@ -419,7 +348,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         f_buf, q_buf = self._buffers
         # after a gated or missing encoder reading the speed state sums the periods since the
         # last fused counts (fusion.ekf.functions, "Gated readings")
-        accumulate = self._have_ref and self._periods_since_ref > 0
+        counts = self.encoder_counts
+        accumulate = counts.accumulating
         x, P = predict_step(self.x, self.P, cmd_m_s, self.fm, accumulate=accumulate,
                             out_F=f_buf, out_Q=q_buf)
         # swap buffers so self.F / self.Q keep this step's matrices
@@ -429,7 +359,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         self.x = self.x_prior = x
         self.P = self.P_prior = P
         self.t_s += self._dt_s
-        self._periods_since_ref += 1
+        counts.advance()
         self._n_predicts += 1
         if self._gyro_rules:                    # rest and settling (fusion.ekf.gyro)
             zero = bool(cmd_m_s[0] == 0.0 and cmd_m_s[1] == 0.0)   # checked by predict_step
@@ -519,10 +449,10 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
             frame: after a gated reading, a NaN reading (``"non_finite"``,
             skipped) or lost frames, the next reading measures the speeds
             summed over all the periods since, so no motion is lost. A
-            reading rejected while spanning :attr:`reanchor_periods` periods
+            reading rejected while spanning ``options.reanchor_periods`` periods
             or more renews the reference (a stuck encoder's lost ticks are
             gone), as do a second reading without a :meth:`predict` between
-            and more than :attr:`max_periods` periods without a fused one
+            and more than ``options.max_periods`` periods without a fused one
             (``"gap"``).
 
         Raises
@@ -539,35 +469,34 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
                 if self._gyro_rules:
                     self._mark_still(still=False)
                 return self._skip("encoders", t, "non_finite", 2)
+        counts, opts = self.encoder_counts, self.options
+        left, right = ticks.tolist()
+        left, right = int(left), int(right)
         if self._gyro_rules:
-            self._mark_still(still=self._have_last and int(ticks[0]) == self._last_frame[0]
-                             and int(ticks[1]) == self._last_frame[1])
-        periods = self._periods_since_ref
-        if not self._have_ref or periods == 0 or periods > self.max_periods:
-            reason: UpdateReason = "gap" if self._have_ref else "anchor"
-            self._frame_jump(ticks)
-            self._span_jump = 0.0
-            self._ref_ticks = self._last_frame
-            self._have_ref, self._periods_since_ref = True, 0
+            self._mark_still(still=counts.frame is not None and left == counts.frame[0]
+                             and right == counts.frame[1])
+        periods = counts.periods
+        if counts.reference is None or periods == 0 or periods > opts.max_periods:
+            reason: UpdateReason = "anchor" if counts.reference is None else "gap"
+            counts.observe(left, right)
+            counts.rebase()
             return self._skip("encoders", t, reason, 2)
-        jump = self._frame_jump(ticks)              # sets _last_frame: this frame's counts
+        jump = counts.observe(left, right)          # this frame's counts and step
         speeds = self.x[self._speed_at:]
         y = self._span_speeds()                     # summed over `periods` periods
         verdict = "young"
-        if periods >= self.reanchor_periods:
-            verdict = span_verdict(tick_deltas(self._tick_pair(), axis=0,
-                                               counter_bits=self.counter_bits)[0],
+        if periods >= opts.reanchor_periods:
+            verdict = span_verdict(tick_deltas(counts.pair(), axis=0,
+                                               counter_bits=counts.counter_bits)[0],
                                    np.linalg.solve(self.fm.ticks_to_speeds, speeds),
-                                   jump, self._span_jump, periods=periods,
-                                   max_jump_ticks=self.max_jump_ticks)
+                                   jump, counts.span_jump_ticks, periods=periods,
+                                   max_jump_ticks=float(opts.max_jump_ticks))
         record = self._gated("encoders", t, y, y - speeds, self.fm.H_encoders, self.R, None,
                              PHt=self.P[:, self._speed_at:], force=verdict == "consistent")
         if record.accepted or verdict == "broken":
-            self._ref_ticks = self._last_frame
-            self._periods_since_ref = 0
-            self._span_jump = 0.0
+            counts.rebase()
         else:
-            self._span_jump = max(self._span_jump, jump)
+            counts.hold(jump)
         return record
 
     def _mark_still(self, *, still: bool) -> None:
@@ -583,46 +512,16 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         if self._settling and self._still_run >= self._window_periods:
             self._settling = False          # a whole window still: the stop has settled
 
-    def _tick_pair(self) -> np.ndarray:
-        """Counts of the last fused frame and of the current one, rows (left, right), (2, 2)."""
-        return np.array((self._ref_ticks, self._last_frame), dtype=np.int64)
-
     def _span_speeds(self) -> np.ndarray:
-        """:func:`~fusion.ekf.encoder_speeds` of the counts pair, in scalar
-        arithmetic (it runs at every reading): rollover-safe increments as
-        :func:`lti_motion.recordings.tick_deltas`, times ``fm.ticks_to_speeds``."""
+        """:func:`~fusion.ekf.encoder_speeds` of the counts from the reference to the last
+        frame, in scalar arithmetic (it runs at every reading): rollover-safe increments
+        (:meth:`EncoderCounts.span <fusion.ekf.EncoderCounts.span>`), times
+        ``fm.ticks_to_speeds``."""
         if self._t2s is None:
-            return encoder_speeds(self._tick_pair(), self.fm)      # raises: no encoder scale
-        (l0, r0), (l1, r1) = self._ref_ticks, self._last_frame
-        dl, dr = self._steps(l1 - l0, r1 - r0)
+            return encoder_speeds(self.encoder_counts.pair(), self.fm)   # raises: no scale
+        dl, dr = self.encoder_counts.span()
         (a, b), (c, d) = self._t2s
         return np.array((a * dl + b * dr, c * dl + d * dr))
-
-    def _steps(self, d_left: int, d_right: int) -> tuple[int, int]:
-        """Both wheels' count differences as the shortest signed steps on the counters'
-        ring [ticks] (:func:`lti_motion.recordings.tick_deltas`, scalar: it runs at every
-        reading)."""
-        if not self._modulus:
-            return d_left, d_right
-        half, modulus = self._half, self._modulus
-        return (d_left + half) % modulus - half, (d_right + half) % modulus - half
-
-    def _frame_jump(self, ticks: np.ndarray) -> float:
-        """``max | |d_k| - |d_(k-1)| |`` over the wheels [ticks]: how much this frame's
-        increment differs from the last frame's (a wheel's speed changes by about a tick per
-        period). Scalar arithmetic: it runs at every reading."""
-        left, right = ticks.tolist()
-        left, right = int(left), int(right)
-        dl, dr = self._steps(left - self._last_frame[0], right - self._last_frame[1])
-        dl, dr = abs(dl), abs(dr)
-        jump = 0.0
-        if self._have_last_delta:
-            jump = float(max(abs(dl - self._last_delta[0]), abs(dr - self._last_delta[1])))
-        self._have_last_delta = self._have_last
-        self._have_last = True
-        self._last_frame = (left, right)
-        self._last_delta = (dl, dr)
-        return jump
 
     def update_speeds(self, speeds: np.ndarray, *, t_s: float | None = None) -> UpdateRecord:
         """Fuse measured body speeds ``(v [m/s], w [rad/s])`` of the period just predicted.
@@ -638,7 +537,7 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         FilterOptionError
             If the filter already fuses encoder counts.
         """
-        if self._have_ref:
+        if self.encoder_counts.reference is not None:
             raise FilterOptionError("this filter fuses encoder counts (update_encoders); "
                                     "use one of update_encoders and update_speeds, not both")
         y = np.array(speeds, dtype=float)
@@ -727,7 +626,8 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
         """
         gyro = self.fm.gyro
         if gyro is None:
-            raise FilterOptionError("this filter has no gyro; give gyro=GyroNoise(...) to ModelEKF")
+            raise FilterOptionError("this filter has no gyro; give "
+                                    "options=EKFOptions(gyro=GyroNoise(...)) to ModelEKF")
         arr = np.asarray(yaw_rate_rad_s, dtype=float)
         if arr.size != 1:
             raise MeasurementShapeError(f"expected one yaw rate [rad/s], got shape {arr.shape}")

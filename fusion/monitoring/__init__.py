@@ -12,7 +12,8 @@
 - :mod:`fusion.monitoring.scale` (with ``scale_odometry``): the landmark scale test
   (a floor: ``scale_changed``; one wheel's diameter: ``wheel_drift``);
 - :mod:`fusion.monitoring.recalibration`, :mod:`fusion.monitoring.rescale`: the
-  policy that answers alarms;
+  policy that answers alarms (its options: :class:`RecalibrationOptions`,
+  :mod:`fusion.monitoring.recalibration_options`);
 - :mod:`fusion.monitoring.phase_one`: the dynamics null and the encoder gate fitted
   on nominal drives;
 - :mod:`fusion.monitoring.monitored_filter`: :class:`MonitoredFilter`, the model EKF
@@ -49,6 +50,7 @@ __all__ = [
     "MonitoredFilter",
     "NominalFit",
     "RecalibrationAction",
+    "RecalibrationOptions",
     "RecalibrationRecord",
     "Recalibrator",
     "ResidualMonitor",
@@ -149,6 +151,7 @@ __getattr__, __dir__ = lazy_exports(
             "RecalibrationRecord",
             "Recalibrator",
         ),
+        "fusion.monitoring.recalibration_options": ("RecalibrationOptions",),
         "fusion.monitoring.rescale": (
             "output_scaling",
             "rescaled_model",
@@ -235,6 +238,7 @@ if TYPE_CHECKING:
         RecalibrationRecord,
         Recalibrator,
     )
+    from fusion.monitoring.recalibration_options import RecalibrationOptions
     from fusion.monitoring.rescale import output_scaling, rescaled_model
     from fusion.monitoring.residual import (
         AlarmEvent,

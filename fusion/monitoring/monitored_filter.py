@@ -2,23 +2,29 @@
 
 :class:`MonitoredFilter` owns the order of the per-frame steps that make the
 monitor's tests valid; a frame goes in, the estimate and the alarms it raised
-come out. For frame ``k`` (it closes period ``k``, whose command ``u[k]`` went
-out at its start):
+come out. The frame is a :class:`~lti_motion.recordings.SensorFrame` (a
+driver's, the simulator's, or one built from a recording's row with
+:meth:`SensorFrame.of_counts <lti_motion.recordings.SensorFrame.of_counts>`);
+the filter reads its counts, its command, its ``valid`` flag, its wheel currents
+and overcurrent flags and its gyro reading. For frame ``k`` (it closes period
+``k``, whose command ``u[k]`` went out at its start):
 
 1. the first frame anchors the encoder counts (no prediction);
 2. :meth:`ModelEKF.predict <fusion.ekf.ModelEKF.predict>` with ``u[k]``: the
    model's speeds for the period;
 3. a lost frame (``valid=False``) stops here: the next valid frame's counts
    span the gap;
-4. the stuck-encoder check gets the count changes and the *predicted* wheel
-   speeds (:meth:`ResidualMonitor.update_counts
-   <fusion.monitoring.ResidualMonitor.update_counts>`), before the encoders
-   correct them;
-5. the encoder counts are fused (gated) and the update record goes to the
-   per-sample gate and glitch-burst tests;
+4. the *predicted* wheel speeds are taken for the stuck-encoder check, before
+   the encoders correct them;
+5. the encoder counts are fused (gated) by the EKF, which holds the counts
+   (:class:`~fusion.ekf.EncoderCounts`) and takes the frame's count change
+   once; the stuck-encoder check gets that change and the predicted speeds
+   (:meth:`ResidualMonitor.update_counts
+   <fusion.monitoring.ResidualMonitor.update_counts>`), then the update record
+   goes to the per-sample gate and glitch-burst tests;
 6. with a Phase-I fit (:func:`~fusion.monitoring.fit_nominal`), the
    dynamics tests get the command and the count changes;
-7. with a gyro (``gyro=``), the frame's yaw-rate reading goes to
+7. with a gyro (``EKFOptions(gyro=...)``), the frame's yaw-rate reading goes to
    :meth:`ModelEKF.update_gyro <fusion.ekf.ModelEKF.update_gyro>` after the
    encoders (a lost frame or a missing reading gives it NaN: the window so far
    is dropped and a new one starts); its innovations are not monitored;
@@ -41,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import FilterReset
 from fusion.ekf.updates import UpdateRecord
@@ -50,11 +57,10 @@ from fusion.monitoring.dynamics import DynamicsMonitor
 from fusion.monitoring.phase_one import NominalFit
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleMonitor
-from fusion.noise import GyroNoise, LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.ticks import tick_deltas
+from lti_motion.recordings.frames import SensorFrame
 
 __all__ = ["FrameResult", "MonitoredFilter"]
 
@@ -112,6 +118,13 @@ class MonitoredFilter:
     options : MonitorOptions, optional
         Monitor settings (default: the model's period and, with ``nominal``,
         its encoder gate).
+    ekf_options : EKFOptions, optional
+        The EKF's options (:class:`~fusion.ekf.EKFOptions`; default
+        ``EKFOptions(history=0)``: no update records kept). Its
+        ``landmark_noise`` is the sightings' noise for the scale test too, its
+        ``counter_bits`` the width of the encoder counters, and with its
+        ``gyro`` the EKF fuses the frames' yaw-rate readings
+        (:mod:`fusion.ekf.gyro`); without one they are refused.
     landmarks : LandmarkMap, optional
         Known landmarks: runs the scale test on the sightings given to
         :meth:`step`, and fuses them into the EKF unless ``fuse_landmarks`` is
@@ -119,8 +132,6 @@ class MonitoredFilter:
     fuse_landmarks : bool
         Whether the EKF fuses the sightings (the scale test runs its own
         filters either way).
-    landmark_noise : LandmarkNoise, optional
-        Range-bearing noise of the sightings (default 2% of range, 1 degree).
     initial_pose : array_like, shape (3,)
         Start pose ``(x [m], y [m], theta [rad])`` of the filter and the scale test.
     pose_std : tuple of 3 float
@@ -131,17 +142,15 @@ class MonitoredFilter:
         Filter time at the anchoring frame [s].
     on_alarm : callable, optional
         Called with each :class:`~fusion.monitoring.AlarmEvent` as it is raised.
-    counter_bits : int
-        Width of the encoder counters [bits] (16: the Open Interface's;
-        :class:`~fusion.ekf.ModelEKF`).
-    gyro : GyroNoise, optional
-        A yaw-rate gyro's noise: the EKF fuses the readings given to
-        :meth:`step` (:mod:`fusion.ekf.gyro`); without it they are refused.
 
     Attributes
     ----------
     ekf : ModelEKF or None
-        The filter (None until the first frame anchors it).
+        The filter (None until the first frame anchors it); it holds the
+        encoder counts (:attr:`ModelEKF.encoder_counts
+        <fusion.ekf.ModelEKF.encoder_counts>`).
+    ekf_options : EKFOptions
+        Its options.
     monitor : ResidualMonitor
         The residual monitor, with :attr:`dynamics` and :attr:`scale` plugged in.
     dynamics : DynamicsMonitor or None
@@ -167,22 +176,27 @@ class MonitoredFilter:
     >>> for k in range(200):
     ...     right = 6 * max(k - 1, 0)
     ...     left = right if k < 100 else 588    # the left encoder freezes at frame 100
-    ...     result = mf.step(np.array([left, right]), cmd)
+    ...     frame = SensorFrame.of_counts(0.015 * k, np.array([left, right]), cmd)
+    ...     result = mf.step(frame)
     ...     if result.alarms:
     ...         print(k, [(e.kind, e.channel) for e in result.alarms])
     102 [('stuck_encoder', 0)]
     """
 
     def __init__(self, model: MotionModel, *, nominal: NominalFit | None = None,
-                 options: MonitorOptions | None = None, landmarks: LandmarkMap | None = None,
-                 fuse_landmarks: bool = True, landmark_noise: LandmarkNoise | None = None,
+                 options: MonitorOptions | None = None, ekf_options: EKFOptions | None = None,
+                 landmarks: LandmarkMap | None = None, fuse_landmarks: bool = True,
                  initial_pose: Sequence[float] = (0.0, 0.0, 0.0),
                  pose_std: tuple[float, float, float] = (0.01, 0.01, 0.01),
                  initial_ticks: np.ndarray | Sequence[int] | None = None, t0_s: float = 0.0,
-                 on_alarm: Callable[[AlarmEvent], None] | None = None,
-                 counter_bits: int = 16, gyro: GyroNoise | None = None) -> None:
+                 on_alarm: Callable[[AlarmEvent], None] | None = None) -> None:
         if model.m_per_tick is None:
             raise MissingEncoderScaleError.needed_by("the monitor")
+        ekf_options = EKFOptions(history=0) if ekf_options is None else ekf_options
+        if not isinstance(ekf_options, EKFOptions):
+            raise FilterOptionError(f"ekf_options must be an EKFOptions, got "
+                                    f"{type(ekf_options).__name__}")
+        self.ekf_options = ekf_options
         self.model = model
         self._wheel_base_m = float(model.wheel_base_m)
         if options is None:
@@ -194,17 +208,15 @@ class MonitoredFilter:
         if landmarks is not None:
             self.scale = ScaleMonitor(model.m_per_tick, model.wheel_base_m, landmarks,
                                       initial_pose=initial_pose, pose_std=pose_std,
-                                      landmark_noise=landmark_noise,
+                                      landmark_noise=ekf_options.landmark_noise,
                                       intrinsics=model.encoder_intrinsics)
         self.monitor = ResidualMonitor(options, m_per_tick=model.m_per_tick, on_alarm=on_alarm,
                                        dynamics=self.dynamics, scale=self.scale)
         self._fuse = landmarks is not None and bool(fuse_landmarks)
-        self._ekf_args = {"initial_pose": initial_pose, "pose_std": pose_std, "t0_s": t0_s,
-                          "history": 0, "landmarks": landmarks if self._fuse else None,
-                          "landmark_noise": landmark_noise, "counter_bits": counter_bits,
-                          "gyro": gyro}
+        # where the EKF starts, and the map it fuses
+        self._start = (initial_pose, pose_std, float(t0_s))
+        self._ekf_landmarks = landmarks if self._fuse else None
         self.ekf: ModelEKF | None = None
-        self._last_ticks: np.ndarray | None = None
         if initial_ticks is not None:
             self._anchor(initial_ticks)
 
@@ -213,27 +225,16 @@ class MonitoredFilter:
         """Every alarm so far, in time order."""
         return self.monitor.events
 
-    def _anchor(self, ticks: np.ndarray | Sequence[int]) -> np.ndarray:
-        first = _counts(ticks)
-        self.ekf = ModelEKF(self.model, initial_ticks=first, **self._ekf_args)
-        self._last_ticks = first
-        return first
+    def _anchor(self, ticks: np.ndarray | Sequence[int]) -> None:
+        initial_pose, pose_std, t0_s = self._start
+        self.ekf = ModelEKF(self.model, options=self.ekf_options, initial_pose=initial_pose,
+                            pose_std=pose_std, t0_s=t0_s, landmarks=self._ekf_landmarks,
+                            initial_ticks=_counts(ticks))
 
     def _result(self, deltas: np.ndarray, record: UpdateRecord | None,
                 alarms: list[AlarmEvent]) -> FrameResult:
         ekf = self.ekf
         return FrameResult(ekf.t_s, ekf.pose, ekf.speeds, deltas, record, tuple(alarms))
-
-    def _deltas(self, now: np.ndarray) -> np.ndarray:
-        """Count changes since the last valid frame [ticks], (2,) floats:
-        :func:`lti_motion.recordings.tick_deltas`, in scalar arithmetic below 63-bit counters
-        (the filter's ring step; int64 and Python integers agree there). Runs every frame."""
-        ekf = self.ekf
-        if ekf.counter_bits >= 63:
-            return tick_deltas(np.stack([self._last_ticks, now]), axis=0,
-                               counter_bits=ekf.counter_bits)[0].astype(float)
-        (l0, r0), (l1, r1) = self._last_ticks.tolist(), now.tolist()
-        return np.array(ekf._steps(l1 - l0, r1 - r0), dtype=float)
 
     def _predicted_wheels(self) -> np.ndarray:
         """The filter's predicted (left, right) wheel speeds [m/s], (2,):
@@ -243,33 +244,26 @@ class MonitoredFilter:
         half_base = 0.5 * self._wheel_base_m
         return np.array((v - half_base * w, v + half_base * w))
 
-    def step(self, ticks: np.ndarray | Sequence[int], cmd_m_s: np.ndarray | Sequence[float], *,
-             valid: bool = True, sightings: RangeBearing | None = None,
-             motor_current_a: np.ndarray | Sequence[float] | None = None,
-             wheel_overcurrent: np.ndarray | Sequence[bool] | None = None,
-             yaw_rate_rad_s: float | None = None) -> FrameResult:
+    def step(self, frame: SensorFrame, *, sightings: RangeBearing | None = None
+             ) -> FrameResult:
         """Take one frame: predict, test, fuse, in the module's order.
 
         Parameters
         ----------
-        ticks : array_like, shape (2,)
-            Raw (16-bit, wrapping) encoder counts ``(left, right)`` of the frame.
-        cmd_m_s : array_like, shape (2,)
-            Wheel commands ``(left, right)`` [m/s] of the period the frame closes.
-        valid : bool
-            False for a lost frame: the filter only advances.
+        frame : SensorFrame
+            The frame of one robot: its raw (wrapping) encoder counts ``ticks``
+            ``(left, right)`` [ticks], the wheel commands ``cmd_m_s`` ``(left,
+            right)`` [m/s] of the period it closes, ``valid`` (false for a lost
+            frame: the filter only advances), and where the robot reports them
+            ``motor_current_a`` [A] and ``wheel_overcurrent`` (with either, a flat
+            count is called a ``"stalled_wheel"`` or a ``"stuck_encoder"``,
+            :mod:`fusion.monitoring.wheel_check`) and ``yaw_rate_rad_s``, the
+            gyro's reading over the period [rad/s] (needs ``EKFOptions(gyro=...)``;
+            ``None`` or NaN: no reading, the gyro window starts again). Its light
+            bumps, bumpers and truth are not read.
         sightings : RangeBearing, optional
             Landmarks seen at this frame (used with a landmark map; rows without
-            a covariance take ``landmark_noise``).
-        motor_current_a : array_like, shape (2,), optional
-            Wheel motor currents (left, right) [A] where the robot reports them.
-        wheel_overcurrent : array_like of bool, shape (2,), optional
-            Wheel overcurrent flags (left, right) where the robot reports them.
-            With either, a flat count is called a ``"stalled_wheel"`` or a
-            ``"stuck_encoder"`` (:mod:`fusion.monitoring.wheel_check`).
-        yaw_rate_rad_s : float, optional
-            The gyro's reading over the period [rad/s] (needs ``gyro=``); ``None``
-            or NaN: no reading, the gyro window starts again.
+            a covariance take ``ekf_options.landmark_noise``).
 
         Returns
         -------
@@ -278,33 +272,37 @@ class MonitoredFilter:
         Raises
         ------
         FilterOptionError
-            For a reading given to a filter built without ``gyro=``.
+            For a frame with a gyro reading given to a filter without a gyro.
         MeasurementShapeError
             For counts that are not two numbers.
         """
-        if yaw_rate_rad_s is not None and self._ekf_args["gyro"] is None:
-            raise FilterOptionError("a yaw rate was given, but this monitored filter has no "
-                                    "gyro; give gyro=GyroNoise(...)")
+        yaw_rate_rad_s = frame.yaw_rate_rad_s
+        if yaw_rate_rad_s is not None and self.ekf_options.gyro is None:
+            raise FilterOptionError("the frame has a yaw rate, but this monitored filter has no "
+                                    "gyro; give ekf_options=EKFOptions(gyro=GyroNoise(...)), or "
+                                    "frames without yaw_rate_rad_s")
         if self.ekf is None:
-            self._anchor(ticks)
+            self._anchor(frame.ticks)
             return self._result(np.zeros(2), None, [])
         ekf, mon = self.ekf, self.monitor
-        cmd = np.asarray(cmd_m_s, dtype=float)
+        cmd = np.asarray(frame.cmd_m_s, dtype=float)
         ekf.predict(cmd)
         gyro = ekf.fm.gyro is not None
-        if not valid:
+        if not frame.valid:
             if gyro:
                 ekf.update_gyro(math.nan)           # a lost frame: the window starts again
             return self._result(np.zeros(2), None, [])
-        now = _counts(ticks)
-        deltas = self._deltas(now)
+        now = _counts(frame.ticks)
         t = ekf.t_s
         # the stuck check compares the counts with the model's prediction, before the update
-        alarms = mon.update_counts(t, deltas, self._predicted_wheels(), cmd_m_s=cmd,
-                                   motor_current_a=motor_current_a,
-                                   wheel_overcurrent=wheel_overcurrent)
+        predicted = self._predicted_wheels()
         resets = ekf.n_resets
         record = ekf.update_encoders(now)
+        # the count changes since the last valid frame, as the EKF took them (its frame step)
+        deltas = np.array(ekf.encoder_counts.step, dtype=float)
+        alarms = mon.update_counts(t, deltas, predicted, cmd_m_s=cmd,
+                                   motor_current_a=frame.motor_current_a,
+                                   wheel_overcurrent=frame.wheel_overcurrent)
         alarms += mon.update_record(record)
         if gyro:
             ekf.update_gyro(math.nan if yaw_rate_rad_s is None else yaw_rate_rad_s)
@@ -318,7 +316,6 @@ class MonitoredFilter:
         if ekf.n_resets > resets:
             alarms += mon.report([_reset_alarm(r) for r in
                                   list(ekf.resets)[resets - ekf.n_resets:]])
-        self._last_ticks = now
         return self._result(deltas, record, alarms)
 
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.monitoring.dynamics_null import DynamicsNull, fit_dynamics_null
@@ -88,7 +89,8 @@ def encoder_nis(model: MotionModel, cmd_m_s: np.ndarray, ticks: np.ndarray) -> n
     ndarray, shape (n,)
         NaN where a reading was not compared.
     """
-    ekf = ModelEKF(model, initial_ticks=np.asarray(ticks[0], np.int64), history=0)
+    ekf = ModelEKF(model, initial_ticks=np.asarray(ticks[0], np.int64),
+                   options=EKFOptions(history=0))
     out = np.full(len(cmd_m_s), math.nan)
     for k, cmd in enumerate(np.asarray(cmd_m_s, float)):
         ekf.predict(cmd)

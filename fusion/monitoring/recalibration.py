@@ -88,6 +88,7 @@ from typing import Literal
 import numpy as np
 
 from fusion.exceptions import FilterOptionError, MeasurementShapeError, TimeOrderError
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.rescale import output_scaling, rescaled_model
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.exceptions import CalibrationError
@@ -149,16 +150,10 @@ class Recalibrator:
     ----------
     model : MotionModel
         The model in use.
-    buffer_s : float
-        Seconds of ``(t, u, y)`` kept [s].
-    min_samples : int
-        Fewest samples since the onset for a refit attempt.
-    validation_fraction : float
-        Newest share of the data since the onset held out for validation.
-    min_gain_pp : float
-        Percentage points the new model's held-out fit must gain to replace the old.
-    orders, delays : sequence of int
-        Selection grid of the refit (default: around the current model's order).
+    options : RecalibrationOptions, optional
+        What the policy decides with (:class:`~fusion.monitoring.RecalibrationOptions`:
+        the refit's data, grid and validation, the precision a landmark scale or a
+        curvature needs to be adopted); default ``RecalibrationOptions()``.
     save_path : path-like, optional
         Where an adopted model is saved (atomically).
     request_rotation : callable, optional
@@ -167,31 +162,13 @@ class Recalibrator:
     request_excitation : callable, optional
         Called with the alarm, once, when a dynamics refit has to wait for
         data that excites the model.
-    retry_samples : int, optional
-        New samples between automatic retries while waiting (default
-        ``min_samples // 4``).
-    dc_gain : {"wheel_servo", "free"}, optional
-        Steady-state gain of the refit (:func:`lti_motion.model.fit_arx`);
-        default: as the model in use was fitted (``"wheel_servo"`` when its
-        diagnostics hold ``dc_gain_scale``).
-    max_scale_std : float, optional
-        Largest standard deviation of a landmark scale (or yaw) ratio that is
-        adopted (module notes).
-    scale_settle_s : float, optional
-        Longest wait [s] after a scale alarm for a precise running estimate
-        before the rotation is requested (0: request it at once).
-    scale_reference : tuple of 2 float, optional
-        ``(m_per_tick [m/tick], wheel_base_m [m])`` the scale monitor's ratios
-        refer to (the values its :class:`~fusion.monitoring.ScaleMonitor`
-        was built with); default the model's at construction.
-    max_curvature_std_rad_per_m : float, optional
-        Largest standard deviation [rad/m] of a wheel-drift alarm's curvature whose
-        intrinsics are adopted (module notes).
 
     Attributes
     ----------
     model : MotionModel
         The model in use.
+    options : RecalibrationOptions
+        The policy's options.
     history : list of RecalibrationRecord
         Every decision.
 
@@ -213,59 +190,46 @@ class Recalibrator:
     ('adopted', 482.5, 0.2387)
     """
 
-    def __init__(self, model: MotionModel, *, buffer_s: float = 120.0, min_samples: int = 2000,
-                 validation_fraction: float = 0.3, min_gain_pp: float = 0.0,
-                 orders: tuple[int, ...] | None = None, delays: tuple[int, ...] | None = None,
+    def __init__(self, model: MotionModel, *, options: RecalibrationOptions | None = None,
                  save_path: str | os.PathLike | None = None,
                  request_rotation: Callable[[AlarmEvent], None] | None = None,
-                 request_excitation: Callable[[AlarmEvent], None] | None = None,
-                 retry_samples: int | None = None,
-                 dc_gain: Literal["wheel_servo", "free"] | None = None,
-                 max_scale_std: float = 0.004, scale_settle_s: float = 30.0,
-                 scale_reference: tuple[float, float] | None = None,
-                 max_curvature_std_rad_per_m: float = 0.004) -> None:
-        if not (0.0 < validation_fraction < 1.0 and buffer_s > 0 and min_samples > 0):
-            raise FilterOptionError(
-                f"need 0 < validation_fraction < 1, buffer_s > 0, min_samples > 0; got "
-                f"{validation_fraction}, {buffer_s}, {min_samples}")
-        if dc_gain not in (None, "wheel_servo", "free"):
-            raise FilterOptionError(f"dc_gain must be 'wheel_servo' or 'free', got {dc_gain!r}")
-        if not (0.0 < max_scale_std < 1.0 and scale_settle_s >= 0.0
-                and 0.0 < max_curvature_std_rad_per_m < 1.0):
-            raise FilterOptionError(f"need 0 < max_scale_std < 1, scale_settle_s >= 0 and "
-                                    f"0 < max_curvature_std_rad_per_m < 1; got {max_scale_std}, "
-                                    f"{scale_settle_s} and {max_curvature_std_rad_per_m}")
-        reference = scale_reference or (model.m_per_tick, model.wheel_base_m)
+                 request_excitation: Callable[[AlarmEvent], None] | None = None) -> None:
+        opts = RecalibrationOptions() if options is None else options
+        if not isinstance(opts, RecalibrationOptions):
+            raise FilterOptionError(f"options must be a RecalibrationOptions, got "
+                                    f"{type(opts).__name__}")
+        reference = opts.scale_reference or (model.m_per_tick, model.wheel_base_m)
         if reference[0] is None or not all(math.isfinite(v) and v > 0 for v in reference):
             raise FilterOptionError(f"scale_reference (m_per_tick, wheel_base_m) must be "
                                     f"positive, got {reference}; the model needs m_per_tick")
         self.model = model
-        self.min_samples = int(min_samples)
-        self.validation_fraction = float(validation_fraction)
-        self.min_gain_pp = float(min_gain_pp)
+        self.options = opts
+        # the options the model in use completes: the refit's grid, retries and gain
         na = int(model.orders.get("na", 4))
-        self.orders = orders or tuple(range(max(1, na - 2), na + 3))
-        self.delays = delays or tuple(range(0, 9))
+        self._orders = opts.orders or tuple(range(max(1, na - 2), na + 3))
+        self._delays = opts.delays or tuple(range(0, 9))
+        self._retry_samples = max(1, int(opts.retry_samples if opts.retry_samples is not None
+                                         else int(opts.min_samples) // 4))
+        self._dc_gain = opts.dc_gain or ("wheel_servo" if "dc_gain_scale" in model.diagnostics
+                                         else "free")
+        self._scale_reference = (float(reference[0]), float(reference[1]))
         self.save_path = None if save_path is None else Path(save_path)
         self.request_rotation = request_rotation
         self.request_excitation = request_excitation
-        self.retry_samples = max(1, int(retry_samples if retry_samples is not None
-                                        else self.min_samples // 4))
-        self.dc_gain = dc_gain or ("wheel_servo" if "dc_gain_scale" in model.diagnostics
-                                   else "free")
         self._n_added = 0                         # samples added so far
         self._next_try = 0                        # _n_added at which a waiting refit retries
         self._excitation_asked = False
         self._buf: deque[tuple[float, np.ndarray, np.ndarray]] = deque(
-            maxlen=max(1, round(buffer_s / model.dt_s)))
+            maxlen=max(1, round(opts.buffer_s / model.dt_s)))
         self._pending: AlarmEvent | None = None
-        self.max_scale_std = float(max_scale_std)
-        self.scale_settle_s = float(scale_settle_s)
-        self.scale_reference = (float(reference[0]), float(reference[1]))
         self._scale_pending: AlarmEvent | None = None
-        self.max_curvature_std_rad_per_m = float(max_curvature_std_rad_per_m)
         self._drift_pending: AlarmEvent | None = None
         self.history: list[RecalibrationRecord] = []
+
+    @property
+    def dc_gain(self) -> Literal["wheel_servo", "free"]:
+        """Steady-state gain of a refit: the options', else as the model in use was fitted."""
+        return self._dc_gain
 
     def add(self, t_s: float, cmd_m_s: np.ndarray, speeds: np.ndarray) -> None:
         """Buffer one period: wheel commands ``cmd_m_s`` (2,) [m/s] and measured body speeds
@@ -290,11 +254,11 @@ class Recalibrator:
         if self._pending is not None and self._n_added >= self._next_try:
             self.retry()
         if (self._scale_pending is not None
-                and t_s - self._scale_pending.t_s >= self.scale_settle_s):
+                and t_s - self._scale_pending.t_s >= self.options.scale_settle_s):
             self._record(self._rotation(float(t_s), "no precise landmark scale within "
-                                                    f"{self.scale_settle_s:g} s"))
+                                                    f"{self.options.scale_settle_s:g} s"))
         if (self._drift_pending is not None
-                and t_s - self._drift_pending.t_s >= self.scale_settle_s):
+                and t_s - self._drift_pending.t_s >= self.options.scale_settle_s):
             self._record(self._drift_unsettled(float(t_s)))
 
     @property
@@ -363,12 +327,12 @@ class Recalibrator:
         """
         if self._scale_pending is None:
             return None
-        if math.isfinite(scale_ratio) and scale_ratio_std <= self.max_scale_std:
+        if math.isfinite(scale_ratio) and scale_ratio_std <= self.options.max_scale_std:
             return self._record(self._adopt_scale(float(t_s), self._scale_pending, scale_ratio,
                                                   scale_ratio_std, yaw_ratio, yaw_ratio_std))
-        if t_s - self._scale_pending.t_s >= self.scale_settle_s:
+        if t_s - self._scale_pending.t_s >= self.options.scale_settle_s:
             return self._record(self._rotation(float(t_s), "no precise landmark scale within "
-                                                           f"{self.scale_settle_s:g} s"))
+                                                           f"{self.options.scale_settle_s:g} s"))
         return None
 
     def _scale_alarm(self, event: AlarmEvent) -> RecalibrationRecord:
@@ -376,17 +340,17 @@ class Recalibrator:
         a = event.scale
         if a is None:
             return self._rotation(event.t_s, "the alarm carries no scale estimate")
-        if math.isfinite(a.scale_ratio) and a.scale_ratio_std <= self.max_scale_std:
+        if math.isfinite(a.scale_ratio) and a.scale_ratio_std <= self.options.max_scale_std:
             return self._adopt_scale(event.t_s, event, a.scale_ratio, a.scale_ratio_std,
                                      a.yaw_ratio, a.yaw_ratio_std)
-        if self.scale_settle_s <= 0.0:
+        if self.options.scale_settle_s <= 0.0:
             return self._rotation(event.t_s, f"scale std {a.scale_ratio_std:.4f} > "
-                                             f"{self.max_scale_std:g}")
+                                             f"{self.options.max_scale_std:g}")
         return RecalibrationRecord(
             event.t_s, event, "waiting",
             reason=f"scale {a.scale_ratio:.4f} +- {a.scale_ratio_std:.4f} (need std <= "
-                   f"{self.max_scale_std:g}): waiting up to {self.scale_settle_s:g} s for the "
-                   "landmark estimate")
+                   f"{self.options.max_scale_std:g}): waiting up to "
+                   f"{self.options.scale_settle_s:g} s for the landmark estimate")
 
     def _rotation(self, t_s: float, reason: str) -> RecalibrationRecord:
         event, self._scale_pending = self._scale_pending, None
@@ -398,8 +362,8 @@ class Recalibrator:
 
     def _adopt_scale(self, t_s: float, event: AlarmEvent, ratio: float, ratio_std: float,
                      yaw: float, yaw_std: float) -> RecalibrationRecord:
-        m_ref, b_ref = self.scale_reference
-        with_yaw = math.isfinite(yaw) and yaw > 0 and yaw_std <= self.max_scale_std
+        m_ref, b_ref = self._scale_reference
+        with_yaw = math.isfinite(yaw) and yaw > 0 and yaw_std <= self.options.max_scale_std
         m_new = m_ref * ratio
         b_new = b_ref * ratio / yaw if with_yaw else b_ref     # fusion.monitoring.rescale eq. 1
         old = self.model
@@ -442,10 +406,10 @@ class Recalibrator:
         """
         if self._drift_pending is None:
             return None
-        if curvature_std_rad_per_m <= self.max_curvature_std_rad_per_m:
+        if curvature_std_rad_per_m <= self.options.max_curvature_std_rad_per_m:
             return self._record(self._adopt_intrinsics(float(t_s), self._drift_pending,
                                                        intrinsics, curvature_std_rad_per_m))
-        if t_s - self._drift_pending.t_s >= self.scale_settle_s:
+        if t_s - self._drift_pending.t_s >= self.options.scale_settle_s:
             return self._record(self._drift_unsettled(float(t_s)))
         return None
 
@@ -454,20 +418,21 @@ class Recalibrator:
         if a is None or a.intrinsics is None:
             return RecalibrationRecord(event.t_s, event, "kept_old",
                                        reason="the alarm carries no intrinsics estimate")
-        if a.curvature_std_rad_per_m <= self.max_curvature_std_rad_per_m:
+        if a.curvature_std_rad_per_m <= self.options.max_curvature_std_rad_per_m:
             return self._adopt_intrinsics(event.t_s, event, a.intrinsics,
                                           a.curvature_std_rad_per_m)
         self._drift_pending = event            # a later alarm replaces one still waiting
         return RecalibrationRecord(
             event.t_s, event, "waiting",
             reason=f"curvature {a.curvature_rad_per_m:.4f} +- {a.curvature_std_rad_per_m:.4f} "
-                   f"rad/m (need std <= {self.max_curvature_std_rad_per_m:g}): waiting up to "
-                   f"{self.scale_settle_s:g} s for the landmark estimate")
+                   f"rad/m (need std <= {self.options.max_curvature_std_rad_per_m:g}): waiting "
+                   f"up to {self.options.scale_settle_s:g} s for the landmark estimate")
 
     def _drift_unsettled(self, t_s: float) -> RecalibrationRecord:
         event, self._drift_pending = self._drift_pending, None
         return RecalibrationRecord(t_s, event, "kept_old",
-                                   reason=f"no precise curvature within {self.scale_settle_s:g} "
+                                   reason="no precise curvature within "
+                                          f"{self.options.scale_settle_s:g} "
                                           "s: drive past landmarks and recalibrate the "
                                           "intrinsics (docs/intrinsics.md)")
 
@@ -501,7 +466,7 @@ class Recalibrator:
 
     def _wait(self, event: AlarmEvent, t_s: float, n: int, reason: str) -> RecalibrationRecord:
         self._pending = event
-        self._next_try = self._n_added + self.retry_samples
+        self._next_try = self._n_added + self._retry_samples
         if self.request_excitation is not None and not self._excitation_asked:
             self._excitation_asked = True
             self.request_excitation(event)
@@ -509,13 +474,13 @@ class Recalibrator:
 
     def _refit(self, event: AlarmEvent, t_s: float) -> RecalibrationRecord:
         # the shortest run fit_arx can use: the longest regressor of the grid, and some more
-        shortest = 10 * (max(self.orders) + max(self.delays) + 1)
+        shortest = 10 * (max(self._orders) + max(self._delays) + 1)
         runs = [r for r in self._segments(event.onset_s) if len(r[0]) >= shortest]
         n = sum(len(r[0]) for r in runs)
-        if n < self.min_samples:
+        if n < self.options.min_samples:
             return self._wait(event, t_s, n,
-                              f"{n} samples since the onset, need {self.min_samples}")
-        n_val = max(shortest, round(self.validation_fraction * n))
+                              f"{n} samples since the onset, need {self.options.min_samples}")
+        n_val = max(shortest, round(self.options.validation_fraction * n))
         u_last, y_last = runs[-1]
         if len(u_last) - n_val < shortest:            # the newest run is all validation
             train, val = runs[:-1], [runs[-1]]
@@ -526,9 +491,9 @@ class Recalibrator:
             return self._wait(event, t_s, n, "one short run since the onset: nothing to train on")
         try:
             new = fit_arx(train, dt_s=self.model.dt_s, wheel_base_m=self.model.wheel_base_m,
-                          orders=self.orders, delays=self.delays,
+                          orders=self._orders, delays=self._delays,
                           m_per_tick=self.model.m_per_tick, floor=self.model.floor,
-                          dc_gain=self.dc_gain)
+                          dc_gain=self._dc_gain)
         except CalibrationError as exc:      # not excited enough, too short, unstable
             return self._wait(event, t_s, n, str(exc))
         self._pending = None
@@ -537,7 +502,7 @@ class Recalibrator:
         after = new.fit_percent(val)
         fits = (float(before[0]), float(before[1])), (float(after[0]), float(after[1]))
         gain = float(np.mean(after) - np.mean(before))
-        if not (math.isfinite(gain) and gain >= self.min_gain_pp):
+        if not (math.isfinite(gain) and gain >= self.options.min_gain_pp):
             return RecalibrationRecord(t_s, event, "kept_old", n, *fits,
                                        reason=f"held-out fit gain {gain:.2f} pp")
         self.model = new

@@ -127,7 +127,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
         return calibrate_simulator(described, seed=args.seed, floor=args.floor, plan=plan,
                                    progress=print_progress, after_stage=after_stage,
                                    recorded=recorded)
-    from drivers.roomba import Roomba
+    from drivers.roomba import Roomba, RoombaOptions
     from lti_motion.app.prompts import wait_until_placed
 
     def before_stage(stage: str) -> None:
@@ -144,7 +144,8 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
     if all(s in recorded for s in STAGES):            # nothing to drive: no robot needed
         return calibrate(_NoRobot(recorded["rotation"].dt_s), **options)
     print(f"calibrating the robot on {args.port} at {args.baud} baud")
-    with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+    link = RoombaOptions(baud_bps=args.baud, clock_rate=args.clock_rate)
+    with Roomba(args.port, options=link) as robot:
         return calibrate(robot, **options)
 
 

@@ -29,12 +29,13 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fusion.ekf import EKFOptions
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring import (
     AlarmEvent,
@@ -316,9 +317,10 @@ def monitor_frames(model: MotionModel,
         if on_alarm is not None:
             on_alarm(event)
 
-    mf = MonitoredFilter(model, nominal=nominal, options=options, landmarks=landmarks,
-                         fuse_landmarks=False, pose_std=(0.005, 0.005, 0.005), on_alarm=relay,
-                         counter_bits=counter_bits, gyro=gyro)
+    mf = MonitoredFilter(model, nominal=nominal, options=options,
+                         ekf_options=EKFOptions(history=0, counter_bits=counter_bits, gyro=gyro),
+                         landmarks=landmarks, fuse_landmarks=False,
+                         pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
                      glitch_gate_nis=mf.monitor.thresholds().gate)
     for item in frames:
@@ -326,10 +328,9 @@ def monitor_frames(model: MotionModel,
         if on_frame is not None:
             on_frame(frame)
         run.frames += 1
-        result = mf.step(frame.ticks, frame.cmd_m_s, valid=bool(np.all(frame.valid)),
-                         sightings=seen, motor_current_a=frame.motor_current_a,
-                         wheel_overcurrent=frame.wheel_overcurrent,
-                         yaw_rate_rad_s=None if gyro is None else frame.yaw_rate_rad_s)
+        if gyro is None and frame.yaw_rate_rad_s is not None:
+            frame = replace(frame, yaw_rate_rad_s=None)     # the filter has no gyro
+        result = mf.step(frame, sightings=seen)
         if on_step is not None and mf.ekf is not None:
             on_step(result, mf.ekf.P[:3, :3].copy())
     if mf.ekf is not None:
@@ -469,14 +470,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         for k0 in range(0, len(commands), block):
             log = sim.run(commands[k0:k0 + block])
             for k in range(len(log)):
-                full = SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
-                                   light_bump=log.light_bump[k], bumps=log.bumps[k],
-                                   cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
-                                   true_pose=log.true_pose[k], true_body_m_s=log.true_body_m_s[k],
-                                   motor_current_a=log.motor_current_a[k],
-                                   wheel_overcurrent=log.wheel_overcurrent[k],
-                                   yaw_rate_rad_s=None if log.yaw_rate_rad_s is None
-                                   else float(log.yaw_rate_rad_s[k]))
+                full = log.frame(k)
                 if record:
                     rec.add(full)
                 # the landmark sensor sees the world (the true pose); the monitor sees its output
@@ -484,11 +478,7 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                         if landmarks else None)
                 n += 1
                 # the filter and the monitor get what a robot reports: no truth
-                yield (SensorFrame(full.t_s, full.ticks, full.light_bump, full.bumps,
-                                   full.cmd_m_s, valid=full.valid,
-                                   motor_current_a=full.motor_current_a,
-                                   wheel_overcurrent=full.wheel_overcurrent,
-                                   yaw_rate_rad_s=full.yaw_rate_rad_s), seen)
+                yield replace(full, true_pose=None, true_body_m_s=None), seen
 
     density = params.gyro_noise_density_rad_s_sqrt_hz
     noise = GyroNoise(noise_density_rad_s_sqrt_hz=density) if density else GyroNoise()
@@ -540,7 +530,7 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
         If the model has no encoder scale (before the port is opened).
     """
     from drivers.logs import Recorder
-    from drivers.roomba import Roomba
+    from drivers.roomba import Roomba, RoombaOptions
 
     _require_scale(model)
 
@@ -555,8 +545,9 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     what = "listening to" if listen else "driving"
     print_fn(f"{what} the robot on {port} for {duration_s:g} s"
              + ("" if listen else " (needs 2 m x 2 m of clear floor; Ctrl-C stops it)"))
-    with Roomba(port, baud=baud, clock_rate=clock_rate, open_timeout_s=3.0,
-                stall_periods=max(5, math.ceil(0.3 * clock_rate / model.dt_s))) as robot:
+    options = RoombaOptions(baud_bps=baud, clock_rate=clock_rate, open_timeout_s=3.0,
+                            stall_periods=max(5, math.ceil(0.3 * clock_rate / model.dt_s)))
+    with Roomba(port, options=options) as robot:
 
         def frames() -> Iterator[SensorFrame]:
             try:

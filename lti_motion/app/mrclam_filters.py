@@ -47,6 +47,7 @@ median absolute deviation. The figures are the RMS position error against
 Vicon over all grid times of the second half, the mean position NEES at the
 same times (2 degrees of freedom: 2 if consistent) and the mean NIS of the
 fused sightings (2 if consistent, 1.99 after the gate's truncation)
+from fusion.ekf.ekf_options import EKFOptions
 (Bar-Shalom, Li & Kirubarajan 2001, section 5.4.2).
 
 Run it: ``python -m lti_motion.app.mrclam_filters PATH [--motion-noise legacy]``.
@@ -70,7 +71,7 @@ from drivers.datasets import (
     load_mrclam,
     resample_robot,
 )
-from fusion.ekf import ModelEKF, VelocityModelEKF
+from fusion.ekf import EKFOptions, ModelEKF, VelocityModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import RangeBearing, range_bearing, range_bearing_residual
@@ -267,9 +268,9 @@ def evaluate_filters(robot: MrclamRobot, landmarks: dict[int, np.ndarray], arx: 
         u = wheel_from_body(seg.commands_vw, wheel_base_m=CREATE1_WHEEL_BASE_M)
         z0 = arx.state_from_data(u[:warmup], seg.speeds_vw[:warmup])
         model_ekf = ModelEKF(model, initial_pose=seg.pose[warmup], pose_std=POSE_STD, z0=z0,
-                             landmarks=lmap, landmark_noise=noise,
-                             slip=slip, scales=scales, gate_probability=GATE_PROBABILITY,
-                             history=0)
+                             landmarks=lmap,
+                             options=EKFOptions(landmark_noise=noise, slip=slip, scales=scales,
+                                                gate_probability=GATE_PROBABILITY, history=0))
         raw_ekf = VelocityModelEKF(dt_s=dt_s, speed_cov=speed_cov["raw"],
                                    initial_pose=seg.pose[warmup], pose_std=POSE_STD,
                                    landmarks=lmap, landmark_noise=noise,

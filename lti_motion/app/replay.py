@@ -1,4 +1,5 @@
 """``lti-motion replay``: the estimators on a recorded log or a data set robot.
+from fusion.ekf.ekf_options import EKFOptions
 
 A *source* is what a robot reported, frame by frame: the wheel commands of
 each sensor period, the raw encoder counts (logs only), landmark sightings
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion.ekf import ModelEKF
+from fusion.ekf import EKFOptions, ModelEKF
 from fusion.noise import GyroNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.app.replay_sources import (
@@ -136,8 +137,9 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
     ekf = ModelEKF(model, initial_pose=pose0, pose_std=(0.005, 0.005, 0.005),
                    initial_ticks=ticks[first] if encoders else None,
                    landmarks=src.landmarks if landmarks else None,
-                   landmark_noise=src.landmark_noise, history=0, counter_bits=bits,
-                   gyro=None if gyro is None else gyro_noise(src))
+                   options=EKFOptions(landmark_noise=src.landmark_noise, history=0,
+                                      counter_bits=bits,
+                                      gyro=None if gyro is None else gyro_noise(src)))
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
     poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]

@@ -25,7 +25,7 @@ from typing import Protocol
 import numpy as np
 
 from drivers.sim import FloorMap, RobotParams, Room, Simulator
-from fusion.ekf import ModelEKF
+from fusion.ekf import EKFOptions, ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing, range_bearing
@@ -232,7 +232,7 @@ class EkfEstimator:
             self.filters = [
                 ModelEKF(self.model, initial_pose=pose, pose_std=(0.005, 0.005, 0.005),
                          initial_ticks=t if ok else None, landmarks=self.landmarks,
-                         landmark_noise=self.landmark_noise, history=0)
+                         options=EKFOptions(landmark_noise=self.landmark_noise, history=0))
                 for pose, t, ok in zip(self.pose, ticks, valid, strict=True)]
             return self.pose
         for i, ekf in enumerate(self.filters):

@@ -91,11 +91,12 @@ def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: Robot
               f"(seed {args.seed})")
         sim = wall_run_simulator(described, seed=args.seed, floor=args.floor)
         return drive_wall_run(sim, known, run_m=args.wall_run_m)
-    from drivers.roomba import Roomba
+    from drivers.roomba import Roomba, RoombaOptions
     from lti_motion.app.prompts import wait_until_placed
 
     # the port is opened first: a missing robot is said before anyone is asked to place it
-    with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+    options = RoombaOptions(baud_bps=args.baud, clock_rate=args.clock_rate)
+    with Roomba(args.port, options=options) as robot:
         print(f"next: the wall run. Put the robot on hard floor facing a straight, plain wall "
               f"0.2-1.5 m ahead, with {args.wall_run_m + 0.5:g} m clear along the wall on "
               "both sides of it.")

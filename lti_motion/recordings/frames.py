@@ -92,6 +92,39 @@ class SensorFrame:
     wheel_overcurrent: np.ndarray | None = None
     yaw_rate_rad_s: float | np.ndarray | None = None
 
+    @classmethod
+    def of_counts(cls, t_s: float, ticks: np.ndarray, cmd_m_s: np.ndarray, *,
+                  valid: bool = True, motor_current_a: np.ndarray | None = None,
+                  wheel_overcurrent: np.ndarray | None = None,
+                  yaw_rate_rad_s: float | None = None) -> SensorFrame:
+        """A frame of what a recording's row holds: counts, commands and the optional wheel
+        and gyro readings, without light bumps or bumpers.
+
+        For a filter fed from a recording or a test (the light bumps read zero, nothing
+        near; the bumpers are released).
+
+        Parameters
+        ----------
+        t_s : float
+            Timestamp [s].
+        ticks : array_like of int, shape (2,)
+            Raw encoder counts (left, right) [ticks].
+        cmd_m_s : array_like, shape (2,)
+            Wheel-speed commands (left, right) of the period the frame closes [m/s].
+        valid, motor_current_a, wheel_overcurrent, yaw_rate_rad_s
+            As the attributes of the same names.
+
+        Examples
+        --------
+        >>> frame = SensorFrame.of_counts(0.015, np.array([6, 6]), np.array([0.2, 0.2]))
+        >>> frame.light_bump.tolist(), frame.bumps.tolist(), frame.valid
+        ([0, 0, 0, 0, 0, 0], [False, False], True)
+        """
+        return cls(t_s=t_s, ticks=ticks, light_bump=np.zeros(N_LIGHT_BUMPS, np.int64),
+                   bumps=np.zeros(2, bool), cmd_m_s=cmd_m_s, valid=valid,
+                   motor_current_a=motor_current_a, wheel_overcurrent=wheel_overcurrent,
+                   yaw_rate_rad_s=yaw_rate_rad_s)
+
 
 _PER_SAMPLE = MappingProxyType({
     "t_s": (),
@@ -229,21 +262,44 @@ class FrameLog:
         if self.n_robots is not None:
             raise ValueError("FrameLog.frames() needs a single-robot log; use robot(i) first")
         for k in np.flatnonzero(self.valid):
-            yield SensorFrame(
-                t_s=float(self.t_s[k]),
-                ticks=self.ticks[k],
-                light_bump=self.light_bump[k],
-                bumps=self.bumps[k],
-                cmd_m_s=self.cmd_m_s[k],
-                true_pose=None if self.true_pose is None else self.true_pose[k],
-                true_body_m_s=None if self.true_body_m_s is None else self.true_body_m_s[k],
-                motor_current_a=(None if self.motor_current_a is None
-                                 else self.motor_current_a[k]),
-                wheel_overcurrent=(None if self.wheel_overcurrent is None
-                                   else self.wheel_overcurrent[k]),
-                yaw_rate_rad_s=(None if self.yaw_rate_rad_s is None
-                                else float(self.yaw_rate_rad_s[k])),
-            )
+            yield self.frame(k)
+
+    def frame(self, k: int, *, truth: bool = True) -> SensorFrame:
+        """Frame ``k`` of a single-robot log, lost or not (its ``valid`` says which).
+
+        Parameters
+        ----------
+        k : int
+            Index along the time axis.
+        truth : bool
+            Whether the frame carries the simulator's truth (``true_pose``,
+            ``true_body_m_s``) when the log has it; false gives what a robot
+            reports.
+
+        Raises
+        ------
+        ValueError
+            If the log holds a batch of robots.
+        """
+        if self.n_robots is not None:
+            raise ValueError("FrameLog.frame(k) needs a single-robot log; use robot(i) first")
+        return SensorFrame(
+            t_s=float(self.t_s[k]),
+            ticks=self.ticks[k],
+            light_bump=self.light_bump[k],
+            bumps=self.bumps[k],
+            cmd_m_s=self.cmd_m_s[k],
+            valid=bool(self.valid[k]),
+            true_pose=self.true_pose[k] if truth and self.true_pose is not None else None,
+            true_body_m_s=(self.true_body_m_s[k] if truth and self.true_body_m_s is not None
+                           else None),
+            motor_current_a=(None if self.motor_current_a is None
+                             else self.motor_current_a[k]),
+            wheel_overcurrent=(None if self.wheel_overcurrent is None
+                               else self.wheel_overcurrent[k]),
+            yaw_rate_rad_s=(None if self.yaw_rate_rad_s is None
+                            else float(self.yaw_rate_rad_s[k])),
+        )
 
     @classmethod
     def from_frames(

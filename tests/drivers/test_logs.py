@@ -9,7 +9,9 @@ import pytest
 
 from drivers.logs import Recorder, replay
 from drivers.roomba.driver import Roomba
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.exceptions import LogFileError
@@ -37,8 +39,9 @@ def test_round_trip_through_save_and_load_keeps_every_field(tmp_path, rng):
 
 def test_recording_a_driver_keeps_the_oi_mode(tmp_path):
     rec = Recorder()
-    with VirtualRoomba(seed=5, speed=5.0) as vr, Roomba(vr.device_path, clock_rate=5.0,
-                                                        stall_periods=100) as robot:
+    options = RoombaOptions(clock_rate=5.0, stall_periods=100)
+    with VirtualRoomba(seed=5, options=VirtualRoombaOptions(speed=5.0)) as vr, \
+            Roomba(vr.device_path, options=options) as robot:
         for _ in range(30):
             rec.add(robot.step([0.1, -0.1]))
     path = rec.save(tmp_path / "robot.npz", dt_s=robot.dt_s)

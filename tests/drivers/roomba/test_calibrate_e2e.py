@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from drivers.roomba.driver import Roomba
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration.manoeuvres import CalibrationPlan, calibrate, speeds_from_log
@@ -36,16 +38,18 @@ def both():
                            initial_pose=Room.CALIBRATION_SPOT)
     direct = calibrate(direct_sim, wheel_base_m=0.235, plan=PLAN, floor="hard",
                        before_stage=lambda s: s != "rotation" and direct_sim.place(Room.OPEN_FLOOR))
-    vr = VirtualRoomba("create2", seed=1, speed=SPEED, room=Room.cluttered(),
-                       initial_pose=Room.CALIBRATION_SPOT)
+    vr = VirtualRoomba("create2", seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT,
+                       options=VirtualRoombaOptions(speed=SPEED))
     # the stall window is the driver's wall-time floor (0.3 s): at 20x, 5 periods are 3.75 ms.
     # A pty loses nothing, and the emulator's thread, held off by a loaded host, sends frames
     # late and slips its schedule (overruns), which a robot's clock never does: the driver
     # counts frames (latency_tolerance_s=inf). With 0.6 s, 295 periods were taken for lost on
     # a quiet machine and 726 on a loaded one, and the fit fell 1.2 and 2.4 points below
     # the direct calibration's (5,124 and 76 points with another test run beside it).
-    with vr, Roomba(vr.device_path, clock_rate=SPEED, open_timeout_s=3.0,
-                    latency_tolerance_s=math.inf, write_timeout_s=2.0) as robot:
+    with vr, Roomba(vr.device_path,
+                    options=RoombaOptions(clock_rate=SPEED, open_timeout_s=3.0,
+                                          latency_tolerance_s=math.inf,
+                                          write_timeout_s=2.0)) as robot:
         over_pty = calibrate(robot, wheel_base_m=0.235, plan=PLAN, floor="hard",
                              before_stage=lambda s: s != "rotation" and vr.place(Room.OPEN_FLOOR))
         counters = robot.counters

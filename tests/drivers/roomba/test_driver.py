@@ -14,6 +14,7 @@ the driver's ticks, light bumps, bumps and requested velocities exactly.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import select
@@ -35,7 +36,9 @@ from drivers.exceptions import (
 from drivers.roomba import oi
 from drivers.roomba.driver import LinkCounters, Roomba, StreamClock
 from drivers.roomba.oi import Opcode
+from drivers.roomba.roomba_options import RoombaOptions
 from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration.manoeuvres import drive as run_commands
@@ -58,7 +61,7 @@ def roomba(vr: VirtualRoomba, **options) -> Roomba:
     opts = {"clock_rate": vr.speed, "latency_tolerance_s": 0.1 * vr.speed,
             "write_timeout_s": 2.0, "open_timeout_s": 3.0}
     opts.update(options)
-    return Roomba(vr.device_path, **opts)
+    return Roomba(vr.device_path, options=RoombaOptions(**opts))
 
 
 def random_commands(rng: np.random.Generator, n: int, *, hold: int = 10) -> np.ndarray:
@@ -126,7 +129,7 @@ def test_stream_clock_infers_nothing_from_buffered_chunks():
 def test_frames_equal_the_simulator_for_the_same_commands_and_seed(rng):
     seed, n = 21, 600
     cmds = random_commands(rng, n)
-    with VirtualRoomba(seed=seed, speed=4.0) as vr:
+    with VirtualRoomba(seed=seed, options=VirtualRoombaOptions(speed=4.0)) as vr:
         with roomba(vr) as robot:
             log = run_commands(robot, cmds)
     ref = replay(vr, seed)
@@ -160,7 +163,7 @@ def test_frames_equal_the_simulator_for_the_same_commands_and_seed(rng):
 def test_five_minute_drive_loses_no_frames(rng):
     seed, n = 5, 20000                               # 300 s of 15 ms periods, 15 s of wall time
     cmds = random_commands(rng, n, hold=40)
-    with VirtualRoomba(seed=seed, speed=20.0) as vr:
+    with VirtualRoomba(seed=seed, options=VirtualRoombaOptions(speed=20.0)) as vr:
         with roomba(vr) as robot:
             log = run_commands(robot, cmds)
             counters = robot.counters
@@ -184,7 +187,8 @@ def test_five_minute_drive_loses_no_frames(rng):
 def test_one_percent_corrupted_bytes_are_counted_and_the_drive_goes_on(rng):
     seed, n = 8, 1500
     cmds = random_commands(rng, n)
-    with VirtualRoomba(seed=seed, speed=20.0, corrupt_probability=0.01) as vr:
+    with VirtualRoomba(seed=seed, options=VirtualRoombaOptions(speed=20.0,
+                                                               corrupt_probability=0.01)) as vr:
         with roomba(vr) as robot:
             log = run_commands(robot, cmds)
             c = robot.counters
@@ -205,7 +209,9 @@ def test_one_percent_corrupted_bytes_are_counted_and_the_drive_goes_on(rng):
 
 def test_stream_stall_raises_and_stops_the_wheels(rng):
     # 1.2 s robot of silence at 2x: 0.6 s of wall time, past the 0.3 s wall floor
-    with VirtualRoomba(seed=2, speed=2.0, stall_at_s=0.6, stall_duration_s=1.2) as vr:
+    with VirtualRoomba(seed=2,
+                       options=VirtualRoombaOptions(speed=2.0, stall_at_s=0.6,
+                                                    stall_duration_s=1.2)) as vr:
         with pytest.raises(StreamStalledError, match=r"/dev/.*115200 baud\) for 0.3 s of "
                                                      r"wall time.*Check the cable"):
             with roomba(vr, stall_periods=10) as robot:      # 0.15 s robot, floor 0.3 s wall
@@ -218,27 +224,35 @@ def test_stream_stall_raises_and_stops_the_wheels(rng):
 def test_a_gap_shorter_than_the_wall_floor_is_no_stall_at_a_high_clock_rate():
     """Issue 15 item 6: at 10x the default 5 periods are 7.5 ms of wall time; a 40 ms gap
     (a loaded host, or the virtual Roomba's thread descheduled) stopped the drive."""
-    with VirtualRoomba(seed=2, speed=10.0, stall_at_s=0.6, stall_duration_s=0.4) as vr:
-        with Roomba(vr.device_path, clock_rate=10.0, open_timeout_s=3.0) as robot:
+    with VirtualRoomba(seed=2,
+                       options=VirtualRoombaOptions(speed=10.0, stall_at_s=0.6,
+                                                    stall_duration_s=0.4)) as vr:
+        with Roomba(vr.device_path,
+                    options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0)) as robot:
             log = run_commands(robot, np.full((100, 2), 0.1))
             c = robot.counters
-    assert robot.stall_periods == 5 and len(log) == 100 and c.stalls == 0
+    assert robot.options.stall_periods == 5 and len(log) == 100 and c.stalls == 0
     assert np.max(np.diff(log.t_s)) > 0.3              # the 0.4 s robot-time gap is in the log
 
 
 def test_a_stall_window_floor_of_zero_keeps_the_period_window():
-    with VirtualRoomba(seed=2, speed=10.0, stall_at_s=0.6, stall_duration_s=0.4) as vr:
+    with VirtualRoomba(seed=2,
+                       options=VirtualRoombaOptions(speed=10.0, stall_at_s=0.6,
+                                                    stall_duration_s=0.4)) as vr:
         with pytest.raises(StreamStalledError, match=r"for 0.0075 s of wall time"):
-            with Roomba(vr.device_path, clock_rate=10.0, open_timeout_s=3.0,
-                        stall_floor_s=0.0) as robot:
+            with Roomba(vr.device_path,
+                        options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0,
+                                              stall_floor_s=0.0)) as robot:
                 run_commands(robot, np.full((100, 2), 0.1))
     with pytest.raises(ValueError, match="stall_floor_s"):
-        Roomba("/dev/x", stall_floor_s=-1.0)
+        Roomba("/dev/x", options=RoombaOptions(stall_floor_s=-1.0))
 
 
 def test_stream_stall_with_reconnect_resumes_and_timestamps_show_the_gap():
     # 1.2 s robot of silence at 2x: the 0.3 s wall window (0.6 s robot) ends inside it
-    with VirtualRoomba(seed=2, speed=2.0, stall_at_s=0.6, stall_duration_s=1.2) as vr:
+    with VirtualRoomba(seed=2,
+                       options=VirtualRoombaOptions(speed=2.0, stall_at_s=0.6,
+                                                    stall_duration_s=1.2)) as vr:
         with roomba(vr, stall_periods=10, reconnect=True, reconnect_timeout_s=2.0) as robot:
             log = run_commands(robot, np.full((150, 2), 0.1))
             c = robot.counters
@@ -252,7 +266,7 @@ def test_stream_stall_with_reconnect_resumes_and_timestamps_show_the_gap():
 def test_discard_buffered_drops_the_frames_that_waited_so_commands_act_at_once():
     """Frames queue while the host waits (a prompt, computing); read_frame returns them
     first, so without a discard the next commands answer stale frames."""
-    with VirtualRoomba(seed=3, speed=2.0) as vr, roomba(vr) as robot:
+    with VirtualRoomba(seed=3, options=VirtualRoombaOptions(speed=2.0)) as vr, roomba(vr) as robot:
         time.sleep(0.5)                                # 1 s robot time: ~67 frames wait
         stale = run_commands(robot, np.full((20, 2), 0.1))
         time.sleep(0.5)
@@ -266,7 +280,7 @@ def test_discard_buffered_drops_the_frames_that_waited_so_commands_act_at_once()
 
 
 def test_fall_to_passive_raises_after_stopping_the_wheels():
-    with VirtualRoomba(seed=4, speed=4.0, passive_at_s=0.5) as vr:
+    with VirtualRoomba(seed=4, options=VirtualRoombaOptions(speed=4.0, passive_at_s=0.5)) as vr:
         with pytest.raises(PassiveModeError, match=r"mode 1 \(PASSIVE\) .*expects SAFE"):
             with roomba(vr) as robot:
                 run_commands(robot, np.full((200, 2), 0.15))
@@ -278,7 +292,7 @@ def test_fall_to_passive_raises_after_stopping_the_wheels():
 
 
 def test_reassert_mode_resends_full_once_and_goes_on():
-    with VirtualRoomba(seed=4, speed=4.0, passive_at_s=0.5) as vr:
+    with VirtualRoomba(seed=4, options=VirtualRoombaOptions(speed=4.0, passive_at_s=0.5)) as vr:
         with roomba(vr, mode="full", reassert_mode=True) as robot:
             log = run_commands(robot, np.full((100, 2), 0.15))
             c = robot.counters
@@ -288,7 +302,7 @@ def test_reassert_mode_resends_full_once_and_goes_on():
 
 
 def test_keyboard_interrupt_in_the_with_block_stops_the_robot():
-    with VirtualRoomba(seed=6, speed=4.0) as vr:
+    with VirtualRoomba(seed=6, options=VirtualRoombaOptions(speed=4.0)) as vr:
         with pytest.raises(KeyboardInterrupt), roomba(vr) as robot:
             for _ in range(20):
                 robot.step([0.2, 0.25])
@@ -299,7 +313,7 @@ def test_keyboard_interrupt_in_the_with_block_stops_the_robot():
 
 def test_banner_and_charger_text_are_skipped_and_counted():
     text = "bat:   min 0  sec 12  mV 15605  mA 1203\r\n" + "Roomba by iRobot!\r\n"
-    with VirtualRoomba(seed=9, speed=4.0) as vr:
+    with VirtualRoomba(seed=9, options=VirtualRoombaOptions(speed=4.0)) as vr:
         with roomba(vr) as robot:
             head = run_commands(robot, np.full((30, 2), 0.1))
             vr.send_text(text)
@@ -313,7 +327,7 @@ def test_banner_and_charger_text_are_skipped_and_counted():
 
 def test_simulator_faults_pass_through_and_lost_frames_show_as_gaps():
     lost = [Fault("lost_frames", t_s=0.0, probability=0.1)]
-    with VirtualRoomba(seed=13, speed=2.0, faults=lost) as vr:
+    with VirtualRoomba(seed=13, faults=lost, options=VirtualRoombaOptions(speed=2.0)) as vr:
         with roomba(vr, latency_tolerance_s=0.007) as robot:
             log = run_commands(robot, np.full((200, 2), 0.1))
     stats = vr.stats
@@ -330,7 +344,8 @@ def test_simulator_faults_pass_through_and_lost_frames_show_as_gaps():
 def test_motor_currents_and_overcurrents_reach_the_frames():
     # a blocked left wheel: packets 54/55 carry the simulated currents [mA], 14 its flag
     stall = [Fault("stall", t_s=1.0, duration_s=1.5, wheel="left")]
-    with VirtualRoomba(seed=14, speed=10.0, faults=stall) as vr, roomba(vr) as robot:
+    with VirtualRoomba(seed=14, faults=stall, options=VirtualRoombaOptions(speed=10.0)) as vr, \
+            roomba(vr) as robot:
         log = run_commands(robot, np.full((200, 2), 0.2))
     ref = Simulator("create2", seed=14, faults=stall).run(vr.applied_commands_m_s)
     periods = vr.frame_periods[1:201]
@@ -345,7 +360,8 @@ def test_motor_currents_and_overcurrents_reach_the_frames():
 
 def test_encoder_rollover_in_both_directions():
     cmds = np.vstack([np.full((100, 2), -0.25), np.full((200, 2), 0.25)])
-    with VirtualRoomba(seed=12, speed=10.0) as vr, roomba(vr) as robot:
+    with VirtualRoomba(seed=12, options=VirtualRoombaOptions(speed=10.0)) as vr, \
+            roomba(vr) as robot:
         first = robot.first_frame
         log = run_commands(robot, cmds)
     raw = np.vstack([first.ticks, log.ticks])
@@ -364,7 +380,7 @@ def test_encoder_rollover_in_both_directions():
 
 
 def test_out_of_range_speed_is_refused_before_anything_is_sent():
-    with VirtualRoomba(seed=1, speed=4.0) as vr, roomba(vr) as robot:
+    with VirtualRoomba(seed=1, options=VirtualRoombaOptions(speed=4.0)) as vr, roomba(vr) as robot:
         robot.step([0.1, 0.1])
         with pytest.raises(ProtocolError, match=r"out of range \[-500, 500\] mm/s"):
             robot.step([0.1, 0.51])
@@ -379,11 +395,11 @@ def test_out_of_range_speed_is_refused_before_anything_is_sent():
 
 def test_unknown_packet_id_and_bandwidth_are_checked_before_opening():
     with pytest.raises(UnknownPacketError, match="unknown sensor packet id 99"):
-        Roomba("/dev/does-not-exist", stream_ids=(43, 44, 99))
+        Roomba("/dev/does-not-exist", options=RoombaOptions(stream_ids=(43, 44, 99)))
     with pytest.raises(StreamBandwidthError, match="19200 baud"):
-        Roomba("/dev/does-not-exist", baud=19200)
+        Roomba("/dev/does-not-exist", options=RoombaOptions(baud_bps=19200))
     with pytest.raises(ProtocolError, match="lack encoder packet 44"):
-        Roomba("/dev/does-not-exist", stream_ids=(7, 43))
+        Roomba("/dev/does-not-exist", options=RoombaOptions(stream_ids=(7, 43)))
 
 
 def test_missing_port_raises_port_error_naming_it():
@@ -392,7 +408,7 @@ def test_missing_port_raises_port_error_naming_it():
 
 
 def test_busy_port_raises_port_error():
-    with VirtualRoomba(seed=1, speed=4.0) as vr, roomba(vr) as robot:
+    with VirtualRoomba(seed=1, options=VirtualRoombaOptions(speed=4.0)) as vr, roomba(vr) as robot:
         with pytest.raises(PortError, match=f"{vr.device_path}.*other program"):
             roomba(vr).open()
         robot.step([0.0, 0.0])                       # the first connection is unharmed
@@ -404,7 +420,7 @@ def test_silent_port_times_out_naming_port_and_baud_and_still_says_goodbye():
     try:
         path = os.ttyname(slave)
         with pytest.raises(StreamStalledError, match=f"{path} at 115200 baud.*baud rate"):
-            Roomba(path, open_timeout_s=0.2, settle_s=0.0).open()
+            Roomba(path, options=RoombaOptions(open_timeout_s=0.2, settle_s=0.0)).open()
         goodbye = (oi.drive_direct(0, 0) + oi.pause_resume_stream(resume=False)
                    + oi.start() + oi.stop())
         sent = b""
@@ -421,7 +437,7 @@ def test_silent_port_times_out_naming_port_and_baud_and_still_says_goodbye():
 
 
 def test_emulator_gone_mid_drive_raises_port_error_and_close_is_quiet(caplog):
-    vr = VirtualRoomba(seed=1, speed=4.0).start()
+    vr = VirtualRoomba(seed=1, options=VirtualRoombaOptions(speed=4.0)).start()
     robot = roomba(vr).open()
     robot.step([0.1, 0.1])
     vr.stop()                                        # closes both pty ends
@@ -437,7 +453,7 @@ def test_emulator_gone_mid_drive_raises_port_error_and_close_is_quiet(caplog):
 
 
 def test_host_clock_and_mode_report_offset():
-    with VirtualRoomba(seed=3, speed=4.0, mode_report_offset=1) as vr:
+    with VirtualRoomba(seed=3, options=VirtualRoombaOptions(speed=4.0, mode_report_offset=1)) as vr:
         with roomba(vr, clock="host", mode_report_offset=1) as robot:
             frames = [robot.step([0.05, 0.05]) for _ in range(30)]
         with roomba(vr, mode="full") as robot:       # no workaround: Full reads as 4
@@ -469,11 +485,26 @@ def test_counters_start_at_zero_and_options_are_validated():
     assert robot.m_per_tick == pytest.approx(0.444565e-3, rel=1e-5)   # spec §7.1
     robot.close()                                    # closing a closed driver is a no-op
     with pytest.raises(ValueError, match="mode"):
-        Roomba("/dev/x", mode="passive")
+        Roomba("/dev/x", options=RoombaOptions(mode="passive"))
     with pytest.raises(ValueError, match="clock_rate"):
-        Roomba("/dev/x", clock_rate=0.0)
+        Roomba("/dev/x", options=RoombaOptions(clock_rate=0.0))
     with pytest.raises(ValueError, match="stall_periods"):
-        Roomba("/dev/x", stall_periods=0)
+        Roomba("/dev/x", options=RoombaOptions(stall_periods=0))
     with pytest.raises(PortError, match="not open"):
         robot.read_frame()
     assert time.monotonic() > 0
+
+
+def test_the_options_are_one_frozen_object_checked_when_made():
+    options = RoombaOptions(clock_rate=4.0, stream_ids=[7, 43, 44])
+    assert options.stream_ids == (7, 43, 44)                   # kept as a tuple
+    robot = Roomba("/dev/does-not-exist", options=options)
+    assert robot.options is options and robot.read_timeout_s == pytest.approx(0.05)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.clock_rate = 1.0
+    with pytest.raises(TypeError):
+        RoombaOptions(115200)                                   # keyword-only
+    with pytest.raises(ValueError, match="read_timeout_s must be a finite positive"):
+        RoombaOptions(read_timeout_s=0.0)
+    with pytest.raises(ValueError, match="options must be a RoombaOptions, got dict"):
+        Roomba("/dev/x", options={"clock_rate": 4.0})

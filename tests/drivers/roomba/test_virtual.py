@@ -7,6 +7,7 @@ emulator checklist; sections as listed in :mod:`drivers.roomba.oi`).
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import time
 
@@ -17,13 +18,14 @@ import serial
 from drivers.roomba import oi
 from drivers.roomba.oi import OIMode, Opcode, StreamParser
 from drivers.roomba.virtual import DEFAULT_BANNER, VirtualRoomba, serve
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 
 SPEED = 10.0
 
 
 @pytest.fixture
 def vr():
-    with VirtualRoomba(seed=7, speed=SPEED) as robot:
+    with VirtualRoomba(seed=7, options=VirtualRoombaOptions(speed=SPEED)) as robot:
         yield robot
 
 
@@ -177,7 +179,9 @@ def test_encoders_count_in_the_commanded_direction(vr, port):
 
 
 def test_wheel_drop_forces_passive_and_stops_the_motors():
-    with VirtualRoomba(seed=3, speed=SPEED, passive_at_s=0.3, passive_duration_s=10.0) as vr, \
+    with VirtualRoomba(seed=3,
+                       options=VirtualRoombaOptions(speed=SPEED, passive_at_s=0.3,
+                                                    passive_duration_s=10.0)) as vr, \
             serial.Serial(vr.device_path, 115200, timeout=0.02, exclusive=True) as port:
         port.write(oi.start() + oi.safe() + oi.drive_direct(100, 100))
         assert vr.wait_until(lambda r: r.sim.t_s > 0.35, timeout_s=3.0)
@@ -189,8 +193,9 @@ def test_wheel_drop_forces_passive_and_stops_the_motors():
 
 
 def test_line_faults_corrupt_and_drop_outgoing_bytes():
-    with VirtualRoomba(seed=11, speed=SPEED, corrupt_probability=0.05,
-                       drop_probability=0.02) as vr, \
+    with VirtualRoomba(seed=11,
+                       options=VirtualRoombaOptions(speed=SPEED, corrupt_probability=0.05,
+                                                    drop_probability=0.02)) as vr, \
             serial.Serial(vr.device_path, 115200, timeout=0.02, exclusive=True) as port:
         parser = StreamParser([43, 44])
         port.write(oi.start() + oi.stream([43, 44]))
@@ -208,7 +213,9 @@ def test_line_faults_corrupt_and_drop_outgoing_bytes():
 
 def test_charger_text_at_a_given_time():
     text = "bat: min 1 sec 2\r\n"
-    with VirtualRoomba(seed=1, speed=SPEED, charger_text_at_s=0.2, charger_text=text) as vr, \
+    with VirtualRoomba(seed=1,
+                       options=VirtualRoombaOptions(speed=SPEED, charger_text_at_s=0.2,
+                                                    charger_text=text)) as vr, \
             serial.Serial(vr.device_path, 115200, timeout=0.02, exclusive=True) as port:
         port.write(oi.start())
         assert read_exactly(port, len(text), timeout_s=3.0) == text.encode()
@@ -216,15 +223,24 @@ def test_charger_text_at_a_given_time():
 
 def test_options_are_validated():
     with pytest.raises(ValueError, match="speed"):
-        VirtualRoomba(speed=0.0)
+        VirtualRoomba(options=VirtualRoombaOptions(speed=0.0))
     with pytest.raises(ValueError, match="corrupt_probability"):
-        VirtualRoomba(corrupt_probability=1.5)
+        VirtualRoomba(options=VirtualRoombaOptions(corrupt_probability=1.5))
     with pytest.raises(ValueError, match="stall_duration_s"):
-        VirtualRoomba(stall_duration_s=0.0)
+        VirtualRoomba(options=VirtualRoombaOptions(stall_duration_s=0.0))
+    options = VirtualRoombaOptions(speed=4.0, mode_report_offset=1)
+    vr = VirtualRoomba(seed=2, options=options)
+    assert vr.options is options and vr.speed == 4.0 and vr.seed == 2
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.speed = 1.0
+    with pytest.raises(TypeError):
+        VirtualRoombaOptions(2.0)                               # keyword-only
+    with pytest.raises(ValueError, match="options must be a VirtualRoombaOptions, got dict"):
+        VirtualRoomba(options={"speed": 4.0})
 
 
 def test_start_and_stop_are_idempotent_and_quick():
-    vr = VirtualRoomba(seed=0, speed=SPEED)
+    vr = VirtualRoomba(seed=0, options=VirtualRoombaOptions(speed=SPEED))
     t0 = time.monotonic()
     vr.start()
     path = vr.device_path

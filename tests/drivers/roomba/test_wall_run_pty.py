@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_intrinsics import straight_line_truth
-from drivers.roomba.driver import Roomba
+from drivers.roomba.driver import Roomba, RoombaOptions
 from drivers.roomba.oi import DEFAULT_STREAM_IDS
-from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual import VirtualRoomba, VirtualRoombaOptions
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
 from lti_motion.calibration.wall_run import calibrate_wall_run
@@ -29,12 +29,14 @@ SCENE = {"seed": 4, "floor": "tile", "room": Room.single_wall(),
 
 def _roomba(vr: VirtualRoomba, **options) -> Roomba:
     # a pty loses nothing: count frames (docs/driver.md, latency_tolerance_s=math.inf)
-    return Roomba(vr.device_path, clock_rate=SPEED, open_timeout_s=3.0,
-                  latency_tolerance_s=math.inf, write_timeout_s=2.0, **options)
+    return Roomba(vr.device_path,
+                  options=RoombaOptions(clock_rate=SPEED, open_timeout_s=3.0,
+                                        latency_tolerance_s=math.inf, write_timeout_s=2.0,
+                                        **options))
 
 
 def test_the_wall_run_over_the_serial_driver_finds_the_ratio():
-    vr = VirtualRoomba(PARAMS, speed=SPEED, **SCENE)
+    vr = VirtualRoomba(PARAMS, **SCENE, options=VirtualRoombaOptions(speed=SPEED))
     with vr, _roomba(vr) as robot:
         drive = drive_wall_run(robot, NOMINAL, run_m=1.0)
         counters = robot.counters
@@ -54,7 +56,7 @@ def test_the_wall_run_over_the_serial_driver_finds_the_ratio():
 
 
 def test_a_stream_without_light_bumps_is_named():
-    vr = VirtualRoomba(PARAMS, speed=SPEED, **SCENE)
+    vr = VirtualRoomba(PARAMS, **SCENE, options=VirtualRoombaOptions(speed=SPEED))
     no_light = [i for i in DEFAULT_STREAM_IDS if not 46 <= i <= 51]
     with vr, _roomba(vr, stream_ids=no_light) as robot, pytest.raises(
             NoSignalError, match=r"no light-bump signals.*packets"):

@@ -14,6 +14,7 @@ import pytest
 from synthetic_ekf_model import DT, M_PER_TICK, B, held_commands, numerical_jacobian
 
 from fusion.ekf import functions as ef
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import ScaleErrors
@@ -203,7 +204,7 @@ def test_landmarks_teach_the_filter_a_known_curvature(model, seed):
     n = round(90.0 / DT)
     u, ticks, truth = _drive(model, rng, n, kappa=KAPPA_TRUE)
     ekf = ModelEKF(model, initial_pose=truth[0], initial_ticks=ticks[0], landmarks=LANDMARKS,
-                   history=0)
+                   options=EKFOptions(history=0))
     for k in range(n):
         ekf.predict(u[k])
         ekf.update_encoders(ticks[k + 1])
@@ -226,9 +227,10 @@ def test_without_landmarks_kappa_stays_at_zero_and_its_spread_grows_the_pose_cov
     rng = np.random.default_rng(7)
     n = round(20.0 / DT)
     u, ticks, _ = _drive(model, rng, n, kappa=0.0)
-    with_k = ModelEKF(model, initial_ticks=ticks[0], history=0)
-    held = ModelEKF(model, initial_ticks=ticks[0], history=0,
-                    scales=ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0))
+    with_k = ModelEKF(model, initial_ticks=ticks[0], options=EKFOptions(history=0))
+    held = ModelEKF(model, initial_ticks=ticks[0],
+                    options=EKFOptions(history=0, scales=ScaleErrors(ratio_prior_std=1e-9,
+                                                                     ratio_walk_per_sqrt_s=0.0)))
     for k in range(n):
         for f in (with_k, held):
             f.predict(u[k])
@@ -262,7 +264,7 @@ def test_a_symmetric_robot_is_tracked_as_well_as_without_the_ratio_state(model):
     for name, scales in (("kappa", ScaleErrors()),
                          ("held", ScaleErrors(ratio_prior_std=1e-9, ratio_walk_per_sqrt_s=0.0))):
         ekf = ModelEKF(model, initial_pose=truth[0], initial_ticks=ticks[0],
-                       landmarks=LANDMARKS, history=0, scales=scales)
+                       landmarks=LANDMARKS, options=EKFOptions(history=0, scales=scales))
         err = np.empty(n)
         for k in range(n):
             ekf.predict(u[k])

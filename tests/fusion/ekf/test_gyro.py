@@ -8,6 +8,7 @@ from synthetic_ekf_model import numerical_jacobian
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf import functions as ef
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.gyro import (
     clone_heading,
     gyro_cov,
@@ -75,7 +76,7 @@ def test_F_with_a_gyro_matches_a_numerical_derivative(fm, rng, accumulate):
 def test_without_gyro_readings_the_filter_is_the_plain_one(model, fm, rng):
     """The two gyro states change nothing else: same x and P on the common states."""
     plain = ModelEKF(model, initial_ticks=(0, 0))
-    with_gyro = ModelEKF(model, initial_ticks=(0, 0), gyro=GyroNoise())
+    with_gyro = ModelEKF(model, initial_ticks=(0, 0), options=EKFOptions(gyro=GyroNoise()))
     keep = np.r_[0:6, 8:with_gyro.fm.n]
     ticks = np.zeros(2)
     for k in range(300):
@@ -132,7 +133,7 @@ def _drive(ekf, n, *, rate):
 
 
 def test_readings_fill_a_window_then_fuse(model):
-    ekf = ModelEKF(model, initial_ticks=(0, 0), gyro=GyroNoise(window_s=0.15))
+    ekf = ModelEKF(model, initial_ticks=(0, 0), options=EKFOptions(gyro=GyroNoise(window_s=0.15)))
     periods = round(0.15 / model.dt_s)
     recs = _drive(ekf, 2 * periods, rate=0.0)
     reasons = [r.reason for r in recs]
@@ -144,7 +145,7 @@ def test_readings_fill_a_window_then_fuse(model):
 
 
 def test_nan_gap_and_errors(model):
-    ekf = ModelEKF(model, initial_ticks=(0, 0), gyro=GyroNoise(window_s=0.15))
+    ekf = ModelEKF(model, initial_ticks=(0, 0), options=EKFOptions(gyro=GyroNoise(window_s=0.15)))
     _drive(ekf, 3, rate=0.0)
     assert ekf.update_gyro(0.0).reason == "gap"              # no predict between
     ekf.predict(np.array([0.2, 0.2]))
@@ -164,7 +165,8 @@ def test_nan_gap_and_errors(model):
 
 def test_the_bias_estimate_is_clipped(model):
     gyro = GyroNoise(window_s=0.03, bias_prior_std_rad_s=0.01, max_bias_rad_s=0.03)
-    ekf = ModelEKF(model, initial_ticks=(0, 0), gyro=gyro, gate_probability=None)
+    ekf = ModelEKF(model, initial_ticks=(0, 0),
+                   options=EKFOptions(gyro=gyro, gate_probability=None))
     recs = _drive(ekf, 400, rate=1.0)          # a rate no encoder sees: bias takes part
     assert sum(r.reason == "fused" for r in recs) == 200
     assert abs(ekf.gyro_bias) == pytest.approx(0.03)
@@ -179,7 +181,7 @@ def sim_model(ekf_example_model):
 
 def _run(model, log, gyro):
     ekf = ModelEKF(model, initial_pose=START, pose_std=(0.005,) * 3, initial_ticks=log.ticks[0],
-                   gyro=gyro, history=0)
+                   options=EKFOptions(gyro=gyro, history=0))
     err, var = np.empty(len(log.t_s)), np.empty(len(log.t_s))
     err[0], var[0] = 0.0, ekf.P[2, 2]
     for k in range(1, len(log.t_s)):

@@ -8,6 +8,7 @@ from synthetic_ekf_model import numerical_jacobian
 from drivers.sim.config import Room, get_preset
 from drivers.sim.simulator import Simulator
 from fusion.ekf import functions as ef
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.gyro import rest_cov, rest_jacobian, rest_measurement
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.exceptions import FilterOptionError
@@ -48,7 +49,8 @@ def test_the_rest_functions_need_a_gyro(model):
 
 def _ekf(model, **gyro):
     return ModelEKF(model, initial_ticks=(100, 200),
-                    gyro=GyroNoise(window_s=WINDOW_S, rest_settle_s=WINDOW_S, **gyro))
+                    options=EKFOptions(gyro=GyroNoise(window_s=WINDOW_S, rest_settle_s=WINDOW_S,
+                                                      **gyro)))
 
 
 def _periods(model, seconds):
@@ -210,7 +212,7 @@ def test_on_the_simulator_at_rest(ekf_example_model):
         log = Simulator(robot, seed=seed, room=Room.box(5.0, 5.0),
                         initial_pose=(2.5, 1.3, 0.0)).run(np.zeros((667, 2)))
         ekf = ModelEKF(ekf_example_model, initial_pose=(2.5, 1.3, 0.0),
-                       initial_ticks=log.ticks[0], gyro=GyroNoise(), history=0)
+                       initial_ticks=log.ticks[0], options=EKFOptions(gyro=GyroNoise(), history=0))
         for k in range(1, len(log.t_s)):
             ekf.predict(log.cmd_m_s[k])
             ekf.update_encoders(log.ticks[k])

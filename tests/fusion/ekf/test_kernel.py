@@ -22,6 +22,7 @@ from synthetic_ekf_model import DT, M_PER_TICK, B, fitted_model, held_commands
 
 from fusion.ekf import functions as ef
 from fusion.ekf import kernel as kn
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.noise import GyroNoise, SlipNoise, inverse_covariance, nis
 from lti_motion.kinematics import sinc_and_derivative
@@ -158,7 +159,8 @@ def _drive(rng, n):
 
 def _run(model, u, ticks, gyro_rates, *, gyro):
     ekf = ModelEKF(model, initial_ticks=ticks[0].astype(np.int64),
-                   gyro=GyroNoise() if gyro else None, slip=SlipNoise(w_per_v_rad_m=0.07))
+                   options=EKFOptions(gyro=GyroNoise() if gyro else None,
+                                      slip=SlipNoise(w_per_v_rad_m=0.07)))
     xs, Ps, reasons = [], [], []
     for k in range(len(u)):
         ekf.predict(u[k])

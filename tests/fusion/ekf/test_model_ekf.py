@@ -22,6 +22,7 @@ from synthetic_ekf_model import (
 
 from fusion.ekf import functions as ef
 from fusion.ekf import kernel
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import (
@@ -153,7 +154,7 @@ def _from_the_model(model, rng, n):
 
 def test_encoder_nis_is_chi_square_on_data_from_the_model(model, rng):
     u, y = _from_the_model(model, rng, 6000)
-    ekf = ModelEKF(model, gate_probability=None)
+    ekf = ModelEKF(model, options=EKFOptions(gate_probability=None))
     nis = []
     for k in range(len(u)):
         ekf.predict(u[k])
@@ -168,7 +169,7 @@ def test_speed_state_is_the_reading_and_the_model_state_the_one_step_predictor(r
     fit = estimate_arx([(u, y)], na=2, nb=1, delay=1)
     model = MotionModel.from_arx(fit, dt_s=DT, wheel_base_m=B, m_per_tick=M_PER_TICK,
                                  calibrated_at="2026-01-01T00:00:00+00:00")
-    ekf = ModelEKF(model, gate_probability=None, initial_pose=(0.0, 0.0, 0.0))
+    ekf = ModelEKF(model, options=EKFOptions(gate_probability=None), initial_pose=(0.0, 0.0, 0.0))
     priors, poses = [], []
     for k in range(len(u)):
         ekf.predict(u[k])
@@ -202,7 +203,7 @@ def test_pose_nees_is_consistent_when_the_world_follows_the_filters_model(model,
         obs = synthetic_observations(np.vstack([start, truth]), LANDMARKS, dt_s=DT, rng=rng)
         by_frame = obs.by_index()
         ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
-                       landmarks=LANDMARKS, gate_probability=None)
+                       landmarks=LANDMARKS, options=EKFOptions(gate_probability=None))
         err = []
         for k in range(n_steps):
             ekf.predict(u[k])
@@ -231,7 +232,8 @@ def test_subclass_and_stock_filterpy_ekf_on_the_plain_functions_agree_step_by_st
     pose0 = np.array([1.0, 1.0, 0.3])
     truth = integrate_poses(y, DT, initial_pose=pose0)
     obs = synthetic_observations(truth, LANDMARKS, dt_s=DT, rng=rng, rate_hz=4.0).by_index()
-    ours = ModelEKF(model, initial_pose=pose0, landmarks=LANDMARKS, gate_probability=None)
+    ours = ModelEKF(model, initial_pose=pose0, landmarks=LANDMARKS,
+                    options=EKFOptions(gate_probability=None))
     stock = _Stock(dim_x=fm.n, dim_z=2, dim_u=2)
     stock.fm = fm
     stock.x, stock.P = ef.initial_state(fm, pose0), ef.initial_covariance(fm)
@@ -263,8 +265,8 @@ def test_encoder_counts_and_speeds_give_the_same_filter(model):
     ticks = (counts + np.array([65000, 100])).astype(np.int64) % 65536    # both roll over
     inc = np.diff(counts, axis=0)
     y_q = body_from_wheel(inc, wheel_base_m=B) * (M_PER_TICK / DT)
-    a = ModelEKF(model, initial_ticks=ticks[0], gate_probability=None)
-    b = ModelEKF(model, gate_probability=None)
+    a = ModelEKF(model, initial_ticks=ticks[0], options=EKFOptions(gate_probability=None))
+    b = ModelEKF(model, options=EKFOptions(gate_probability=None))
     for k in range(len(u)):
         a.predict(u[k])
         b.predict(u[k])
@@ -282,8 +284,8 @@ def test_a_stock_ukf_runs_on_the_plain_functions(model, fm):
                                 points=points, residual_x=ef.state_residual,
                                 x_mean_fn=ef.state_mean)
     ukf.x, ukf.P = ef.initial_state(fm, (0.0, 0.0, 3.1)), ef.initial_covariance(fm)
-    ekf = ModelEKF(model, initial_pose=(0.0, 0.0, 3.1), gate_probability=None,
-                   encoder_std=(1e-3, 1e-2))
+    ekf = ModelEKF(model, initial_pose=(0.0, 0.0, 3.1),
+                   options=EKFOptions(gate_probability=None, encoder_std=(1e-3, 1e-2)))
     for k in range(len(u)):
         ukf.Q = ef.process_noise(ukf.x, u[k], fm)
         ukf.predict(u=u[k])
@@ -406,7 +408,7 @@ def test_wrong_shapes_raise_clear_errors(model):
     with pytest.raises(FilterOptionError, match="no landmark map"):
         ModelEKF(model).update_landmark(0, np.array([1.0, 0.0]))
     with pytest.raises(FilterOptionError, match="gate probability"):
-        ModelEKF(model, gate_probability=1.5)
+        ModelEKF(model, options=EKFOptions(gate_probability=1.5))
     with pytest.raises(NotImplementedError, match="predict"):
         ekf.predict_update(np.zeros(2), None, None)
 
@@ -421,7 +423,7 @@ def test_unknown_landmarks_are_counted_or_raise_as_asked(model):
     stats = ekf.stats
     assert stats.unknown_landmark_ids == ("door", 42)
     assert stats.count("landmark", "unknown_landmark") == 3
-    strict = ModelEKF(model, landmarks=LANDMARKS, unknown_landmarks="raise")
+    strict = ModelEKF(model, landmarks=LANDMARKS, options=EKFOptions(unknown_landmarks="raise"))
     with pytest.raises(UnknownLandmarkError, match="'door' is not in the map"):
         strict.update_landmark("door", np.array([1.0, 0.0]))
     assert LANDMARKS.unknown([0, "door", 7, "door"]) == ("door", 7)
@@ -462,7 +464,7 @@ def test_a_pose_fix_pulls_the_estimate_and_wraps_the_heading(model):
 
 
 def test_records_are_small_frozen_and_read_only(model):
-    ekf = ModelEKF(model, initial_ticks=(0, 0), history=3)
+    ekf = ModelEKF(model, initial_ticks=(0, 0), options=EKFOptions(history=3))
     ekf.predict(np.zeros(2))
     rec = ekf.update_encoders(np.array([0, 0]))
     assert isinstance(rec, UpdateRecord)
@@ -592,7 +594,8 @@ def test_counters_of_any_width_wrap_where_they_wrap(model, rng, bits):
     wrapped = (ticks + top - 40) % top if bits < 63 else ticks + top - 40
 
     def run(counts, counter_bits):
-        ekf = ModelEKF(model, initial_ticks=counts[0], counter_bits=counter_bits)
+        ekf = ModelEKF(model, initial_ticks=counts[0],
+                       options=EKFOptions(counter_bits=counter_bits))
         accepted = []
         for k in range(len(u)):
             ekf.predict(u[k])
@@ -610,4 +613,4 @@ def test_counters_of_any_width_wrap_where_they_wrap(model, rng, bits):
 
 def test_counter_width_out_of_range_is_refused(model):
     with pytest.raises(FilterOptionError, match=r"counter_bits must be an int in 8\.\.64"):
-        ModelEKF(model, counter_bits=7)
+        ModelEKF(model, options=EKFOptions(counter_bits=7))

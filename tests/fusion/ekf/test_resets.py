@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_bounds import BIAS_M_S, LANDMARKS, START, biased_drive
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.functions import SCALES
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.resets import (
@@ -79,7 +80,7 @@ def test_scale_errors_refuse_an_impossible_plausibility_probability(bad):
 def test_a_prior_too_wide_for_the_physical_bound_is_refused(small_model, scales):
     """5.5 sigma of a 10% prior reach |k| = 0.5; of a 2% ratio prior a 10% ratio."""
     with pytest.raises(FilterOptionError, match="physical bounds"):
-        ModelEKF(small_model, scales=scales)
+        ModelEKF(small_model, options=EKFOptions(scales=scales))
 
 
 def test_reset_puts_the_scales_back_at_their_prior_and_keeps_P_psd(rng):
@@ -144,7 +145,7 @@ def test_an_implausible_scale_is_reset_counted_and_logged(small_model, caplog):
 
 def test_a_wide_prior_is_clipped_to_the_physical_bound(small_model):
     scales = ScaleErrors(prior_std=(0.05, 0.05), plausible_probability=0.9)
-    ekf = ModelEKF(small_model, scales=scales)
+    ekf = ModelEKF(small_model, options=EKFOptions(scales=scales))
     ekf.predict(np.zeros(2))
     x = ekf.x.copy()
     x[SCALES] = (0.6, 0.0, -0.5)         # kappa -0.5 rad/m: a ratio 12.5% off at b = 0.25 m
@@ -158,7 +159,7 @@ def test_a_wide_prior_is_clipped_to_the_physical_bound(small_model):
 # -- the reproduction on the simulator ----------------------------------------------------------
 def _filter(model, log, speeds, sightings):
     ekf = ModelEKF(model, initial_pose=START, pose_std=(0.005,) * 3, landmarks=LANDMARKS,
-                   history=0)
+                   options=EKFOptions(history=0))
     by_frame, none = sightings.by_index(), RangeBearing.empty()
     poses = np.empty((len(log.t_s), 3))
     poses[0] = ekf.pose
@@ -209,7 +210,7 @@ def test_without_the_bias_the_filter_never_resets(example, route_model):
 def test_pose_fixes_that_stay_outside_the_gate_mean_divergence_too(small_model):
     """A filter sure of a pose 1 m off rejects pose fixes; after diverged_after of them in a
     row it resets and widens its pose covariance, and the next fix is fused."""
-    ekf = ModelEKF(small_model, pose_std=(0.001,) * 3, diverged_after=5)
+    ekf = ModelEKF(small_model, pose_std=(0.001,) * 3, options=EKFOptions(diverged_after=5))
     cov = np.diag([1e-4, 1e-4, 1e-4])
     fix = np.array([1.0, 0.0, 0.0])
     for _ in range(5):

@@ -9,6 +9,7 @@ import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
 from fusion.ekf import functions as ef
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 from fusion.exceptions import (
@@ -39,7 +40,7 @@ def model():
 def _filters(model, **kwargs):
     """The model filter and the baseline, each a few periods into a drive."""
     mf = ModelEKF(model, initial_pose=(0.1, -0.2, 0.3), pose_std=(0.05, 0.05, 0.05),
-                  landmarks=LANDMARKS, **kwargs)
+                  landmarks=LANDMARKS, options=EKFOptions(**kwargs))
     vf = VelocityModelEKF(dt_s=0.1, speed_cov=np.diag([1e-3, 4e-3]),
                           initial_pose=(0.1, -0.2, 0.3), pose_std=(0.05, 0.05, 0.05),
                           landmarks=LANDMARKS, **kwargs)
@@ -200,7 +201,7 @@ def test_the_baseline_takes_no_gate_and_refuses_impossible_options(model):
     does; impossible options are one-line FilterOptionErrors (ValueErrors)."""
     vf = VelocityModelEKF(dt_s=0.1, speed_cov=np.diag([1e-4, 1e-3]), landmarks=LANDMARKS,
                           gate_probability=None)
-    mf = ModelEKF(model, landmarks=LANDMARKS, gate_probability=None)
+    mf = ModelEKF(model, landmarks=LANDMARKS, options=EKFOptions(gate_probability=None))
     for ekf in (vf, mf):
         ekf.predict(np.array([0.2, 0.2]) if ekf is mf else np.array([0.2, 0.0]))
         far = range_bearing(ekf.x, np.array(LANDMARKS[1])) + np.array([3.0, 1.0])
@@ -219,4 +220,4 @@ def test_the_baseline_takes_no_gate_and_refuses_impossible_options(model):
             VelocityModelEKF(**{**ok, **bad})
         assert isinstance(info.value, ValueError) and "\n" not in str(info.value)
     with pytest.raises(FilterOptionError, match="gate probability"):
-        ModelEKF(model, gate_probability="0.99")
+        ModelEKF(model, options=EKFOptions(gate_probability="0.99"))

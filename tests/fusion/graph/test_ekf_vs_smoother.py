@@ -13,6 +13,7 @@ import pytest
 
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.graph.smoother import SmootherOptions, smooth_log
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.noise import LandmarkNoise
@@ -36,7 +37,8 @@ def runs(load_example, ekf_example_model):
         obs = synthetic_observations(log.true_pose, ekf_ex.LANDMARKS, dt_s=log.dt_s,
                                      rng=np.random.default_rng(700 + i), noise=NOISE)
         ekf = ekf_ex.run_filter(model, log, initial_pose=log.true_pose[0], observations=obs,
-                                landmarks=ekf_ex.LANDMARKS, landmark_noise=NOISE)
+                                landmarks=ekf_ex.LANDMARKS,
+                                options=EKFOptions(landmark_noise=NOISE))
         sm = smooth_log(model, log, initial_pose=log.true_pose[0], observations=obs,
                         landmarks=ekf_ex.LANDMARKS, mode="filtered",
                         options=SmootherOptions(landmark_noise=NOISE))

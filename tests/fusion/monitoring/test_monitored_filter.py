@@ -5,7 +5,8 @@ import pytest
 
 from benchmarks.bench_monitor import route_drives
 from drivers.sim.config import Fault
-from fusion.exceptions import MeasurementShapeError
+from fusion.ekf.ekf_options import EKFOptions
+from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.landmark_map import LandmarkMap
 from fusion.landmarks.synthetic import synthetic_observations
 from fusion.monitoring.monitored_filter import MonitoredFilter
@@ -13,7 +14,8 @@ from fusion.monitoring.phase_one import NominalFit
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model.fir import FirFit
 from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.ticks import TICK_MODULUS
+from lti_motion.recordings.frames import SensorFrame
+from lti_motion.recordings.ticks import TICK_MODULUS, tick_deltas
 
 DT = 0.015
 M_PER_TICK = 5e-4
@@ -28,6 +30,11 @@ def _model(m_per_tick=M_PER_TICK):
         calibrated_at="2026-01-01T00:00:00+00:00")
 
 
+def _frame(ticks, cmd, *, valid=True):
+    """A frame of counts and commands only (a recording's row)."""
+    return SensorFrame.of_counts(0.0, ticks, cmd, valid=valid)
+
+
 def _straight(n, ticks_per_period=6):
     """Counts of frames 0..n driving straight at 0.2 m/s (6 ticks a period from period 2,
     after the model's period of delay), 16-bit."""
@@ -40,8 +47,8 @@ def test_lost_frames_only_advance_and_the_next_counts_span_the_gap():
     cmd = np.array([0.2, 0.2])
     whole, lossy = MonitoredFilter(_model()), MonitoredFilter(_model())
     for k in range(201):
-        a = whole.step(ticks[k], cmd)
-        b = lossy.step(ticks[k], cmd, valid=not 100 <= k < 103)
+        a = whole.step(_frame(ticks[k], cmd))
+        b = lossy.step(_frame(ticks[k], cmd, valid=not 100 <= k < 103))
         if 100 <= k < 103:
             assert b.encoders is None and b.tick_deltas.tolist() == [0.0, 0.0]
         elif k == 103:
@@ -65,7 +72,7 @@ def test_sightings_correct_a_wrong_start_when_fused(fuse, rng):
     mf = MonitoredFilter(_model(), landmarks=landmarks, fuse_landmarks=fuse,
                          initial_pose=(0.1, -0.05, 0.0), pose_std=(0.1, 0.1, 0.05))
     for k in range(n + 1):
-        result = mf.step(ticks[k], np.array([0.2, 0.2]), sightings=seen.get(k))
+        result = mf.step(_frame(ticks[k], np.array([0.2, 0.2])), sightings=seen.get(k))
     error = np.hypot(*(result.pose[:2] - truth[-1, :2]))
     landmark_updates = mf.ekf.stats.count("landmark", "fused")
     if fuse:
@@ -87,7 +94,7 @@ def test_phase_one_runs_the_dynamics_tests_with_its_gate(route_model, route_null
                          t0_s=route_model.dt_s, on_alarm=seen.append)
     assert mf.monitor.thresholds().gate == 1e9 and mf.dynamics is not None
     for k in range(cmd.shape[1]):
-        mf.step(ticks[k + 1].astype(np.int64), cmd[0, k])
+        mf.step(_frame(ticks[k + 1].astype(np.int64), cmd[0, k]))
     dynamics = [e for e in mf.events if e.kind == "dynamics_changed"]
     assert dynamics and onset <= dynamics[0].t_s <= onset + 4.0, dynamics
     assert dynamics[0].dynamics is not None and dynamics[0].dynamics.test == "lag"
@@ -99,10 +106,10 @@ def test_bad_input_is_a_clear_error():
         MonitoredFilter(_model(m_per_tick=None))
     mf = MonitoredFilter(_model())
     with pytest.raises(MeasurementShapeError, match=r"shape \(2,\)"):
-        mf.step(np.zeros(3), np.zeros(2))             # the first frame anchors the counts
-    mf.step(np.zeros(2), np.zeros(2))
+        mf.step(_frame(np.zeros(3), np.zeros(2)))     # the first frame anchors the counts
+    mf.step(_frame(np.zeros(2), np.zeros(2)))
     with pytest.raises(MeasurementShapeError, match=r"shape \(2,\).*\(3,\)"):
-        mf.step(np.zeros(3), np.zeros(2))             # and every later one
+        mf.step(_frame(np.zeros(3), np.zeros(2)))     # and every later one
 
 
 def test_a_diverged_filter_resets_and_says_so_with_a_filter_reset_alarm():
@@ -120,9 +127,33 @@ def test_a_diverged_filter_resets_and_says_so_with_a_filter_reset_alarm():
     for k in range(200):
         j = k % 3
         z = range_bearing(truth, np.array(lm.position(j))) + rng.normal(0.0, [0.01, 0.005])
-        result = mf.step(np.array([100, 100]), np.zeros(2),
+        result = mf.step(_frame(np.array([100, 100]), np.zeros(2)),
                          sightings=RangeBearing([k], [j], [z[0]], [z[1]]))
     resets = [e for e in mf.events if e.kind == "filter_reset"]
     assert [e.test for e in resets] == ["diverged"] and resets[0] in heard
     assert mf.ekf.n_resets == 1 and resets[0].t_s == mf.ekf.resets[0].t_s
     assert np.hypot(*(result.pose[:2] - truth[:2])) < 0.05
+
+
+def test_the_count_changes_are_the_filters_own_across_the_wrap_and_lost_frames():
+    """The frame's count changes are those the EKF's counts took (one reference, in the
+    EKF), the ring step since the last valid frame, with a 12-bit counter wrapping."""
+    ticks = _straight(300) % (1 << 12)
+    options = EKFOptions(history=0, counter_bits=12)
+    mf = MonitoredFilter(_model(), ekf_options=options)
+    lost = set(range(40, 44)) | {150}
+    last = None
+    for k in range(301):
+        result = mf.step(_frame(ticks[k], np.array([0.2, 0.2]), valid=k not in lost))
+        if k == 0 or k in lost:
+            assert result.tick_deltas.tolist() == [0.0, 0.0]
+            continue
+        if last is not None:
+            expected = tick_deltas(ticks[[last, k]], axis=0, counter_bits=12)[0]
+            assert result.tick_deltas.tolist() == expected.astype(float).tolist(), k
+        assert mf.ekf.encoder_counts.frame == tuple(ticks[k].tolist())
+        last = k
+    assert mf.ekf.options is options and mf.ekf_options is options
+    assert mf.ekf.stats.count("encoders", "fused") == 300 - len(lost)
+    with pytest.raises(FilterOptionError, match="ekf_options must be an EKFOptions"):
+        MonitoredFilter(_model(), ekf_options={"counter_bits": 12})

@@ -8,6 +8,8 @@ and the fit of the model in use on fresh faulty data against the nominal fit.
 
 The paper: ``docs/architecture.md``, "The paper".
 """
+
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,6 +23,7 @@ from benchmarks.bench_monitor import (
 )
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.residual import AlarmEvent
 from lti_motion.kinematics import wheel_from_body
 
@@ -58,8 +61,8 @@ def _alarm(t_s=10.0, onset_s=0.0):
 
 def test_waiting_asks_for_excitation_once_and_retries_as_data_comes(model):
     asked = []
-    rc = Recalibrator(model, min_samples=3000, retry_samples=500,
-                      request_excitation=asked.append)
+    rc = Recalibrator(model, request_excitation=asked.append,
+                      options=RecalibrationOptions(min_samples=3000, retry_samples=500))
     u, y = excitation_speeds(model, [], seed=3, duration_s=60.0)
     for k in range(200):
         rc.add(k * model.dt_s, u[k], y[k])
@@ -80,7 +83,7 @@ def test_waiting_asks_for_excitation_once_and_retries_as_data_comes(model):
 
 
 def test_segments_split_at_gaps_and_short_ones_are_dropped(model):
-    rc = Recalibrator(model, min_samples=100)
+    rc = Recalibrator(model, options=RecalibrationOptions(min_samples=100))
     dt = model.dt_s
     for k in range(300):
         rc.add(k * dt, np.full(2, 0.1), np.zeros(2))
@@ -97,9 +100,9 @@ def test_segments_split_at_gaps_and_short_ones_are_dropped(model):
 def test_refit_gain_follows_the_model_in_use(model):
     assert "dc_gain_scale" in model.diagnostics              # calibrated as a wheel servo
     assert Recalibrator(model).dc_gain == "wheel_servo"
-    assert Recalibrator(model, dc_gain="free").dc_gain == "free"
+    assert Recalibrator(model, options=RecalibrationOptions(dc_gain="free")).dc_gain == "free"
     with pytest.raises(FilterOptionError, match="dc_gain"):
-        Recalibrator(model, dc_gain="servo")
+        Recalibrator(model, options=RecalibrationOptions(dc_gain="servo"))
 
 
 @pytest.mark.parametrize("kind", ["delay", "payload"])
@@ -185,8 +188,8 @@ def test_precise_scale_alarm_is_adopted_at_once_and_saved(model, tmp_path):
 
 def test_imprecise_scale_alarm_waits_for_the_running_estimate(model):
     asked = []
-    rc = Recalibrator(model, request_rotation=asked.append, max_scale_std=0.004,
-                      scale_settle_s=30.0)
+    rc = Recalibrator(model, request_rotation=asked.append,
+                      options=RecalibrationOptions(max_scale_std=0.004, scale_settle_s=30.0))
     assert rc.update_scale(1.0, 0.96, 0.001) is None                 # nothing waits
     first = rc.on_alarm(_scale_alarm(20.0, 1.01, 0.048))               # raised in a turn
     assert first.action == "waiting" and rc.scale_waiting and rc.model is model
@@ -200,14 +203,15 @@ def test_imprecise_scale_alarm_waits_for_the_running_estimate(model):
 
 def test_scale_that_does_not_settle_asks_for_a_rotation(model):
     asked = []
-    rc = Recalibrator(model, request_rotation=asked.append, scale_settle_s=10.0)
+    rc = Recalibrator(model, request_rotation=asked.append,
+                      options=RecalibrationOptions(scale_settle_s=10.0))
     event = _scale_alarm(20.0, 0.97, 0.02)
     rc.on_alarm(event)
     assert rc.update_scale(29.0, 0.97, 0.01) is None
     record = rc.update_scale(30.0, 0.97, 0.01)
     assert record.action == "rotation_requested" and asked == [event] and rc.model is model
     # the wait also ends in add() (no estimate fed), and without a callback the old scale stays
-    rc2 = Recalibrator(model, scale_settle_s=10.0)
+    rc2 = Recalibrator(model, options=RecalibrationOptions(scale_settle_s=10.0))
     rc2.on_alarm(event)
     rc2.add(25.0, np.zeros(2), np.zeros(2))
     assert rc2.scale_waiting
@@ -215,15 +219,16 @@ def test_scale_that_does_not_settle_asks_for_a_rotation(model):
     assert not rc2.scale_waiting and rc2.history[-1].action == "kept_old"
     assert "no request_rotation" in rc2.history[-1].reason
     # scale_settle_s = 0: an imprecise alarm asks at once
-    rc3 = Recalibrator(model, request_rotation=asked.append, scale_settle_s=0.0)
+    rc3 = Recalibrator(model, request_rotation=asked.append,
+                       options=RecalibrationOptions(scale_settle_s=0.0))
     assert rc3.on_alarm(event).action == "rotation_requested" and len(asked) == 2
 
 
 def test_scale_options_are_checked(model):
     with pytest.raises(FilterOptionError, match="max_scale_std"):
-        Recalibrator(model, max_scale_std=0.0)
+        Recalibrator(model, options=RecalibrationOptions(max_scale_std=0.0))
     with pytest.raises(FilterOptionError, match="scale_reference"):
-        Recalibrator(model, scale_reference=(0.0, 0.235))
+        Recalibrator(model, options=RecalibrationOptions(scale_reference=(0.0, 0.235)))
 
 
 def test_carpet_scale_from_landmarks_is_close_to_the_truth(model):
@@ -239,3 +244,17 @@ def test_carpet_scale_from_landmarks_is_close_to_the_truth(model):
     # without the landmark scale the error would be the carpet's 3.5% (true ratio 0.965);
     # the wait runs from the onset: the alarm (<= 10 s) plus at most scale_settle_s (30 s)
     assert np.all(res.wait_s <= 40.0) and np.all(np.abs(res.b_error_pct) <= 3.0)
+
+
+def test_the_options_are_one_frozen_object_and_the_model_completes_them(model):
+    options = RecalibrationOptions(min_samples=400)
+    rc = Recalibrator(model, options=options)
+    assert rc.options is options and rc.dc_gain == "wheel_servo"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.min_samples = 10
+    with pytest.raises(TypeError):
+        RecalibrationOptions(120.0)                         # keyword-only
+    with pytest.raises(FilterOptionError, match="validation_fraction"):
+        RecalibrationOptions(validation_fraction=1.0)
+    with pytest.raises(FilterOptionError, match="options must be a RecalibrationOptions"):
+        Recalibrator(model, options={"min_samples": 400})

@@ -19,6 +19,7 @@ from fusion.ekf.updates import UpdateRecord
 from fusion.exceptions import CovarianceNotPositiveDefiniteError, TimeOrderError
 from fusion.monitoring.cusum import cusum_arl, cusum_threshold
 from fusion.monitoring.monitored_filter import MonitoredFilter
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.residual import (
     AlarmEvent,
     MonitorOptions,
@@ -27,6 +28,7 @@ from fusion.monitoring.residual import (
     one_step_innovations,
     whiten,
 )
+from lti_motion.recordings.frames import SensorFrame
 
 DT = 0.015
 N_RUNS, FAULT_AT_S, DURATION_S = 20, 20.0, 30.0
@@ -280,7 +282,7 @@ def _monitor_run(model, log, start_pose, until_s=math.inf):
     mf = MonitoredFilter(model, initial_pose=start_pose, pose_std=(0.005,) * 3,
                          initial_ticks=log.ticks[0])
     for k in range(1, int(np.searchsorted(log.t_s, until_s, side="right"))):
-        mf.step(log.ticks[k], log.cmd_m_s[k])
+        mf.step(SensorFrame.of_counts(log.t_s[k], log.ticks[k], log.cmd_m_s[k]))
     return mf.monitor
 
 
@@ -369,7 +371,8 @@ def test_after_a_dynamics_alarm_the_fit_returns_within_2_points(model, fault, ac
     from fusion.monitoring.recalibration import Recalibrator
     from lti_motion.model.motion_model import MotionModel
     u, y = _excitation_speeds(model, (fault,))
-    rc = Recalibrator(model, min_samples=3000, save_path=tmp_path / "model.json")
+    rc = Recalibrator(model, save_path=tmp_path / "model.json",
+                      options=RecalibrationOptions(min_samples=3000))
     for k in range(len(y)):
         rc.add(k * model.dt_s, u[k], y[k])
     record = rc.on_alarm(_alarm())
@@ -391,7 +394,8 @@ def test_policy_waits_keeps_and_delegates(model):
     from fusion.monitoring.recalibration import Recalibrator
     u, y = _excitation_speeds(model, (), duration_s=40.0)
     asked = []
-    rc = Recalibrator(model, min_samples=2000, request_rotation=asked.append)
+    rc = Recalibrator(model, request_rotation=asked.append,
+                      options=RecalibrationOptions(min_samples=2000))
     for k in range(len(y)):
         rc.add(k * model.dt_s, u[k], y[k])
     assert rc.on_alarm(_alarm(onset_s=35.0)).action == "waiting"        # ~330 samples since

@@ -12,6 +12,7 @@ from fusion.exceptions import FilterOptionError, MeasurementShapeError
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.wheel_check import WheelCheck, WheelCheckOptions
 from lti_motion.app.monitor_setup import monitor_route
+from lti_motion.recordings.frames import SensorFrame
 
 MOVING, FLAT_LEFT = np.array([False, False]), np.array([True, False])
 
@@ -86,9 +87,9 @@ def _alarms(model, kind, *, currents=True):
         r = log.robot(i)
         mf = MonitoredFilter(model)
         for k in range(len(r)):
-            extra = ({"motor_current_a": r.motor_current_a[k],
-                      "wheel_overcurrent": r.wheel_overcurrent[k]} if currents else {})
-            mf.step(r.ticks[k], r.cmd_m_s[k], **extra)
+            # with currents the simulator's frame, else one of a robot that reports none
+            mf.step(r.frame(k) if currents
+                    else SensorFrame.of_counts(r.t_s[k], r.ticks[k], r.cmd_m_s[k]))
         wheel = [e for e in mf.events if e.test == "stuck"]
         out.append(wheel[0] if wheel else None)
     return out

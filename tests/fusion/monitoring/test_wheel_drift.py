@@ -20,6 +20,7 @@ from drivers.sim.config import get_preset
 from fusion.exceptions import FilterOptionError
 from fusion.landmark_map import LandmarkMap
 from fusion.monitoring.recalibration import Recalibrator
+from fusion.monitoring.recalibration_options import RecalibrationOptions
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions, ResidualMonitor
 from fusion.monitoring.scale import ScaleAlarm, ScaleMonitor, ScaleOptions
 from fusion.noise import LandmarkNoise
@@ -196,13 +197,13 @@ def test_the_policy_writes_a_precise_alarms_intrinsics_into_the_model(tmp_path):
 
 
 def test_an_imprecise_curvature_waits_for_the_running_estimate_then_gives_up():
-    rc = Recalibrator(_model(), scale_settle_s=30.0)
+    rc = Recalibrator(_model(), options=RecalibrationOptions(scale_settle_s=30.0))
     event, new = _drift_event(0.01)
     assert rc.on_alarm(event).action == "waiting" and rc.drift_waiting
     assert rc.update_intrinsics(35.0, new, 0.006) is None            # still imprecise
     r = rc.update_intrinsics(40.0, new, 0.003)
     assert r.action == "adopted" and rc.model.intrinsics == new and not rc.drift_waiting
-    rc2 = Recalibrator(_model(), scale_settle_s=30.0)
+    rc2 = Recalibrator(_model(), options=RecalibrationOptions(scale_settle_s=30.0))
     rc2.on_alarm(_drift_event(0.01)[0])
     rc2.add(61.0, np.zeros(2), np.zeros(2))
     assert rc2.history[-1].action == "kept_old" and rc2.model.intrinsics is None

@@ -24,6 +24,7 @@ import pytest
 import drivers.sim
 from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
 from drivers.bags.writer import write_drive_bag
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.exceptions import FilterOptionError
 from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.noise import GyroNoise
@@ -32,6 +33,7 @@ from lti_motion.app.cli import main
 from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_frame_log
 from lti_motion.kinematics import wrap_angle
+from lti_motion.recordings.frames import SensorFrame
 
 
 @pytest.fixture(scope="module")
@@ -124,18 +126,20 @@ def test_monitored_filter_estimates_a_gyro_bias_at_rest(tiny_model, rng):
     period), frames 300-309 lost (their readings too): the bias state ends within 0.003
     rad/s of 0.008 (two of its standard deviations, 0.0016 over 10 s at 0.005
     rad/s/sqrt(Hz)) and the heading stays within 0.005 rad of 0 (the encoders say: no
-    turn). Without ``gyro=`` a reading is refused."""
-    mf = MonitoredFilter(tiny_model, gyro=GyroNoise())
+    turn). Without ``EKFOptions(gyro=)`` a frame with a reading is refused."""
+    mf = MonitoredFilter(tiny_model, ekf_options=EKFOptions(history=0, gyro=GyroNoise()))
     readings = 0.008 + 0.005 / np.sqrt(tiny_model.dt_s) * rng.standard_normal(667)
     for k, y in enumerate(readings):
-        mf.step(np.array([100, 200]), np.zeros(2), valid=not 300 <= k < 310,
-                yaw_rate_rad_s=float(y))
+        mf.step(SensorFrame.of_counts(k * tiny_model.dt_s, np.array([100, 200]), np.zeros(2),
+                                      valid=not 300 <= k < 310, yaw_rate_rad_s=float(y)))
     assert abs(mf.ekf.gyro_bias - 0.008) < 0.003, mf.ekf.gyro_bias
     assert abs(mf.ekf.pose[2]) < 0.005
     assert mf.ekf.stats.count("gyro", "non_finite") == 10       # the lost frames
     assert mf.ekf.stats.count("gyro", "fused") > 0
-    with pytest.raises(FilterOptionError, match="has no gyro; give gyro=GyroNoise"):
-        MonitoredFilter(tiny_model).step(np.array([0, 0]), np.zeros(2), yaw_rate_rad_s=0.0)
+    with pytest.raises(FilterOptionError,
+                       match=r"has no gyro; give ekf_options=EKFOptions\(gyro=GyroNoise"):
+        MonitoredFilter(tiny_model).step(SensorFrame.of_counts(0.0, np.array([0, 0]), np.zeros(2),
+                                                               yaw_rate_rad_s=0.0))
 
 
 def test_monitor_sim_with_a_robot_file_that_has_a_gyro(model_file, tmp_path, capsys):

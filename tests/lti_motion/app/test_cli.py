@@ -9,6 +9,7 @@ import tomllib
 import numpy as np
 import pytest
 
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from lti_motion.app.cli import build_parser, main
 
 
@@ -187,7 +188,7 @@ def test_monitor_sim_runs_the_dynamics_and_scale_tests_after_phase_one(model_fil
 def test_monitor_port_drives_a_virtual_roomba(model_file, capsys):
     from drivers.roomba.virtual import VirtualRoomba
 
-    with VirtualRoomba(seed=5, speed=10.0) as vr:
+    with VirtualRoomba(seed=5, options=VirtualRoombaOptions(speed=10.0)) as vr:
         assert main(["monitor", "--port", vr.device_path, "--clock-rate", "10",
                      "--model", model_file, "--duration", "4"]) == 0
         driven = len(vr.applied_commands_m_s)
@@ -205,7 +206,7 @@ def test_monitor_port_fits_phase_one_on_recorded_nominal_drives(model_file, tmp_
     assert main(["monitor", "--sim", "create2", "--model", model_file, "--duration", "60",
                  "--nominal-drives", "0", "--record", str(log), "--seed", "3"]) == 0
     assert "dynamics tests off" in capsys.readouterr().out
-    with VirtualRoomba(seed=5, speed=10.0) as vr:
+    with VirtualRoomba(seed=5, options=VirtualRoombaOptions(speed=10.0)) as vr:
         assert main(["monitor", "--port", vr.device_path, "--clock-rate", "10",
                      "--model", model_file, "--duration", "4", "--nominal", str(log)]) == 0
     out = capsys.readouterr().out

@@ -11,6 +11,7 @@ import pytest
 
 from drivers.roomba.oi import Opcode
 from drivers.roomba.virtual import VirtualRoomba
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Room
 from lti_motion.app.cli import main
 from lti_motion.model.motion_model import MotionModel
@@ -96,8 +97,8 @@ def test_ctrl_c_stops_the_wheels_and_says_what_was_kept(tmp_path, capsys, monkey
 
     monkeypatch.setattr(drivers.sim, "print_progress", interrupted)    # what the command reads
     out = tmp_path / "cal"
-    with VirtualRoomba(seed=1, speed=8.0, room=Room.cluttered(),
-                       initial_pose=Room.CALIBRATION_SPOT) as vr:
+    with VirtualRoomba(seed=1, room=Room.cluttered(), initial_pose=Room.CALIBRATION_SPOT,
+                       options=VirtualRoombaOptions(speed=8.0)) as vr:
         assert main(["calibrate", "--port", vr.device_path, "--clock-rate", "8", "--yes",
                      "--out", str(out)]) == 130
         vr.wait_until(lambda v: v.received[-1].opcode == Opcode.STOP, timeout_s=5.0)
@@ -115,7 +116,7 @@ def test_ctrl_c_at_the_prompt_is_one_line(tmp_path, capsys, monkeypatch):
         raise KeyboardInterrupt
 
     monkeypatch.setattr("builtins.input", no_enter)
-    with VirtualRoomba(seed=1, speed=8.0) as vr:
+    with VirtualRoomba(seed=1, options=VirtualRoombaOptions(speed=8.0)) as vr:
         assert main(["calibrate", "--port", vr.device_path, "--clock-rate", "8",
                      "--out", str(tmp_path / "cal")]) == 130
     assert "stopped by Ctrl-C" in _one_error_line(capsys.readouterr().err)

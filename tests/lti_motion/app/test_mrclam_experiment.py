@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from drivers.datasets import CREATE1_WHEEL_BASE_M, load_mrclam, resample_robot
+from fusion.ekf.ekf_options import EKFOptions
 from fusion.ekf.model_ekf import ModelEKF
 from fusion.ekf.velocity_ekf import VelocityModelEKF
 from fusion.noise import LandmarkNoise
@@ -176,10 +177,12 @@ def test_model_filter_under_the_rule_is_the_textbook_filter_for_a_pass_through_m
     rng = np.random.default_rng(3)
     filters = {
         "rule": ModelEKF(output_error_model(model, cov), initial_pose=pose0,
-                         pose_std=(0.05, 0.05, 0.05), slip=NO_SLIP, scales=HELD_SCALES,
-                         landmarks={7: landmark}, landmark_noise=noise, history=0),
+                         pose_std=(0.05, 0.05, 0.05), landmarks={7: landmark},
+                         options=EKFOptions(slip=NO_SLIP, scales=HELD_SCALES,
+                                            landmark_noise=noise, history=0)),
         "own": ModelEKF(model, initial_pose=pose0, pose_std=(0.05, 0.05, 0.05),
-                        landmarks={7: landmark}, landmark_noise=noise, history=0)}
+                        landmarks={7: landmark},
+                        options=EKFOptions(landmark_noise=noise, history=0))}
     raw = VelocityModelEKF(dt_s=0.1, speed_cov=cov, initial_pose=pose0,
                            pose_std=(0.05, 0.05, 0.05), landmarks={7: landmark},
                            landmark_noise=noise)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import drivers.sim.calibration
+from drivers.roomba.virtual_options import VirtualRoombaOptions
 from drivers.sim.config import Room, load_robot
 from drivers.sim.simulator import Simulator
 from lti_motion.app.cli import main
@@ -136,8 +137,9 @@ def test_port_drives_the_wall_run_on_a_virtual_roomba(lefty, tmp_path, capsys):
     """The user's path: --port through the serial driver (default link options) at 10x."""
     from drivers.roomba.virtual import VirtualRoomba
 
-    with VirtualRoomba(load_robot(str(lefty)), seed=2, speed=10.0, floor="tile",
-                       room=Room.single_wall(), initial_pose=(0.0, 0.5, -np.pi / 2)) as vr:
+    with VirtualRoomba(load_robot(str(lefty)), seed=2, floor="tile", room=Room.single_wall(),
+                       initial_pose=(0.0, 0.5, -np.pi / 2),
+                       options=VirtualRoombaOptions(speed=10.0)) as vr:
         code = main(["calibrate", "--port", vr.device_path, "--clock-rate", "10", "--yes",
                      "--robot", str(lefty), "--wall-run", "--wall-run-m", "1",
                      "--out", str(tmp_path)])
@@ -168,8 +170,9 @@ def test_closed_standard_input_at_the_prompt_is_one_line_saying_give_yes(
     from drivers.roomba.virtual import VirtualRoomba
 
     monkeypatch.setattr("builtins.input", _no_one_answers)
-    with VirtualRoomba(load_robot(str(lefty)), seed=2, speed=10.0, room=Room.single_wall(),
-                       initial_pose=(0.0, 0.5, -np.pi / 2)) as vr:
+    with VirtualRoomba(load_robot(str(lefty)), seed=2, room=Room.single_wall(),
+                       initial_pose=(0.0, 0.5, -np.pi / 2),
+                       options=VirtualRoombaOptions(speed=10.0)) as vr:
         _refused(capsys, ["--port", vr.device_path, "--clock-rate", "10", "--robot",
                           str(lefty), "--out", str(tmp_path)],
                  "standard input is closed.*give --yes")

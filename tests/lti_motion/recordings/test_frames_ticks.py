@@ -48,6 +48,33 @@ def test_framelog_batch_robot_window_and_frames_round_trip():
     assert isinstance(frames[0], SensorFrame)
 
 
+def test_framelog_frame_k_keeps_lost_frames_and_drops_the_truth_when_asked():
+    one = _log(n=4)
+    truth = np.arange(12.0).reshape(4, 3)
+    log = FrameLog(**{**one.__dict__, "valid": np.array([1, 0, 1, 1], bool),
+                      "true_pose": truth, "true_body_m_s": np.ones((4, 2)),
+                      "yaw_rate_rad_s": np.array([0.1, 0.2, 0.3, 0.4])})
+    lost = log.frame(1)
+    assert lost.valid is False and lost.t_s == pytest.approx(0.015)
+    np.testing.assert_array_equal(lost.true_pose, truth[1])
+    assert lost.yaw_rate_rad_s == 0.2 and isinstance(lost.yaw_rate_rad_s, float)
+    reported = log.frame(2, truth=False)
+    assert reported.valid is True and reported.true_pose is None
+    assert reported.true_body_m_s is None
+    assert [f.t_s for f in log.frames()] == [log.frame(k).t_s for k in (0, 2, 3)]
+    with pytest.raises(ValueError, match="needs a single-robot log"):
+        _log(n=4, batch=2).frame(0)
+
+
+def test_a_frame_of_counts_has_no_light_bumps_or_bumpers():
+    frame = SensorFrame.of_counts(0.3, np.array([5, 7]), np.array([0.1, 0.2]), valid=False,
+                                  yaw_rate_rad_s=0.05)
+    assert frame.light_bump.shape == (6,) and not frame.light_bump.any()
+    assert frame.bumps.dtype == bool and not frame.bumps.any()
+    assert frame.valid is False and frame.yaw_rate_rad_s == 0.05
+    assert frame.motor_current_a is None and frame.wheel_overcurrent is None
+
+
 @pytest.mark.parametrize(
     ("prev", "cur", "step"),
     [(65530, 5, 11), (5, 65530, -11), (65535, 0, 1), (0, 65535, -1), (100, 100, 0),
