@@ -38,6 +38,7 @@ __all__ = [
     "WallRunDrive",
     "calibrate",
     "calibrate_intrinsics",
+    "calibrate_intrinsics_intervals",
     "calibrate_recording",
     "calibrate_wall_run",
     "drive",
@@ -65,6 +66,7 @@ __getattr__, __dir__ = lazy_exports(
             "IdentifiabilityReport",
             "IntrinsicsCalibration",
             "calibrate_intrinsics",
+            "calibrate_intrinsics_intervals",
         ),
         "lti_motion.calibration.manoeuvres": (
             "Calibration",
@@ -109,6 +111,7 @@ if TYPE_CHECKING:
         IdentifiabilityReport,
         IntrinsicsCalibration,
         calibrate_intrinsics,
+        calibrate_intrinsics_intervals,
     )
     from lti_motion.calibration.manoeuvres import (
         Calibration,

@@ -11,7 +11,9 @@
 - :mod:`lti_motion.recordings.resample`: any recording onto the model's grid of periods;
 - :mod:`lti_motion.recordings.ticks`: encoder-count arithmetic (the ring step of a wrapping
   counter, unwrapping, speeds from counts);
-- :mod:`lti_motion.recordings.tum`: planar trajectories in the TUM text format.
+- :mod:`lti_motion.recordings.tum`: planar trajectories in the TUM text format;
+- :mod:`lti_motion.recordings.motion_intervals`: interval samples of a sensor's own motion
+  against the wheels (Censi et al.'s format).
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
 importing the door costs nothing until a name is read.
@@ -36,6 +38,7 @@ __all__ = [
     "ClockFit",
     "FrameLog",
     "GridSignals",
+    "MotionIntervals",
     "PeriodAssignment",
     "Recording",
     "SensorFrame",
@@ -49,6 +52,7 @@ __all__ = [
     "median_period_s",
     "on_grid",
     "poses_from_tum",
+    "read_motion_intervals",
     "read_tum",
     "save_log",
     "save_recording",
@@ -78,6 +82,10 @@ __getattr__, __dir__ = lazy_exports(
             "FrameLog",
             "N_LIGHT_BUMPS",
             "SensorFrame",
+        ),
+        "lti_motion.recordings.motion_intervals": (
+            "MotionIntervals",
+            "read_motion_intervals",
         ),
         "lti_motion.recordings.logfile": (
             "LOG_FORMAT",
@@ -140,6 +148,7 @@ if TYPE_CHECKING:
         save_log,
         save_recording,
     )
+    from lti_motion.recordings.motion_intervals import MotionIntervals, read_motion_intervals
     from lti_motion.recordings.recording import COMMAND_KINDS, WHEEL_KINDS, Recording, Stream
     from lti_motion.recordings.resample import (
         MAX_WHEEL_SPEED_M_S,
