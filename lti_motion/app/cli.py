@@ -116,7 +116,7 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders, gyro=gyro, **extra)
+                      encoders=args.encoders or "commanded", gyro=gyro, **extra)
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
@@ -148,7 +148,7 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
     print(f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
           f"{model.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
     plot_order_selection(model, out / "order_selection.png")
-    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders)
+    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders or "commanded")
     print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
     print(f"wrote {path}, {out / 'order_selection.png'} and {out / 'bag_fit.png'}")
     return 0
@@ -161,7 +161,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         return run_wall_run(args)
     if args.bag:
         return _cmd_calibrate_bag(args)
-    if args.log and args.reference:                 # odometry intrinsics of a recorded drive
+    if args.reference:                              # odometry intrinsics against a reference
         from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
 
         return run_intrinsics_calibration(args)
@@ -393,11 +393,13 @@ def _check_args(args: argparse.Namespace) -> None:
 def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     """``calibrate``: one place to drive; --wheel-base only for a robot or a recording (the
     simulator has its description's)."""
-    if not (args.sim or args.port or args.log or args.bag):
+    alone = bool(args.reference) and not (args.sim or args.port or args.log or args.bag)
+    if not (args.sim or args.port or args.log or args.bag or alone):
         raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot), "
                          "--log FILE or --bag PATH (a recorded drive)")
-    if args.reference and not args.log:
-        raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
+    if args.reference and (args.sim or args.port or args.bag):
+        raise ValueError("--reference goes with --log LOG.npz (a recorded drive), or alone "
+                         "with interval samples")
     described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
     recorded = args.log or args.bag
     if described and not (args.port or recorded) and args.wheel_base is not None:

@@ -148,9 +148,11 @@ def closed_form(iv: Intervals, *, sensor_pose: bool, causes: str
         if abs(b) > 3.0 * se_b:
             raise PoseReferenceError("the reference's travel does not follow the wheel counts "
                                      f"(wheel base estimate {b:.3g} m); {causes}")
+        mount = ("" if sensor_pose else "; if the reference is a sensor off the axle centre "
+                 "or turned on the robot, estimate its mount (sensor_pose=True; --sensor-pose)")
         raise UnidentifiableError(
             f"the drive does not determine the wheel base ({b:.3g} +- {se_b:.2g} m): the "
-            "robot barely travelled (turns in place only?); add straight runs or arcs")
+            f"robot barely travelled (turns in place only?); add straight runs or arcs{mount}")
     return OdometryIntrinsics(-j21 * b, j22 * b, b), pose
 
 
