@@ -48,6 +48,7 @@ from lti_motion.calibration.intrinsics_solver import (
     noise_from_residuals,
     refine,
     residuals,
+    rotation_step_precision,
     trim,
 )
 from lti_motion.exceptions import PoseReferenceError, UnidentifiableError
@@ -75,6 +76,10 @@ _IN_PLACE = 0.8
 _REFERENCE_TURN_RAD = 0.02
 #: Above this condition number the rotation cannot separate the two wheels.
 _MAX_CONDITION = 1e3
+#: Above this relative standard error of the rotation step's ``J21, J22`` the wheels
+#: moved in too nearly one proportion to separate them (measured: 1.5% on Censi's l90,
+#: 0.03% on a drive of straight runs and turns; 30-500% on constant arcs).
+_MAX_ROTATION_ERROR = 0.05
 #: After the fit, residuals above these fractions of the reference's own motion (medians
 #: per interval) mean the reference does not follow the counts.
 _MAX_ROTATION_RESIDUAL = 0.5
@@ -314,7 +319,7 @@ def _report(dn_w: np.ndarray, rot_w: np.ndarray, iv: Intervals,
                                  windows=len(dn_w))
 
 
-def _check_identifiable(report: IdentifiabilityReport, dn_w: np.ndarray, *,
+def _check_identifiable(report: IdentifiabilityReport, dn_w: np.ndarray, iv: Intervals, *,
                         interval_hint: str) -> None:
     """The documented ``UnidentifiableError`` (or, for a reference that does not turn
     with the counts, ``PoseReferenceError``) before anything is fitted."""
@@ -330,10 +335,12 @@ def _check_identifiable(report: IdentifiabilityReport, dn_w: np.ndarray, *,
         raise PoseReferenceError(
             f"the reference shows no turns while the wheel counts turn the robot in "
             f"{counts_turn} windows; {_causes(sensor_pose=True, encoders=None)}")
-    if report.rotation_condition > _MAX_CONDITION:
+    precision = rotation_step_precision(iv)
+    if report.rotation_condition > _MAX_CONDITION or not precision < _MAX_ROTATION_ERROR:
         raise UnidentifiableError(
             f"{interval_hint}the wheels always moved in one proportion "
-            f"(condition {report.rotation_condition:.3g}): add straight runs to the turns or "
+            f"(condition {report.rotation_condition:.3g}, the wheels' turn rates "
+            f"{precision:.0%} uncertain): add straight runs to the turns or "
             "turns to the straight runs" + (
                 ", or give a shorter interval_s if the manoeuvres alternate faster than that"
                 if interval_hint else ""))
@@ -512,7 +519,7 @@ def calibrate_intrinsics(
     iv = _intervals(t, counts, rt, rp, interval_s, overlap=overlap)
     dn_w, rot_w, halves = _windows(t, counts, rt, rp)
     report = _report(dn_w, rot_w, iv, halves)
-    _check_identifiable(report, dn_w, interval_hint=f"over intervals of {interval_s:g} s ")
+    _check_identifiable(report, dn_w, iv, interval_hint=f"over intervals of {interval_s:g} s ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
     return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
                   fraction=outlier_fraction,
@@ -601,7 +608,7 @@ def calibrate_intrinsics_intervals(
         raise UnidentifiableError("the encoders did not move: nothing to calibrate")
     iv = Intervals.from_samples(dn, sm)
     report = _report(dn, sm[:, 2], iv)
-    _check_identifiable(report, dn, interval_hint="")
+    _check_identifiable(report, dn, iv, interval_hint="")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad])
     return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
                   fraction=outlier_fraction,

@@ -107,6 +107,19 @@ def rotation_step(iv: Intervals) -> tuple[float, float]:
     return float(j21), float(j22)
 
 
+def rotation_step_precision(iv: Intervals) -> float:
+    """The larger relative standard error of ``J21, J22`` (sec. V-A's least squares,
+    ``s^2 (X^T X)^-1``): large when the wheels always moved in one proportion, whatever
+    the counts' noise or unit; ``inf`` if singular."""
+    x, y = iv.dn_total, iv.ref_motion[:, 2]
+    j, *_ = np.linalg.lstsq(x, y, rcond=None)
+    s2 = float(np.sum((y - x @ j) ** 2)) / max(len(y) - 2, 1)
+    info = x.T @ x
+    if not np.linalg.cond(info) < 1e14 or not np.all(j != 0):
+        return float("inf")
+    return float(np.max(np.sqrt(np.diag(s2 * np.linalg.inv(info))) / np.abs(j)))
+
+
 def closed_form(iv: Intervals, *, sensor_pose: bool, causes: str
                 ) -> tuple[OdometryIntrinsics, np.ndarray]:
     """Censi et al. 2013 sec. V-A (rotation) and V-B (translation, constrained LS).
