@@ -353,12 +353,14 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
     (:mod:`lti_motion.calibration.intrinsics_solver`)."""
     keep = np.ones(len(iv.starts), bool)
     sigma = sigma0
+    p = None
     for round_ in range(rounds + 1):
         sub = iv.subset(keep)
         closed, pose = closed_form(sub, sensor_pose=sensor_pose, causes=causes)
-        p0 = np.array([closed.m_per_tick_left, closed.m_per_tick_right, closed.wheel_base_m,
-                       *(pose if sensor_pose else ())])
-        p, cov = refine(sub, p0, sigma)
+        if p is None:                          # later rounds start where the last ended
+            p = np.array([closed.m_per_tick_left, closed.m_per_tick_right,
+                          closed.wheel_base_m, *(pose if sensor_pose else ())])
+        p, cov = refine(sub, p, sigma)
         r = residuals(sub, p)
         sigma = noise_from_residuals(r, _NOISE_FLOOR)
         if round_ < rounds:
