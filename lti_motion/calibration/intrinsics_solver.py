@@ -216,14 +216,24 @@ def refine(iv: Intervals, p0: np.ndarray, sigma: np.ndarray
     return fit.x * unit, cov_x * np.outer(unit, unit)
 
 
-def trim(r: np.ndarray, fraction: float) -> np.ndarray:
+def trim(r: np.ndarray, fraction: float, *, robust: bool = True) -> np.ndarray:
     """Censi et al.'s rule on the residuals ``r`` (K, 3) of the intervals kept: True for
     those at or below both the rotation's and the translation's ``1 - fraction``
-    quantile (their solver: the sorted errors' element ``round((1 - fraction) K)``)."""
+    quantile (their solver: the sorted errors' element ``round((1 - fraction) K)``).
+
+    With ``robust``, an interval is rejected only if it also lies beyond 3 robust
+    standard deviations (scale from the median, Hampel's rule): ``|e_theta| > 3 sigma``
+    with ``sigma = median |e_theta| / 0.6745`` (half-normal), ``|e_xy| > 3.44 sigma`` with
+    ``sigma = median |e_xy| / 1.1774`` (Rayleigh; the same 0.27% tail), so residuals
+    that are merely the largest of clean data are kept."""
     e_th = np.abs(r[:, 2])
     e_xy = np.hypot(r[:, 0], r[:, 1])
     index = min(max(int(np.round((1.0 - fraction) * len(r))), 0), len(r) - 1)
-    return (e_th <= np.sort(e_th)[index]) & (e_xy <= np.sort(e_xy)[index])
+    lim_th, lim_xy = np.sort(e_th)[index], np.sort(e_xy)[index]
+    if robust:
+        lim_th = max(lim_th, 3.0 * np.median(e_th) / 0.6745)
+        lim_xy = max(lim_xy, 3.44 * np.median(e_xy) / 1.1774)
+    return (e_th <= lim_th) & (e_xy <= lim_xy)
 
 
 def noise_from_residuals(r: np.ndarray, floor: np.ndarray) -> np.ndarray:
