@@ -53,8 +53,8 @@ def test_cli_defaults_on_raw_samples_match_the_authors(censi_path, tmp_path, cap
 @pytest.mark.parametrize(("config", "upper"), [("lstraight", 2.0), ("l90", None)])
 def test_reported_std_covers_the_subsets_spread(censi_path, config, upper):
     """The subsets' mean reported standard deviation over their spread, per parameter:
-    never below 1/2 (overconfident); for lstraight also below 2 (measured 0.74-1.20). On
-    l90 (turns in place) the reported values are 2.1-4.7 times the spread for five of the
+    never below 1/2 (overconfident); for lstraight also below 2 (measured 0.73-1.26). On
+    l90 (turns in place) the reported values are 1.95-3.8 times the spread for five of the
     six parameters (docs/intrinsics.md: missed; with three subsets the spread itself is
     uncertain by about a factor of two), so only the lower bound is held there."""
     est, std = [], []
