@@ -70,10 +70,12 @@ def run_scores(path: Path) -> dict[str, float]:
         err["diam"] = max(err["diam"], rel[1:].max())
         err["head"] = max(err["head"], abs(np.rad2deg(v[5] - a[5])))
         err["xy"] = max(err["xy"], np.abs(v[3:5] - a[3:5]).max() * 1e3)
-        raw = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion, outlier_rounds=0)
+        raw = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion, sensor_pose=True,
+                                             outlier_rounds=0)
         err["raw"] = max(err["raw"], abs(raw.intrinsics.wheel_base_m / a[0] - 1) * 100)
         for factor in (10.0, 0.1):
-            other = calibrate_intrinsics_intervals(s.wheel_rad * factor, s.sensor_motion)
+            other = calibrate_intrinsics_intervals(s.wheel_rad * factor, s.sensor_motion,
+                                                   sensor_pose=True)
             w, _ = _vector(other)
             w[1:3] *= factor
             change = np.abs(w - v) / np.maximum(np.abs(v), [1e-3] * 5 + [1e-2])

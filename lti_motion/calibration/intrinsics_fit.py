@@ -51,7 +51,7 @@ from lti_motion.calibration.intrinsics_solver import (
     rotation_step_precision,
     trim,
 )
-from lti_motion.exceptions import PoseReferenceError, UnidentifiableError
+from lti_motion.exceptions import CalibrationError, PoseReferenceError, UnidentifiableError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.recordings.ticks import tick_deltas, unfold_commanded_direction
 
@@ -84,6 +84,9 @@ _MAX_ROTATION_ERROR = 0.05
 #: per interval) mean the reference does not follow the counts.
 _MAX_ROTATION_RESIDUAL = 0.5
 _MAX_TRANSLATION_RESIDUAL = 0.5
+#: A reference fitted without the mount whose translation residual the mount would cut
+#: below this fraction is taken as a sensor off the axle.
+_MOUNT_GAIN = 0.5
 #: Floor of the noise estimated from the residuals [m, m, rad] (a perfect reference).
 _NOISE_FLOOR = np.array([1e-7, 1e-7, 1e-8])
 
@@ -346,6 +349,28 @@ def _check_identifiable(report: IdentifiabilityReport, dn_w: np.ndarray, iv: Int
                 if interval_hint else ""))
 
 
+def _check_mount(iv: Intervals, rms_xy: float) -> None:
+    """A reference fitted as the axle centre's that a sensor off the axle explains far
+    better (the closed form with the mount estimated leaves under half the translation
+    residual): the mount is the likely cause, named with its option."""
+    n = len(iv.starts)
+    if n < 10:                       # too few intervals to tell a mount from noise
+        return
+    try:
+        k, pose = closed_form(iv, sensor_pose=True, causes="")
+    except CalibrationError:
+        return
+    r = residuals(iv, np.array([*k.as_dict().values(), *pose]))
+    # per degree of freedom: 2n translation equations, 2 more unknowns with the mount
+    free = float(np.sqrt(np.sum(r[:, :2] ** 2) / (2 * n - 3)))
+    if free < _MOUNT_GAIN * rms_xy * np.sqrt(2 * n / (2 * n - 1)):
+        raise PoseReferenceError(
+            f"the reference moves as a sensor off the axle centre would: its travel differs "
+            f"from the wheel counts' by {rms_xy:.3g} m RMS per interval, {free:.3g} m with "
+            f"a mount of x {pose[0]:.3f} m, y {pose[1]:.3f} m, {np.rad2deg(pose[2]):.1f} deg "
+            "estimated; estimate the mount (sensor_pose=True; --sensor-pose)")
+
+
 def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
            sigma0: np.ndarray, rounds: int, fraction: float, causes: str
            ) -> IntrinsicsCalibration:
@@ -377,6 +402,8 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
     med_th, ref_th = np.median(np.abs(r[:, 2])), np.median(np.abs(sub.ref_motion[:, 2]))
     med_xy = np.median(np.hypot(r[:, 0], r[:, 1]))
     ref_xy = np.median(np.hypot(sub.ref_motion[:, 0], sub.ref_motion[:, 1]))
+    if not sensor_pose:
+        _check_mount(sub, rms_xy)
     if med_th > _MAX_ROTATION_RESIDUAL * ref_th:
         raise PoseReferenceError(
             f"the reference's turns differ from the wheel counts' by {med_th:.3g} rad per "
@@ -416,7 +443,7 @@ def calibrate_intrinsics(
     *,
     interval_s: float = 6.0,
     overlap: int = 10,
-    sensor_pose: bool = True,
+    sensor_pose: bool = False,
     position_std_m: float = 0.005,
     heading_std_rad: float = 0.01,
     encoders: _Encoders = "quadrature",
@@ -446,7 +473,8 @@ def calibrate_intrinsics(
         intervals, so every reference sample counts.
     sensor_pose : bool
         Estimate the reference frame's pose on the robot (Censi et al.); ``False``
-        when the reference tracks the wheel axle's centre itself.
+        (default, as the command line's ``--sensor-pose`` left out) when the reference
+        tracks the wheel axle's centre itself.
     position_std_m, heading_std_rad : float
         Noise of one reference pose [m], [rad]: the weights of the first outlier round
         only; later rounds and the covariance weigh by the noise the kept residuals show.
@@ -532,7 +560,7 @@ def calibrate_intrinsics_intervals(
     counts: np.ndarray,
     sensor_motion: np.ndarray,
     *,
-    sensor_pose: bool = True,
+    sensor_pose: bool = False,
     position_std_m: float = 0.005,
     heading_std_rad: float = 0.01,
     outlier_rounds: int = 4,
@@ -554,8 +582,8 @@ def calibrate_intrinsics_intervals(
         The sensor's displacement ``(x [m], y [m], theta [rad])`` over each interval,
         in its frame at the interval's start.
     sensor_pose : bool
-        Estimate the sensor's pose on the robot; ``False`` when it sits on the axle
-        centre, facing forward.
+        Estimate the sensor's pose on the robot (``--sensor-pose``); ``False`` (default)
+        when it sits on the axle centre, facing forward.
     position_std_m, heading_std_rad : float
         Noise of one sample's motion [m], [rad]: the weights of the first outlier round
         only; later rounds and the covariance weigh by the kept residuals' noise.

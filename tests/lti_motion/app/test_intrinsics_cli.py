@@ -94,3 +94,31 @@ def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, caps
 def test_reference_without_log_is_refused(capsys):
     assert main(["calibrate", "--robot", "create2", "--reference", "x.tum"]) == 2
     assert "--reference goes with --log" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--reference-std", "-0.005", "0.5"], "--reference-std M must be a positive"),
+    (["--outlier-rounds", "-1"], "--outlier-rounds must be an integer of at least 0"),
+    (["--outlier-fraction", "0.7"], r"--outlier-fraction must be in (0, 0.5]"),
+])
+def test_bad_options_are_one_line_and_exit_2(drive, capsys, extra, message):
+    args = ["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+            "--out", str(drive["folder"] / "bad"), *extra]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_the_command_line_and_the_api_give_the_same_result(drive):
+    """One set of defaults: the command with no options and the API with none."""
+    from lti_motion.calibration import calibrate_intrinsics
+    from lti_motion.recordings import load_log, read_tum
+
+    out = drive["folder"] / "same"
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--out", str(out)]) == 0
+    log = load_log(drive["log"])
+    cal = calibrate_intrinsics(log.t_s[log.valid], log.ticks[log.valid], *read_tum(drive["ref"]))
+    written = json.loads((out / "intrinsics.json").read_text())
+    assert written["intrinsics"] == cal.intrinsics.as_dict()
+    assert written["intervals_rejected"] == cal.n_rejected

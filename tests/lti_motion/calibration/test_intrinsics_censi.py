@@ -60,7 +60,7 @@ def test_reported_std_covers_the_subsets_spread(censi_path, config, upper):
     est, std = [], []
     for i in range(3):
         s = read_motion_intervals(censi_path / f"{config}_{i}.tuple")
-        cal = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion)
+        cal = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion, sensor_pose=True)
         est.append([*cal.intrinsics.as_dict().values(), *cal.sensor_pose])
         std.append(cal.std)
     ratio = np.mean(std, axis=0) / np.std(est, axis=0, ddof=1)
@@ -71,9 +71,10 @@ def test_reported_std_covers_the_subsets_spread(censi_path, config, upper):
 
 def test_counts_in_any_unit_give_the_same_physical_result(censi_path):
     s = read_motion_intervals(censi_path / "l90_2.tuple")
-    base = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion)
+    base = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion, sensor_pose=True)
     for factor in (10.0, 0.1):
-        cal = calibrate_intrinsics_intervals(s.wheel_rad * factor, s.sensor_motion)
+        cal = calibrate_intrinsics_intervals(s.wheel_rad * factor, s.sensor_motion,
+                                             sensor_pose=True)
         k, k0 = cal.intrinsics, base.intrinsics
         np.testing.assert_allclose([k.m_per_tick_left * factor, k.m_per_tick_right * factor,
                                     k.wheel_base_m], [k0.m_per_tick_left, k0.m_per_tick_right,
@@ -89,7 +90,7 @@ def test_time_series_in_ten_times_finer_ticks_gives_the_same_result(censi_path):
     out = []
     for cpr in (COUNTS_PER_RAD, 10 * COUNTS_PER_RAD):
         t, ticks, poses = _series(s, cpr)
-        cal = calibrate_intrinsics(t, ticks, t, poses)
+        cal = calibrate_intrinsics(t, ticks, t, poses, sensor_pose=True)
         k = cal.intrinsics
         out.append([k.m_per_tick_left * cpr, k.m_per_tick_right * cpr, k.wheel_base_m,
                     cal.std[2]])
@@ -98,10 +99,12 @@ def test_time_series_in_ten_times_finer_ticks_gives_the_same_result(censi_path):
 
 def test_khepera_straight_runs_count_in_its_own_terms(censi_path):
     s = read_motion_intervals(censi_path / "lstraight_0.tuple")
-    report = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion).report
+    report = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion,
+                                            sensor_pose=True).report
     assert report.straight_runs > 300 and report.turns_left > 300 and report.turns_right > 300
     s = read_motion_intervals(censi_path / "l90_0.tuple")
-    report = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion).report
+    report = calibrate_intrinsics_intervals(s.wheel_rad, s.sensor_motion,
+                                            sensor_pose=True).report
     assert report.straight_runs == 0 and report.arcs == 0
     assert any("turns in place only" in note for note in report.undetermined)
 

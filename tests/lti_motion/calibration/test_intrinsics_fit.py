@@ -239,3 +239,13 @@ def test_ticks_in_a_finer_unit_give_the_same_physical_result(rng):
                                 kb.wheel_base_m], [ka.m_per_tick_left, ka.m_per_tick_right,
                                                    ka.wheel_base_m], rtol=1e-4)
     np.testing.assert_allclose(b.std[2:], a.std[2:], rtol=1e-2)
+
+
+@pytest.mark.parametrize("offset", [(0.08, -0.03, 0.3), (0.1, 0.0, 0.0)])
+def test_a_sensor_off_the_axle_fitted_as_the_axle_names_the_mount(rng, offset):
+    t, ticks, poses = _drive(*RICH)
+    rt, rp = _reference(rng, _compose(poses, np.array(offset)), t,
+                        std=(0.001, np.deg2rad(0.1)))
+    with pytest.raises(PoseReferenceError, match=r"sensor_pose=True; --sensor-pose") as info:
+        calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False)
+    assert "this robot's" not in str(info.value)
