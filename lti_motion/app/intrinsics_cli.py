@@ -34,7 +34,9 @@ def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
     """
     parser.add_argument("--reference", metavar="FILE",
                         help="with --log: a TUM trajectory (t x y z qx qy qz qw) of the robot "
-                             "or of a sensor on it, on the log's clock; alone: interval samples "
+                             "or of a sensor on it, on the log's clock, or runs with a start and "
+                             "an end pose each (a file starting '# lti-motion runs:'); alone: "
+                             "interval samples "
                              "of a sensor's own motion against the wheel angles (Censi et al.'s "
                              "JSON lines: T, phi_l, phi_r, sm); calibrates both wheels' scale "
                              "and the wheel base (docs/intrinsics.md)")
@@ -172,6 +174,37 @@ def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out
     return moved.save(Path(out) / "model_intrinsics.json")
 
 
+def _calibrate_runs(args: argparse.Namespace, options: dict) -> IntrinsicsCalibration:
+    """``--log LOG --reference RUNS``: each run's counts cut from the log between its start
+    and end time (:func:`lti_motion.calibration.calibrate_intrinsics_runs`)."""
+    import numpy as np
+
+    from lti_motion.calibration import calibrate_intrinsics_runs
+    from lti_motion.recordings import load_log, read_end_pose_runs
+
+    if not args.log:
+        raise ValueError(f"{args.reference} holds runs with their times: it goes with --log "
+                         "LOG.npz (the drive the runs are part of)")
+    runs = read_end_pose_runs(args.reference)
+    log = load_log(args.log)
+    if np.ndim(log.t_s) != 1:
+        raise ValueError(f"{args.log} holds {np.shape(log.t_s)[0]} robots; calibrate one "
+                         "robot's log")
+    t, ticks = log.t_s[log.valid], log.ticks[log.valid]
+    cut = []
+    for i, (t0, t1) in enumerate(runs.times_s):
+        inside = (t >= t0) & (t <= t1)
+        if inside.sum() < 2:
+            raise ValueError(f"run {i} ({t0:.3f}..{t1:.3f} s) holds {int(inside.sum())} frames "
+                             f"of {args.log} ({t[0]:.3f}..{t[-1]:.3f} s): is it on the log's "
+                             "clock?")
+        cut.append(ticks[inside])
+    if args.encoders is not None:
+        options["encoders"] = args.encoders
+    return calibrate_intrinsics_runs(cut, runs.start_poses, runs.end_poses,
+                                     turns=runs.turns.tolist(), **options)
+
+
 def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     """Handler of ``lti-motion calibrate --log LOG --reference FILE`` and of
     ``lti-motion calibrate --reference SAMPLES``; returns the exit code.
@@ -187,7 +220,12 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     import numpy as np
 
     from lti_motion.calibration import calibrate_intrinsics, calibrate_intrinsics_intervals
-    from lti_motion.recordings import load_log, read_motion_intervals, read_tum
+    from lti_motion.recordings import (
+        is_end_pose_runs,
+        load_log,
+        read_motion_intervals,
+        read_tum,
+    )
 
     if not args.reference:
         raise ValueError("--log needs --reference FILE.tum: the pose reference to calibrate "
@@ -197,7 +235,10 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     options = _api_options(args)
     radians = is_interval_file(args.reference)
     try:
-        if radians:
+        if is_end_pose_runs(args.reference):
+            cal = _calibrate_runs(args, options)
+            sources = {"log": str(args.log), "reference": str(args.reference)}
+        elif radians:
             if args.log:
                 raise ValueError(f"{args.reference} holds interval samples with their own "
                                  "wheel angles; give it without --log")

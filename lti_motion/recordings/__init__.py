@@ -32,10 +32,12 @@ __all__ = [
     "MAX_WHEEL_SPEED_M_S",
     "N_LIGHT_BUMPS",
     "RECORDING_VERSION",
+    "RUNS_HEADER",
     "TICK_MODULUS",
     "TUM_HEADER",
     "WHEEL_KINDS",
     "ClockFit",
+    "EndPoseRuns",
     "FrameLog",
     "GridSignals",
     "MotionIntervals",
@@ -47,11 +49,13 @@ __all__ = [
     "body_speeds_from_ticks",
     "commands_at",
     "fit_clock",
+    "is_end_pose_runs",
     "load_log",
     "load_recording",
     "median_period_s",
     "on_grid",
     "poses_from_tum",
+    "read_end_pose_runs",
     "read_motion_intervals",
     "read_tum",
     "save_log",
@@ -84,7 +88,11 @@ __getattr__, __dir__ = lazy_exports(
             "SensorFrame",
         ),
         "lti_motion.recordings.motion_intervals": (
+            "RUNS_HEADER",
+            "EndPoseRuns",
             "MotionIntervals",
+            "is_end_pose_runs",
+            "read_end_pose_runs",
             "read_motion_intervals",
         ),
         "lti_motion.recordings.logfile": (
@@ -148,7 +156,14 @@ if TYPE_CHECKING:
         save_log,
         save_recording,
     )
-    from lti_motion.recordings.motion_intervals import MotionIntervals, read_motion_intervals
+    from lti_motion.recordings.motion_intervals import (
+        RUNS_HEADER,
+        EndPoseRuns,
+        MotionIntervals,
+        is_end_pose_runs,
+        read_end_pose_runs,
+        read_motion_intervals,
+    )
     from lti_motion.recordings.recording import COMMAND_KINDS, WHEEL_KINDS, Recording, Stream
     from lti_motion.recordings.resample import (
         MAX_WHEEL_SPEED_M_S,

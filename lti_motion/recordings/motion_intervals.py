@@ -1,4 +1,5 @@
-"""Interval samples of a sensor's own motion against the wheels: Censi et al.'s format.
+"""References by interval: samples of a sensor's own motion against the wheels (Censi et
+al.'s format), and runs localised only at their start and end (:func:`read_end_pose_runs`).
 
 One JSON object per line, one line per interval::
 
@@ -26,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MotionIntervals", "read_motion_intervals"]
+__all__ = ["RUNS_HEADER", "EndPoseRuns", "MotionIntervals", "is_end_pose_runs",
+           "read_end_pose_runs", "read_motion_intervals"]
 
 
 @dataclass(frozen=True)
@@ -103,3 +105,82 @@ def read_motion_intervals(path: str | os.PathLike) -> MotionIntervals:
     a = np.array(rows)
     return MotionIntervals(duration_s=a[:, 0], wheel_rad=a[:, :1] * a[:, 1:3],
                            sensor_motion=a[:, 3:6])
+
+
+#: The first line of an end-pose runs file (:func:`read_end_pose_runs`).
+RUNS_HEADER = ("# lti-motion runs: t_start_s t_end_s x0_m y0_m theta0_rad x1_m y1_m "
+               "theta1_rad turns")
+
+
+@dataclass(frozen=True)
+class EndPoseRuns:
+    """Runs localised only at their start and end.
+
+    Attributes
+    ----------
+    times_s : ndarray, shape (R, 2)
+        Each run's start and end time [s], on the encoder log's clock.
+    start_poses, end_poses : ndarray, shape (R, 3)
+        ``(x [m], y [m], theta [rad])`` at the start and the end.
+    turns : ndarray of int, shape (R,)
+        Whole turns counter-clockwise (negative: clockwise) beyond what the two headings
+        show (a run that turns more than half a turn net).
+    """
+
+    times_s: np.ndarray
+    start_poses: np.ndarray
+    end_poses: np.ndarray
+    turns: np.ndarray
+
+
+def is_end_pose_runs(path: str | os.PathLike) -> bool:
+    """Whether the file starts with :data:`RUNS_HEADER`'s ``# lti-motion runs:``."""
+    with open(path) as f:
+        for line in f:
+            if line.strip():
+                return line.strip().startswith("# lti-motion runs:")
+    return False
+
+
+def read_end_pose_runs(path: str | os.PathLike) -> EndPoseRuns:
+    """Read runs with a start and an end pose each: :data:`RUNS_HEADER`, then one run a
+    line, nine numbers separated by blanks (``turns`` an integer, usually 0).
+
+    Raises
+    ------
+    ValueError
+        A missing header, a line of another length, a run that ends before it starts,
+        or non-finite values (the message names the line).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as f:
+    ...     _ = f.write(RUNS_HEADER + "\\n0 10 0 0 0 2 0.1 3.1 1\\n")
+    >>> runs = read_end_pose_runs(f.name)
+    >>> runs.times_s.tolist(), runs.turns.tolist()
+    ([[0.0, 10.0]], [1])
+    """
+    if not is_end_pose_runs(path):
+        raise ValueError(f"{path} does not start with the runs header '{RUNS_HEADER}'")
+    rows = []
+    for number, line in enumerate(Path(path).read_text().splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            row = [float(v) for v in line.split()]
+        except ValueError:
+            raise ValueError(f"{path} line {number}: expected 9 numbers, got {line.strip()!r}"
+                             ) from None
+        if len(row) != 9 or not np.all(np.isfinite(row)) or row[8] != round(row[8]):
+            raise ValueError(f"{path} line {number}: expected 9 finite numbers (the last "
+                             f"an integer), got {line.strip()!r}")
+        if not row[1] > row[0]:
+            raise ValueError(f"{path} line {number}: the run ends ({row[1]:g} s) before it "
+                             f"starts ({row[0]:g} s)")
+        rows.append(row)
+    if not rows:
+        raise ValueError(f"{path} holds no runs")
+    a = np.array(rows)
+    return EndPoseRuns(times_s=a[:, :2], start_poses=a[:, 2:5], end_poses=a[:, 5:8],
+                       turns=a[:, 8].astype(int))

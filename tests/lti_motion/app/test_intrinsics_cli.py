@@ -1,6 +1,7 @@
 """``lti-motion calibrate --log LOG --reference FILE.tum``: a recorded drive and a motion
 capture give both wheels' scale; bad input is one line and exit 2."""
 
+import itertools
 import json
 
 import numpy as np
@@ -122,3 +123,30 @@ def test_the_command_line_and_the_api_give_the_same_result(drive):
     written = json.loads((out / "intrinsics.json").read_text())
     assert written["intrinsics"] == cal.intrinsics.as_dict()
     assert written["intervals_rejected"] == cal.n_rejected
+
+
+def test_runs_with_only_start_and_end_poses(drive, tmp_path, capsys):
+    """The drive cut into 20 runs, each localised only at its ends by the motion capture
+    (5 mm, 0.5 deg): ``--reference RUNS`` with the runs header."""
+    from lti_motion.recordings import RUNS_HEADER, read_tum
+
+    t, poses = read_tum(drive["ref"])
+    heading = np.unwrap(poses[:, 2])
+    edges = np.linspace(0, len(t) - 1, 21).astype(int)
+    lines = [RUNS_HEADER]
+    for a, b in itertools.pairwise(edges):
+        seen = np.angle(np.exp(1j * (poses[b, 2] - poses[a, 2])))
+        turns = int(np.round((heading[b] - heading[a] - seen) / (2 * np.pi)))
+        lines.append(" ".join(f"{v:.6f}" for v in [t[a], t[b], *poses[a], *poses[b]])
+                     + f" {turns}")
+    runs = tmp_path / "runs.txt"
+    runs.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(runs),
+                 "--out", str(tmp_path / "o")]) == 0
+    written = json.loads((tmp_path / "o" / "intrinsics.json").read_text())
+    k = written["intrinsics"]
+    assert k["m_per_tick_left"] / k["m_per_tick_right"] == pytest.approx(1.01, rel=3e-3)
+    assert written["intervals_used"] == 20
+    capsys.readouterr()
+    assert main(["calibrate", "--reference", str(runs), "--out", str(tmp_path / "p")]) == 2
+    assert "goes with --log" in capsys.readouterr().err
