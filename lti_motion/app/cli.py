@@ -161,6 +161,10 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         return run_wall_run(args)
     if args.bag:
         return _cmd_calibrate_bag(args)
+    if args.umbmark:                                # UMBmark's square both ways, simulated
+        from lti_motion.app.umbmark_cli import run_umbmark
+
+        return run_umbmark(args)
     if args.reference:                              # odometry intrinsics against a reference
         from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
 

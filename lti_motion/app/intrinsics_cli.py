@@ -201,6 +201,8 @@ def _calibrate_runs(args: argparse.Namespace, options: dict) -> IntrinsicsCalibr
         cut.append(ticks[inside])
     if args.encoders is not None:
         options["encoders"] = args.encoders
+    if getattr(args, "m_per_tick", None) is not None:    # runs that close a loop (UMBmark)
+        options["mean_m_per_tick"] = args.m_per_tick
     return calibrate_intrinsics_runs(cut, runs.start_poses, runs.end_poses,
                                      turns=runs.turns.tolist(), **options)
 

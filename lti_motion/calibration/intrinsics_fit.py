@@ -65,7 +65,7 @@ _log = logging.getLogger(__name__)
 _WINDOW_S = 1.0
 #: A window moves when its larger wheel increment is at least this fraction of the
 #: recording's typical one (90th percentile over the windows): the robot's own speeds.
-_MOVING = 0.25
+_MOVING = 0.1
 #: ``|dn_R - dn_L| / (|dn_L| + |dn_R|)``: below _STRAIGHT a straight run, from _TURN a
 #: turn (from _IN_PLACE a turn in place, between the two an arc).
 _STRAIGHT = 0.05
@@ -80,7 +80,8 @@ _MAX_CONDITION = 1e3
 #: moved in too nearly one proportion to separate them (measured: 1.5% on Censi's l90,
 #: 0.03% on a drive of straight runs and turns; 30-500% on constant arcs).
 _MAX_ROTATION_ERROR = 0.05
-#: After the fit, residuals above these fractions of the reference's own motion (medians
+#: After the fit, residuals above these fractions of the reference's own rotation and of
+#: the wheels' travel per interval (medians
 #: per interval) mean the reference does not follow the counts.
 _MAX_ROTATION_RESIDUAL = 0.5
 _MAX_TRANSLATION_RESIDUAL = 0.5
@@ -99,7 +100,7 @@ class IdentifiabilityReport:
 
     Windows are about 1 s of a time series, or the samples themselves for interval
     samples; each is judged in the robot's own terms: it moves when its larger wheel
-    increment is at least a quarter of the recording's typical one (90th percentile),
+    increment is at least a tenth of the recording's typical one (90th percentile),
     and the wheels' imbalance ``|dn_R - dn_L| / (|dn_L| + |dn_R|)`` says whether it runs
     straight (below 0.05), arcs, or turns in place (from 0.8).
 
@@ -372,8 +373,8 @@ def _check_mount(iv: Intervals, rms_xy: float) -> None:
 
 
 def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
-           sigma0: np.ndarray, rounds: int, fraction: float, causes: str
-           ) -> IntrinsicsCalibration:
+           sigma0: np.ndarray, rounds: int, fraction: float, causes: str,
+           mean_scale: float | None = None) -> IntrinsicsCalibration:
     """Closed form, refinement and Censi et al.'s outlier rounds
     (:mod:`lti_motion.calibration.intrinsics_solver`)."""
     keep = np.ones(len(iv.starts), bool)
@@ -381,17 +382,18 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
     p = None
     for round_ in range(rounds + 1):
         sub = iv.subset(keep)
-        closed, pose = closed_form(sub, sensor_pose=sensor_pose, causes=causes)
+        closed, pose = closed_form(sub, sensor_pose=sensor_pose, causes=causes,
+                                   mean_scale=mean_scale)
         if p is None:                          # later rounds start where the last ended
             p = np.array([closed.m_per_tick_left, closed.m_per_tick_right,
                           closed.wheel_base_m, *(pose if sensor_pose else ())])
-        p, cov = refine(sub, p, sigma)
+        p, cov = refine(sub, p, sigma, mean_scale=mean_scale)
         r = residuals(sub, p)
         sigma = noise_from_residuals(r, _NOISE_FLOOR)
         if round_ < rounds:
             kept = np.flatnonzero(keep)
             keep[kept[~trim(r, fraction)]] = False
-    p, cov = refine(sub, p, sigma)             # weights from the kept residuals
+    p, cov = refine(sub, p, sigma, mean_scale=mean_scale)   # weights from the residuals
     r = residuals(sub, p)
     if not (np.all(np.isfinite(p)) and np.all(p[:3] > 0)):
         raise UnidentifiableError(f"the refinement left the physical range ({p[:3]}); "
@@ -401,8 +403,10 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
     # medians: a few outliers left (outlier_rounds=0) must not trip the check
     med_th, ref_th = np.median(np.abs(r[:, 2])), np.median(np.abs(sub.ref_motion[:, 2]))
     med_xy = np.median(np.hypot(r[:, 0], r[:, 1]))
-    ref_xy = np.median(np.hypot(sub.ref_motion[:, 0], sub.ref_motion[:, 1]))
-    if not sensor_pose:
+    # the wheels' travel (a run that returns to its start still travelled)
+    wheels = 0.5 * (np.abs(p[0] * sub.dn[:, 0]) + np.abs(p[1] * sub.dn[:, 1]))
+    ref_xy = np.median(np.add.reduceat(wheels, sub.starts))
+    if not sensor_pose and mean_scale is None:
         _check_mount(sub, rms_xy)
     if med_th > _MAX_ROTATION_RESIDUAL * ref_th:
         raise PoseReferenceError(
@@ -411,7 +415,8 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
     if med_xy > _MAX_TRANSLATION_RESIDUAL * ref_xy:
         raise PoseReferenceError(
             f"the reference's travel differs from the wheel counts' by {med_xy:.3g} m per "
-            f"interval (median) after calibration ({med_xy / ref_xy:.0%} of its own); {causes}")
+            f"interval (median) after calibration ({med_xy / ref_xy:.0%} of the wheels' "
+            f"travel); {causes}")
     n_kept = int(keep.sum())
     _log.info("intrinsics: %s (closed form %s), %d intervals kept, %d rejected, residual RMS "
               "%.4g m, %.4g rad", p[:3], closed.as_dict(), n_kept, len(keep) - n_kept,

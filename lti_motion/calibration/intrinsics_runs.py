@@ -65,6 +65,7 @@ def calibrate_intrinsics_runs(
     outlier_rounds: int = 4,
     outlier_fraction: float = 0.01,
     turns: Sequence[int] | None = None,
+    mean_m_per_tick: float | None = None,
 ) -> IntrinsicsCalibration:
     """Both wheels' scale and the wheel base from runs with a start and an end pose each.
 
@@ -91,6 +92,11 @@ def calibrate_intrinsics_runs(
         Whole turns counter-clockwise (negative: clockwise) to add to each run's heading
         change, for runs that turn more than half a turn net: the poses give the heading
         only modulo a full turn. Default: all zero (net turns within +-pi).
+    mean_m_per_tick : float, optional
+        The wheels' mean scale [m/tick], known (a robot description's): for runs that end
+        where they started (UMBmark's squares), whose travel cannot give the scale; the
+        fit then gives the diameter ratio and the wheel base (UMBmark's type B and type A
+        errors). Only with ``sensor_pose=False``.
 
     Returns
     -------
@@ -126,6 +132,13 @@ def calibrate_intrinsics_runs(
         if run.ndim != 2 or run.shape[1] != 2 or len(run) < 2:
             raise PoseReferenceError(f"run {i}: expected counts of shape (n >= 2, 2), got "
                                      f"{run.shape}")
+    if mean_m_per_tick is not None:
+        if not (np.isfinite(mean_m_per_tick) and mean_m_per_tick > 0):
+            raise ValueError(f"mean_m_per_tick must be a positive finite number, got "
+                             f"{mean_m_per_tick!r}")
+        if sensor_pose:
+            raise ValueError("mean_m_per_tick fixes the scale of runs about the axle centre; "
+                             "give sensor_pose=False")
     n_params = 6 if sensor_pose else 3
     if 3 * len(runs) < n_params + 3:
         raise UnidentifiableError(f"{len(runs)} runs give {3 * len(runs)} equations for "
@@ -159,5 +172,5 @@ def calibrate_intrinsics_runs(
     _check_identifiable(report, dn_w, iv, interval_hint="over the runs ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
     return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
-                  fraction=outlier_fraction,
+                  fraction=outlier_fraction, mean_scale=mean_m_per_tick,
                   causes=_causes(sensor_pose=sensor_pose, encoders=encoders))

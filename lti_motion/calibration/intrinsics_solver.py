@@ -120,17 +120,22 @@ def rotation_step_precision(iv: Intervals) -> float:
     return float(np.max(np.sqrt(np.diag(s2 * np.linalg.inv(info))) / np.abs(j)))
 
 
-def closed_form(iv: Intervals, *, sensor_pose: bool, causes: str
-                ) -> tuple[OdometryIntrinsics, np.ndarray]:
+def closed_form(iv: Intervals, *, sensor_pose: bool, causes: str,
+                mean_scale: float | None = None) -> tuple[OdometryIntrinsics, np.ndarray]:
     """Censi et al. 2013 sec. V-A (rotation) and V-B (translation, constrained LS).
 
-    ``causes`` ends the error messages: the likely causes in the caller's words.
+    ``causes`` ends the error messages: the likely causes in the caller's words. With
+    ``mean_scale`` (the wheels' mean scale known, as UMBmark takes it) the wheel base
+    follows from the rotation step alone: ``k_L + k_R = b (J22 - J21) = 2 mean_scale``.
     """
     j21, j22 = rotation_step(iv)
     if not (j21 < 0 < j22):
         raise PoseReferenceError(
             "the reference's rotation does not follow the wheel counts (one wheel would turn "
             f"the robot the wrong way: J21={j21:.3g}, J22={j22:.3g}); {causes}")
+    if mean_scale is not None:
+        b = 2.0 * mean_scale / (j22 - j21)
+        return OdometryIntrinsics(-j21 * b, j22 * b, b), np.zeros(3)
     # V-B: robot translation = b a_k, with a_k the odometry of (k_L, k_R, b) = (-J21, J22, 1)
     a = odometry_motion(iv, -j21, j22, 1.0)
     s = iv.ref_motion
@@ -192,20 +197,34 @@ def residuals(iv: Intervals, params: np.ndarray) -> np.ndarray:
     return r
 
 
-def refine(iv: Intervals, p0: np.ndarray, sigma: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray]:
+def refine(iv: Intervals, p0: np.ndarray, sigma: np.ndarray, *,
+           mean_scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Newton (trust region) in scaled parameters; returns the parameters and the
     covariance ``s^2 (J^T J)^-1`` (the inverse Fisher information with the noise
-    estimated from the residuals, as Censi et al.'s solver computes it)."""
-    unit = np.concatenate([p0[:3], [p0[2], p0[2], 1.0][:len(p0) - 3]])
-    offset = np.concatenate([np.zeros(3), p0[3:] / unit[3:]])
+    estimated from the residuals, as Censi et al.'s solver computes it). With
+    ``mean_scale`` the parameters are ``k_L = m (1 + d)``, ``k_R = m (1 - d)`` and ``b``."""
+    if mean_scale is not None:
+        m, b0 = mean_scale, p0[2]
+        t = np.array([[m, 0.0], [-m, 0.0], [0.0, b0]])     # dp/dx
+
+        def to_p(x: np.ndarray) -> np.ndarray:
+            return np.array([m * (1 + x[0]), m * (1 - x[0]), b0 * x[1]])
+
+        x0 = np.array([(p0[0] - p0[1]) / (p0[0] + p0[1]), 1.0])
+    else:
+        unit = np.concatenate([p0[:3], [p0[2], p0[2], 1.0][:len(p0) - 3]])
+        t = np.diag(unit)
+
+        def to_p(x: np.ndarray) -> np.ndarray:
+            return x * unit
+
+        x0 = np.concatenate([np.ones(3), p0[3:] / unit[3:]])
 
     def scaled(x: np.ndarray) -> np.ndarray:
-        return (residuals(iv, x * unit) / sigma).ravel()
+        return (residuals(iv, to_p(x)) / sigma).ravel()
 
-    x0 = np.concatenate([np.ones(3), offset[3:]])
     fit = least_squares(scaled, x0, method="trf", jac="3-point", x_scale=1.0)
-    dof = max(fit.fun.size - len(p0), 1)
+    dof = max(fit.fun.size - len(x0), 1)
     s2 = 2.0 * fit.cost / dof
     jtj = fit.jac.T @ fit.jac
     if not np.linalg.cond(jtj) < _MAX_NORMAL_CONDITION:
@@ -213,7 +232,7 @@ def refine(iv: Intervals, p0: np.ndarray, sigma: np.ndarray
                                   "not determine all parameters; add turns both ways and "
                                   "straight runs")
     cov_x = s2 * np.linalg.inv(jtj)
-    return fit.x * unit, cov_x * np.outer(unit, unit)
+    return to_p(fit.x), t @ cov_x @ t.T
 
 
 def trim(r: np.ndarray, fraction: float, *, robust: bool = True) -> np.ndarray:
