@@ -48,6 +48,9 @@ def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor-pose", action="store_true",
                         help="the reference tracks a sensor off the axle centre: estimate its "
                              "pose on the robot too")
+    parser.add_argument("--reference-offset", type=float, default=0.0, metavar="S",
+                        help="seconds added to the reference's times (TUM or runs file) to put "
+                             "them on the log's clock (default 0)")
     parser.add_argument("--outlier-rounds", type=int, default=None, metavar="N",
                         help="rounds of Censi et al.'s outlier rejection (default 4; 0: none)")
     parser.add_argument("--outlier-fraction", type=float, default=None, metavar="F",
@@ -192,7 +195,7 @@ def _calibrate_runs(args: argparse.Namespace, options: dict) -> IntrinsicsCalibr
                          "robot's log")
     t, ticks = log.t_s[log.valid], log.ticks[log.valid]
     cut = []
-    for i, (t0, t1) in enumerate(runs.times_s):
+    for i, (t0, t1) in enumerate(runs.times_s + args.reference_offset):
         inside = (t >= t0) & (t <= t1)
         if inside.sum() < 2:
             raise ValueError(f"run {i} ({t0:.3f}..{t1:.3f} s) holds {int(inside.sum())} frames "
@@ -232,6 +235,9 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     if not args.reference:
         raise ValueError("--log needs --reference FILE.tum: the pose reference to calibrate "
                          "the wheels against")
+    if not np.isfinite(args.reference_offset):
+        raise ValueError(f"--reference-offset must be a finite number of seconds, got "
+                         f"{args.reference_offset:g}")
     if not Path(args.reference).is_file():
         raise FileNotFoundError(f"no reference file {args.reference}")
     options = _api_options(args)
@@ -267,7 +273,8 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
             if args.encoders is not None:
                 options["encoders"] = args.encoders
             keep = log.valid
-            cal = calibrate_intrinsics(log.t_s[keep], log.ticks[keep], t_ref, poses, **options)
+            cal = calibrate_intrinsics(log.t_s[keep], log.ticks[keep],
+                                       t_ref + args.reference_offset, poses, **options)
             sources = {"log": str(args.log), "reference": str(args.reference)}
     except ValueError as exc:
         raise type(exc)(_option_words(str(exc))) from None

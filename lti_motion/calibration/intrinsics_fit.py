@@ -221,7 +221,9 @@ def _check_inputs(t_s, ticks, ref_t_s, ref_poses):
         raise PoseReferenceError(
             f"the reference ({rt[0]:.3f}..{rt[-1]:.3f} s) and the encoder record "
             f"({t[0]:.3f}..{t[-1]:.3f} s) overlap in {int(inside.sum())} reference samples; "
-            "need at least 3: are both on the same clock?")
+            "need at least 3: are both on the same clock? (shift the reference's times: "
+            "ref_t_s + offset; --reference-offset S; for runs localised only at their ends, "
+            "calibrate_intrinsics_runs)")
     return t, n.astype(np.int64), rt[inside], rp[inside]
 
 
@@ -276,7 +278,7 @@ def _causes(*, sensor_pose: bool, encoders: str | None) -> str:
         causes.append("encoders that know their direction are quadrature "
                       "(encoders='quadrature'; --encoders quadrature)")
     causes += ["a clock offset between the counts and the reference (shift the reference's "
-               "times onto the counts' clock)",
+               "times onto the counts' clock: ref_t_s + offset; --reference-offset S)",
                "left and right wheel counts swapped",
                "or the reference is not this robot's trajectory"]
     return "likely causes: " + "; ".join(causes)

@@ -150,3 +150,11 @@ def test_runs_with_only_start_and_end_poses(drive, tmp_path, capsys):
     capsys.readouterr()
     assert main(["calibrate", "--reference", str(runs), "--out", str(tmp_path / "p")]) == 2
     assert "goes with --log" in capsys.readouterr().err
+
+
+def test_a_clock_offset_is_named_and_fixed_by_its_option(drive, capsys):
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["late"]),
+                 "--out", str(drive["folder"] / "late")]) == 2
+    assert "--reference-offset S" in capsys.readouterr().err
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["late"]),
+                 "--reference-offset=-1e4", "--out", str(drive["folder"] / "late")]) == 0
