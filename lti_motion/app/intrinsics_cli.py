@@ -52,7 +52,8 @@ def add_intrinsics_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seconds added to the reference's times (TUM or runs file) to put "
                              "them on the log's clock (default 0)")
     parser.add_argument("--outlier-rounds", type=int, default=None, metavar="N",
-                        help="rounds of Censi et al.'s outlier rejection (default 4; 0: none)")
+                        help="rounds of Censi et al.'s outlier rejection, gated by 3 robust "
+                             "standard deviations (default 4; 0: none)")
     parser.add_argument("--outlier-fraction", type=float, default=None, metavar="F",
                         help="fraction of intervals each round rejects by their largest "
                              "rotation or translation residual (default 0.01)")

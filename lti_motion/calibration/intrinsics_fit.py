@@ -16,9 +16,18 @@ robot, that sensor's pose in the robot frame. The method is Censi et al.'s (2013
    is the eigenvector of the smallest eigenvalue of a 2x2 matrix; this is the
    minimiser Censi et al. find with a Lagrange multiplier.
 3. A nonlinear refinement of all parameters over the intervals' full residual
-   (translation and rotation of the sensor's displacement, weighted by the
-   reference's noise) with :func:`scipy.optimize.least_squares`; the covariance is
-   ``s^2 (J^T J)^-1`` at the optimum, ``s^2`` the reduced chi-square.
+   (translation and rotation of the sensor's displacement) with
+   :func:`scipy.optimize.least_squares`, in parameters scaled by the closed form's so
+   that any count unit gives the same result; the covariance is ``s^2 (J^T J)^-1`` at
+   the optimum, ``s^2`` the reduced chi-square.
+4. Censi et al.'s outlier rounds (four, 1% each, gated by a robust scale), the weights
+   and the covariance from the kept residuals
+   (:mod:`lti_motion.calibration.intrinsics_solver`).
+
+The same solver takes interval samples (:func:`calibrate_intrinsics_intervals`: Censi
+et al.'s own data format) and runs localised only at their ends
+(:func:`lti_motion.calibration.calibrate_intrinsics_runs`). The drive is judged in the
+robot's own terms (:class:`IdentifiabilityReport`) before anything is fitted.
 
 The reference's displacements over neighbouring intervals share a pose sample, so
 their errors correlate; the covariance treats them as independent and is an
@@ -489,7 +498,9 @@ def calibrate_intrinsics(
         As :func:`lti_motion.recordings.body_speeds_from_ticks` ("commanded": a Roomba /
         Create 2, whose encoders count in the commanded direction).
     outlier_rounds : int
-        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none).
+        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none),
+        each rejecting only intervals also beyond 3 robust standard deviations (the
+        scale from the residuals' median; docs/intrinsics.md, "Outliers").
     outlier_fraction : float
         Fraction of intervals each round rejects by their largest rotation or
         translation residual (0.01: those above the 99th percentile of either).
@@ -521,8 +532,8 @@ def calibrate_intrinsics(
     ----------
     A. Censi, A. Franchi, L. Marchionni, G. Oriolo, "Simultaneous calibration of odometry
     and sensor parameters for mobile robots", IEEE T-RO 29(2):475-492, 2013, sec. V.
-    P. J. Huber, E. M. Ronchetti, "Robust Statistics", 2nd ed., Wiley 2009, sec. 3.3
-    (trimming).
+    P. J. Huber, E. M. Ronchetti, "Robust Statistics", 2nd ed., Wiley 2009, sec. 1.4
+    (the median-based scale, Hampel's rejection rule) and sec. 3.3 (trimming).
 
     Examples
     --------
@@ -595,7 +606,9 @@ def calibrate_intrinsics_intervals(
         Noise of one sample's motion [m], [rad]: the weights of the first outlier round
         only; later rounds and the covariance weigh by the kept residuals' noise.
     outlier_rounds : int
-        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none).
+        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none),
+        each rejecting only intervals also beyond 3 robust standard deviations (the
+        scale from the residuals' median; docs/intrinsics.md, "Outliers").
     outlier_fraction : float
         Fraction each round rejects by the largest rotation or translation residual.
 

@@ -16,7 +16,9 @@ Outliers. Censi et al.'s rule (the solver published with the paper,
 4`` and its default ``-outliers_percentage 0.01``): solve, compute each interval's residual,
 drop every interval whose rotation residual ``|e_theta|`` or translation residual
 ``|(e_x, e_y)|`` is above that residual's ``1 - fraction`` quantile of the intervals
-kept, and solve again; ``rounds`` times. The weights of the translation and rotation
+kept, and solve again; ``rounds`` times. An interval is rejected only if it also lies
+beyond 3 robust standard deviations (scale from the residuals' median): on clean data
+the largest residuals are kept (:func:`trim`). The weights of the translation and rotation
 residuals then come from the kept residuals themselves (their RMS), as Censi et al.
 estimate the scan matcher's noise from the residuals (their ``estimate_noise``), so the
 user's noise figures only weigh the first round.
@@ -27,8 +29,8 @@ A. Censi, A. Franchi, L. Marchionni, G. Oriolo, "Simultaneous calibration of odo
 sensor parameters for mobile robots", IEEE T-RO 29(2):475-492, 2013, sec. V (closed
 form); their solver (``src/solver2.cpp``, reference-output/version_string): outlier
 rounds, noise estimated from the residuals, covariance as the inverse Fisher information.
-P. J. Huber, E. M. Ronchetti, "Robust Statistics", 2nd ed., Wiley 2009, sec. 3.3
-(trimmed estimates: each round drops a fixed fraction of the largest residuals).
+P. J. Huber, E. M. Ronchetti, "Robust Statistics", 2nd ed., Wiley 2009, sec. 1.4 (the
+median-based scale and Hampel's rejection rule) and sec. 3.3 (trimmed estimates).
 """
 
 from __future__ import annotations
