@@ -233,7 +233,11 @@ def _check_inputs(t_s, ticks, ref_t_s, ref_poses):
             "need at least 3: are both on the same clock? (shift the reference's times: "
             "ref_t_s + offset; --reference-offset S; for runs localised only at their ends, "
             "calibrate_intrinsics_runs)")
-    return t, n.astype(np.int64), rt[inside], rp[inside]
+    if not np.all(np.isfinite(n)):
+        raise PoseReferenceError("the encoder counts hold NaN or infinite values; drop those "
+                                 "frames first")
+    counts = n.astype(float) if np.issubdtype(n.dtype, np.floating) else n.astype(np.int64)
+    return t, counts, rt[inside], rp[inside]
 
 
 def _intervals_from(t, counts, rt, rp, knots: np.ndarray) -> Intervals:
@@ -472,9 +476,10 @@ def calibrate_intrinsics(
     ----------
     t_s : ndarray, shape (n,)
         Encoder frame times [s], on the reference's clock.
-    ticks : ndarray of int, shape (n, 2)
-        Raw 16-bit encoder counts ``(left, right)``, in any count unit (the result's
-        scales are metres per that count).
+    ticks : ndarray of int or float, shape (n, 2)
+        Encoder counts ``(left, right)``: integers are raw 16-bit counts (wrapping);
+        floats are cumulative counts in any unit that never wrap (wheel angles in
+        radians, say). The result's scales are metres per that count.
     ref_t_s : ndarray, shape (m,)
         Reference pose times [s].
     ref_poses : ndarray, shape (m, 3)
@@ -558,7 +563,10 @@ def calibrate_intrinsics(
                    heading_std_rad=heading_std_rad, encoders=encoders,
                    outlier_rounds=outlier_rounds, outlier_fraction=outlier_fraction)
     t, n, rt, rp = _check_inputs(t_s, ticks, ref_t_s, ref_poses)
-    d = tick_deltas(n, axis=0)
+    if np.issubdtype(n.dtype, np.floating):
+        d = np.diff(n, axis=0)               # counts in any unit that never wrap
+    else:
+        d = tick_deltas(n, axis=0)
     if encoders == "commanded":
         d = unfold_commanded_direction(d)
     counts = np.vstack([[0, 0], np.cumsum(d, axis=0)]).astype(float)

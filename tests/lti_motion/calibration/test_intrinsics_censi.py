@@ -114,3 +114,19 @@ def test_without_the_sensor_mount_the_message_names_it(censi_path, tmp_path, cap
                  "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "--sensor-pose" in err and err.count("\n") == 1
+
+
+def test_time_series_of_wheel_angles_in_any_unit_gives_the_same_result(censi_path):
+    """Float counts (wheel angles, never wrapping): radians, and 10x finer and coarser
+    units, equal within 0.01% (no rounding involved)."""
+    s = read_motion_intervals(censi_path / "l90_1.tuple")
+    t, _, poses = _series(s, 1.0)
+    angle = np.vstack([[0.0, 0.0], np.cumsum(s.wheel_rad, axis=0)])
+    out = []
+    for unit in (1.0, 10.0, 0.1):
+        cal = calibrate_intrinsics(t, angle * unit, t, poses, sensor_pose=True)
+        k = cal.intrinsics
+        out.append([k.m_per_tick_left * unit, k.m_per_tick_right * unit, k.wheel_base_m,
+                    *cal.sensor_pose])
+    np.testing.assert_allclose(out[1], out[0], rtol=1e-4, atol=1e-7)
+    np.testing.assert_allclose(out[2], out[0], rtol=1e-4, atol=1e-7)
