@@ -41,6 +41,19 @@ def mrclam_path() -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def censi_path() -> Path:
+    """Censi et al.'s (2013) Khepera interval samples and results (data/README.md,
+    ``real/censi2013``). Absent data fails under CI and skips elsewhere."""
+    base = data_dir()
+    path = None if base is None else base / "real" / "censi2013"
+    if path is None or not path.is_dir():
+        if os.environ.get("CI"):
+            pytest.fail("Censi 2013 data not found: set LTI_MOTION_DATA to the shared data folder")
+        pytest.skip("Censi 2013 data not found (set LTI_MOTION_DATA)")
+    return path
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

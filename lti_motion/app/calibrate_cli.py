@@ -1,5 +1,6 @@
 """The options of ``lti-motion calibrate`` (the runs: :mod:`lti_motion.app.calibrate_run`,
 :mod:`lti_motion.app.calibrate_log`, :mod:`lti_motion.app.intrinsics_cli`,
+:mod:`lti_motion.app.umbmark_cli`,
 :mod:`lti_motion.app.wall_run_cli` and, with ``--bag``, :mod:`lti_motion.app.bag_commands`).
 
 Light on purpose: ``lti-motion --help`` builds every sub-command's parser, and this
@@ -13,6 +14,7 @@ import argparse
 from lti_motion.app.bag_options import add_bag_options
 from lti_motion.app.intrinsics_cli import add_intrinsics_arguments
 from lti_motion.app.robot_options import FLOOR_NAMES, ROBOT_HELP
+from lti_motion.app.umbmark_cli import add_umbmark_arguments
 from lti_motion.app.wall_run_cli import add_wall_run_arguments
 
 __all__ = ["DESCRIPTION", "HELP", "add_arguments"]
@@ -54,6 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                      "(docs/guide_ros_bags.md)")
     add_intrinsics_arguments(parser)
     add_wall_run_arguments(parser)
+    add_umbmark_arguments(parser)
     parser.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     parser.add_argument("--clock-rate", type=float, default=1.0,
                         help="robot seconds per wall second: 1 for a real robot, the --speed "

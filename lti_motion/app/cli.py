@@ -117,7 +117,7 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders, gyro=gyro, **extra)
+                      encoders=args.encoders or "commanded", gyro=gyro, **extra)
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
@@ -165,7 +165,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         return run_wall_run(args)
     if args.bag:
         return _cmd_calibrate_bag(args)
-    if args.log and args.reference:                 # odometry intrinsics of a recorded drive
+    if args.umbmark:                                # UMBmark's square both ways, simulated
+        from lti_motion.app.umbmark_cli import run_umbmark
+
+        return run_umbmark(args)
+    if args.reference:                              # odometry intrinsics against a reference
         from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
 
         return run_intrinsics_calibration(args)
@@ -439,11 +443,13 @@ def _check_link_and_joints(args: argparse.Namespace) -> None:
 def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     """``calibrate``: one place to drive; --wheel-base only for a robot or a recording (the
     simulator has its description's)."""
-    if not (args.sim or args.port or args.log or args.bag):
+    alone = bool(args.reference) and not (args.sim or args.port or args.log or args.bag)
+    if not (args.sim or args.port or args.log or args.bag or alone):
         raise ValueError("give --robot NAME_OR_FILE (the simulator), --port DEVICE (a robot), "
                          "--log FILE or --bag PATH (a recorded drive)")
-    if args.reference and not args.log:
-        raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
+    if args.reference and (args.sim or args.port or args.bag):
+        raise ValueError("--reference goes with --log LOG.npz (a recorded drive), or alone "
+                         "with interval samples")
     if args.into_model and not (args.reference or args.wall_run):
         raise ValueError("--into-model writes the intrinsics that --reference or --wall-run "
                          "calibrates into a copy of a model: give one of them")

@@ -7,7 +7,9 @@
 - :mod:`lti_motion.calibration.recorded`: the ARX model from any recorded drive, with an
   excitation report;
 - :mod:`lti_motion.calibration.intrinsics_fit`: both wheels' scale and the wheel base
-  against a pose reference (Censi et al. 2013);
+  against a pose reference or interval samples (Censi et al. 2013), with
+  :mod:`lti_motion.calibration.intrinsics_solver` its numerical core and
+  :mod:`lti_motion.calibration.intrinsics_runs` runs localised only at their ends;
 - :mod:`lti_motion.calibration.wall_run`, :mod:`lti_motion.calibration.wall_run_drive`: the
   wheels' diameter ratio from straight runs beside a wall, and the manoeuvre.
 
@@ -38,6 +40,8 @@ __all__ = [
     "WallRunDrive",
     "calibrate",
     "calibrate_intrinsics",
+    "calibrate_intrinsics_intervals",
+    "calibrate_intrinsics_runs",
     "calibrate_recording",
     "calibrate_wall_run",
     "drive",
@@ -65,7 +69,9 @@ __getattr__, __dir__ = lazy_exports(
             "IdentifiabilityReport",
             "IntrinsicsCalibration",
             "calibrate_intrinsics",
+            "calibrate_intrinsics_intervals",
         ),
+        "lti_motion.calibration.intrinsics_runs": ("calibrate_intrinsics_runs",),
         "lti_motion.calibration.manoeuvres": (
             "Calibration",
             "CalibrationPlan",
@@ -109,7 +115,9 @@ if TYPE_CHECKING:
         IdentifiabilityReport,
         IntrinsicsCalibration,
         calibrate_intrinsics,
+        calibrate_intrinsics_intervals,
     )
+    from lti_motion.calibration.intrinsics_runs import calibrate_intrinsics_runs
     from lti_motion.calibration.manoeuvres import (
         Calibration,
         CalibrationPlan,

@@ -16,9 +16,18 @@ robot, that sensor's pose in the robot frame. The method is Censi et al.'s (2013
    is the eigenvector of the smallest eigenvalue of a 2x2 matrix; this is the
    minimiser Censi et al. find with a Lagrange multiplier.
 3. A nonlinear refinement of all parameters over the intervals' full residual
-   (translation and rotation of the sensor's displacement, weighted by the
-   reference's noise) with :func:`scipy.optimize.least_squares`; the covariance is
-   ``s^2 (J^T J)^-1`` at the optimum, ``s^2`` the reduced chi-square.
+   (translation and rotation of the sensor's displacement) with
+   :func:`scipy.optimize.least_squares`, in parameters scaled by the closed form's so
+   that any count unit gives the same result; the covariance is ``s^2 (J^T J)^-1`` at
+   the optimum, ``s^2`` the reduced chi-square.
+4. Censi et al.'s outlier rounds (four, 1% each, gated by a robust scale), the weights
+   and the covariance from the kept residuals
+   (:mod:`lti_motion.calibration.intrinsics_solver`).
+
+The same solver takes interval samples (:func:`calibrate_intrinsics_intervals`: Censi
+et al.'s own data format) and runs localised only at their ends
+(:func:`lti_motion.calibration.calibrate_intrinsics_runs`). The drive is judged in the
+robot's own terms (:class:`IdentifiabilityReport`) before anything is fitted.
 
 The reference's displacements over neighbouring intervals share a pose sample, so
 their errors correlate; the covariance treats them as independent and is an
@@ -36,48 +45,90 @@ mobile robots", IEEE T-RA 12(6), 1996 (UMBmark; type A and type B errors).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from lti_motion.exceptions import PoseReferenceError, UnidentifiableError
+from lti_motion.calibration.intrinsics_solver import (
+    Intervals,
+    closed_form,
+    noise_from_residuals,
+    refine,
+    residuals,
+    rotation_step_precision,
+    trim,
+)
+from lti_motion.exceptions import CalibrationError, PoseReferenceError, UnidentifiableError
 from lti_motion.intrinsics import OdometryIntrinsics
-from lti_motion.kinematics import wrap_angle
 from lti_motion.recordings.ticks import tick_deltas, unfold_commanded_direction
 
-__all__ = ["IdentifiabilityReport", "IntrinsicsCalibration", "calibrate_intrinsics"]
+__all__ = ["IdentifiabilityReport", "IntrinsicsCalibration", "calibrate_intrinsics",
+           "calibrate_intrinsics_intervals"]
 
 _log = logging.getLogger(__name__)
 
-#: The report looks at the reference in windows of this length [s]: a window counts as
-#: a turn above _TURN_RAD [rad], as a straight run below _STRAIGHT_RAD [rad] over at
-#: least _STRAIGHT_M [m].
+#: The report looks at the drive in windows of about this length [s] (a time series) or
+#: at the samples themselves (interval samples).
 _WINDOW_S = 1.0
-_TURN_RAD = 0.1
-_STRAIGHT_RAD = 0.03
-_STRAIGHT_M = 0.05
+#: A window moves when its larger wheel increment is at least this fraction of the
+#: recording's typical one (90th percentile over the windows): the robot's own speeds.
+_MOVING = 0.1
+#: ``|dn_R - dn_L| / (|dn_L| + |dn_R|)``: below _STRAIGHT a straight run, from _TURN a
+#: turn (from _IN_PLACE a turn in place, between the two an arc).
+_STRAIGHT = 0.05
+_TURN = 0.05
+_IN_PLACE = 0.8
+#: A pose reference resolves rotations of about a degree: a window whose counts turn but
+#: whose reference turns less than this [rad] does not count as a turn.
+_REFERENCE_TURN_RAD = 0.02
 #: Above this condition number the rotation cannot separate the two wheels.
 _MAX_CONDITION = 1e3
+#: Above this relative standard error of the rotation step's ``J21, J22`` the wheels
+#: moved in too nearly one proportion to separate them (measured: 1.5% on Censi's l90,
+#: 0.03% on a drive of straight runs and turns; 30-500% on constant arcs).
+_MAX_ROTATION_ERROR = 0.05
+#: After the fit, residuals above these fractions of the reference's own rotation and of
+#: the wheels' travel per interval (medians
+#: per interval) mean the reference does not follow the counts.
+_MAX_ROTATION_RESIDUAL = 0.5
+_MAX_TRANSLATION_RESIDUAL = 0.5
+#: A reference fitted without the mount whose translation residual the mount would cut
+#: below this fraction is taken as a sensor off the axle.
+_MOUNT_GAIN = 0.5
+#: Floor of the noise estimated from the residuals [m, m, rad] (a perfect reference).
+_NOISE_FLOOR = np.array([1e-7, 1e-7, 1e-8])
+
+_Encoders = Literal["quadrature", "commanded"]
 
 
 @dataclass(frozen=True)
 class IdentifiabilityReport:
     """What the calibration drive showed, and what it could not determine.
 
+    Windows are about 1 s of a time series, or the samples themselves for interval
+    samples; each is judged in the robot's own terms: it moves when its larger wheel
+    increment is at least a tenth of the recording's typical one (90th percentile),
+    and the wheels' imbalance ``|dn_R - dn_L| / (|dn_L| + |dn_R|)`` says whether it runs
+    straight (below 0.05), arcs, or turns in place (from 0.8).
+
     Attributes
     ----------
     turns_left, turns_right : int
-        1 s windows of the reference turning counter-clockwise / clockwise by more
-        than 0.1 rad.
+        Moving windows whose wheels turn the robot (imbalance from 0.05) and whose
+        reference turns counter-clockwise / clockwise by more than 0.02 rad.
     straight_runs : int
-        1 s windows turning less than 0.03 rad while travelling at least 0.05 m.
+        Moving windows of imbalance below 0.05.
     rotation_condition : float
         Condition number of the rotation step's design matrix (tick increments,
         columns scaled to unit norm); large means the wheels are not separated.
     undetermined : tuple of str
         Plain-language notes on what the motion left weakly determined.
+    arcs : int
+        Turning windows that also travel (imbalance below 0.8).
+    windows : int
+        Windows judged.
     """
 
     turns_left: int
@@ -85,31 +136,39 @@ class IdentifiabilityReport:
     straight_runs: int
     rotation_condition: float
     undetermined: tuple[str, ...]
+    arcs: int = 0
+    windows: int = 0
 
 
 @dataclass(frozen=True)
 class IntrinsicsCalibration:
-    """Result of :func:`calibrate_intrinsics`.
+    """Result of :func:`calibrate_intrinsics` and :func:`calibrate_intrinsics_intervals`.
 
     Attributes
     ----------
     intrinsics : OdometryIntrinsics
-        The refined estimate.
+        The refined estimate, on the intervals kept.
     closed_form : OdometryIntrinsics
-        Censi et al.'s closed-form estimate the refinement started from.
+        Censi et al.'s closed-form estimate on the intervals kept.
     sensor_pose : ndarray, shape (3,)
         Pose of the reference's frame in the robot frame ``(x [m], y [m], theta [rad])``
         (zeros when not estimated).
     covariance : ndarray, shape (p, p)
-        Covariance of ``(k_L [m/tick], k_R [m/tick], b [m])`` and, when estimated,
-        ``(l_x [m], l_y [m], l_theta [rad])``.
+        Covariance of ``(k_L [m/count], k_R [m/count], b [m])`` and, when estimated,
+        ``(l_x [m], l_y [m], l_theta [rad])``, on the intervals kept, with the reference's
+        noise estimated from their residuals.
     std : ndarray, shape (p,)
         Square roots of the covariance's diagonal, same order and units.
     residual_rms : tuple of 2 float
-        RMS of the intervals' translation [m] and rotation [rad] residuals.
+        RMS of the kept intervals' translation [m] and rotation [rad] residuals.
     n_intervals : int
-        Reference intervals used.
+        Intervals used (kept).
     report : IdentifiabilityReport
+    n_rejected : int
+        Intervals rejected as outliers.
+    noise : ndarray, shape (3,)
+        The reference's noise per interval estimated from the kept residuals
+        ``(x [m], y [m], theta [rad])``: the weights of the final fit.
     """
 
     intrinsics: OdometryIntrinsics
@@ -120,17 +179,32 @@ class IntrinsicsCalibration:
     residual_rms: tuple[float, float]
     n_intervals: int
     report: IdentifiabilityReport
+    n_rejected: int = 0
+    noise: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class _Intervals:
-    """Encoder sub-steps grouped into reference intervals."""
+def _check_options(*, interval_s: float, overlap: int, position_std_m: float,
+                   heading_std_rad: float, encoders: str, outlier_rounds: int,
+                   outlier_fraction: float) -> None:
+    """One-line ``ValueError`` naming the argument, its value and what it must be."""
+    def positive(name: str, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not (
+                math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a positive finite number, got {value!r}")
 
-    dn: np.ndarray            # (m, 2) tick increments of the sub-steps
-    seg: np.ndarray           # (m,) interval index of each sub-step
-    starts: np.ndarray        # (K,) first sub-step of each interval
-    ref_motion: np.ndarray    # (K, 3) reference displacement in its own start frame
-    dn_total: np.ndarray      # (K, 2) tick increments per interval
+    positive("interval_s", interval_s)
+    positive("position_std_m", position_std_m)
+    positive("heading_std_rad", heading_std_rad)
+    for name, value, low in (("overlap", overlap, 1), ("outlier_rounds", outlier_rounds, 0)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise ValueError(f"{name} must be an integer of at least {low}, got {value!r}")
+    if encoders not in ("quadrature", "commanded"):
+        raise ValueError(f"encoders must be 'quadrature' or 'commanded', got {encoders!r}")
+    if isinstance(outlier_fraction, bool) or not (
+            isinstance(outlier_fraction, (int, float, np.number))
+            and 0.0 < outlier_fraction <= 0.5):
+        raise ValueError(f"outlier_fraction must be in (0, 0.5] (0.01: 1% per round), got "
+                         f"{outlier_fraction!r}")
 
 
 def _check_inputs(t_s, ticks, ref_t_s, ref_poses):
@@ -156,11 +230,17 @@ def _check_inputs(t_s, ticks, ref_t_s, ref_poses):
         raise PoseReferenceError(
             f"the reference ({rt[0]:.3f}..{rt[-1]:.3f} s) and the encoder record "
             f"({t[0]:.3f}..{t[-1]:.3f} s) overlap in {int(inside.sum())} reference samples; "
-            "need at least 3: are both on the same clock?")
-    return t, n.astype(np.int64), rt[inside], rp[inside]
+            "need at least 3: are both on the same clock? (shift the reference's times: "
+            "ref_t_s + offset; --reference-offset S; for runs localised only at their ends, "
+            "calibrate_intrinsics_runs)")
+    if not np.all(np.isfinite(n)):
+        raise PoseReferenceError("the encoder counts hold NaN or infinite values; drop those "
+                                 "frames first")
+    counts = n.astype(float) if np.issubdtype(n.dtype, np.floating) else n.astype(np.int64)
+    return t, counts, rt[inside], rp[inside]
 
 
-def _intervals_from(t, counts, rt, rp, knots: np.ndarray) -> _Intervals:
+def _intervals_from(t, counts, rt, rp, knots: np.ndarray) -> Intervals:
     """Intervals between consecutive reference samples ``knots`` and the encoder
     sub-steps inside them (counts interpolated at the reference times)."""
     tk = rt[knots]
@@ -175,11 +255,11 @@ def _intervals_from(t, counts, rt, rp, knots: np.ndarray) -> _Intervals:
     heading = np.unwrap(rp[:, 2])
     motion = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1],
                        heading[knots[1:]] - heading[knots[:-1]]], axis=1)
-    return _Intervals(dn=dn, seg=seg, starts=starts, ref_motion=motion,
-                      dn_total=np.add.reduceat(dn, starts, axis=0))
+    return Intervals(dn=dn, seg=seg, starts=starts, ref_motion=motion,
+                     dn_total=np.add.reduceat(dn, starts, axis=0))
 
 
-def _intervals(t, counts, rt, rp, interval_s: float, *, overlap: int) -> _Intervals:
+def _intervals(t, counts, rt, rp, interval_s: float, *, overlap: int) -> Intervals:
     """Intervals of about ``interval_s``, starting ``overlap`` times per interval (each
     reference sample then enters several intervals, so all samples are used)."""
     stride = max(1, round(interval_s / float(np.median(np.diff(rt)))))
@@ -189,7 +269,7 @@ def _intervals(t, counts, rt, rp, interval_s: float, *, overlap: int) -> _Interv
              for o in offsets if len(rt) - o > stride]
     shift = np.cumsum([0] + [len(p.dn) for p in parts[:-1]])
     seg_shift = np.cumsum([0] + [len(p.starts) for p in parts[:-1]])
-    return _Intervals(
+    return Intervals(
         dn=np.concatenate([p.dn for p in parts]),
         seg=np.concatenate([p.seg + k for p, k in zip(parts, seg_shift, strict=True)]),
         starts=np.concatenate([p.starts + k for p, k in zip(parts, shift, strict=True)]),
@@ -197,125 +277,182 @@ def _intervals(t, counts, rt, rp, interval_s: float, *, overlap: int) -> _Interv
         dn_total=np.concatenate([p.dn_total for p in parts]))
 
 
-def _odometry_motion(iv: _Intervals, kl: float, kr: float, b: float) -> np.ndarray:
-    """Robot displacement ``(x, y, theta)`` over each interval in its start frame, the
-    sub-steps integrated with the chord form of paper eq. 11."""
-    ds = 0.5 * (kl * iv.dn[:, 0] + kr * iv.dn[:, 1])
-    dth = (kr * iv.dn[:, 1] - kl * iv.dn[:, 0]) / b
-    cum = np.cumsum(dth)
-    before = cum - dth
-    theta0 = (before - np.concatenate([[0.0], cum])[iv.starts][iv.seg])
-    mid = theta0 + 0.5 * dth
-    chord = ds * np.sinc(0.5 * dth / np.pi)
-    xy = np.stack([chord * np.cos(mid), chord * np.sin(mid)], axis=1)
-    out = np.empty((len(iv.starts), 3))
-    out[:, :2] = np.add.reduceat(xy, iv.starts, axis=0)
-    out[:, 2] = np.add.reduceat(dth, iv.starts)
-    return out
+def _causes(*, sensor_pose: bool, encoders: str | None) -> str:
+    """The likely causes of a reference that does not follow the counts, most likely
+    first, each with the argument and the command-line option that fixes it."""
+    causes = []
+    if not sensor_pose:
+        causes.append("if the reference tracks a sensor off the axle centre, estimate its "
+                      "mount (sensor_pose=True; --sensor-pose)")
+    if encoders == "quadrature":
+        causes.append("a Roomba / Create 2 counts in the commanded direction "
+                      "(encoders='commanded'; --encoders commanded)")
+    elif encoders == "commanded":
+        causes.append("encoders that know their direction are quadrature "
+                      "(encoders='quadrature'; --encoders quadrature)")
+    causes += ["a clock offset between the counts and the reference (shift the reference's "
+               "times onto the counts' clock: ref_t_s + offset; --reference-offset S)",
+               "left and right wheel counts swapped",
+               "or the reference is not this robot's trajectory"]
+    return "likely causes: " + "; ".join(causes)
 
 
-def _sensor_motion(o: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """``l^-1 (+) o (+) l``: the sensor's displacement for robot displacements ``o``."""
-    lx, ly, lt = pose
-    c, s = np.cos(o[:, 2]), np.sin(o[:, 2])
-    # o (+) l, then l^-1 (+) that
-    px = o[:, 0] + c * lx - s * ly - lx
-    py = o[:, 1] + s * lx + c * ly - ly
-    cl, sl = np.cos(lt), np.sin(lt)
-    return np.stack([cl * px + sl * py, -sl * px + cl * py, o[:, 2]], axis=1)
+def _imbalance(dn: np.ndarray) -> np.ndarray:
+    """``|dn_R - dn_L| / (|dn_L| + |dn_R|)`` over the last axis: 0 straight, 1 in place."""
+    return np.abs(dn[..., 1] - dn[..., 0]) / np.maximum(np.abs(dn).sum(axis=-1), 1e-300)
 
 
-def _report(iv: _Intervals, rt: np.ndarray, rp: np.ndarray) -> IdentifiabilityReport:
-    """Turns and straight runs counted over 1 s windows of the reference (independent of
-    the interval length), and the rotation step's condition number."""
-    step = max(1, round(_WINDOW_S / float(np.median(np.diff(rt)))))
-    rot = np.diff(np.unwrap(rp[:, 2])[::step])
-    dist = np.hypot(*np.diff(rp[::step, :2], axis=0).T)
-    left, right = int(np.sum(rot > _TURN_RAD)), int(np.sum(rot < -_TURN_RAD))
-    straight = int(np.sum((np.abs(rot) < _STRAIGHT_RAD) & (dist >= _STRAIGHT_M)))
-    x = iv.dn_total / np.maximum(np.linalg.norm(iv.dn_total, axis=0), 1e-12)
-    cond = float(np.linalg.cond(x)) if np.any(iv.dn_total) else float("inf")
+def _report(dn_w: np.ndarray, rot_w: np.ndarray, iv: Intervals,
+            halves: np.ndarray | None = None) -> IdentifiabilityReport:
+    """Turns, arcs and straight runs over the windows ``dn_w`` (count increments, (W, 2))
+    with the reference's rotation ``rot_w`` [rad], judged against the recording's own
+    wheel increments; and the rotation step's condition number. ``halves`` (W, 2, 2),
+    the windows' two halves: a straight run is balanced in both (a left arc followed by
+    a right one balances over the window but is no straight run)."""
+    mag = np.max(np.abs(dn_w), axis=1)
+    typical = float(np.quantile(mag, 0.9)) if len(mag) else 0.0
+    moving = (mag >= _MOVING * typical) & (mag > 0)
+    imbalance = _imbalance(dn_w)
+    turning = moving & (imbalance >= _TURN) & (np.abs(rot_w) > _REFERENCE_TURN_RAD)
+    left, right = int(np.sum(turning & (rot_w > 0))), int(np.sum(turning & (rot_w < 0)))
+    balanced = imbalance if halves is None else np.max(_imbalance(halves), axis=1)
+    straight = int(np.sum(moving & (balanced < _STRAIGHT)))
+    arcs = int(np.sum(turning & (imbalance < _IN_PLACE)))
+    x = iv.dn_total / np.maximum(np.linalg.norm(iv.dn_total, axis=0), 1e-300)
+    cond = float(np.linalg.cond(x)) if np.all(np.any(iv.dn_total, axis=0)) else float("inf")
     notes = []
     if left + right == 0:
         notes.append("no turns: the wheel base and the left/right scale ratio")
     elif min(left, right) == 0:
         notes.append(f"turns {'counter-clockwise' if left else 'clockwise'} only: the scale "
                      "ratio rests on the straight runs")
-    if straight == 0:
+    if straight == 0 and arcs == 0 and left + right > 0:
+        notes.append("turns in place only: the wheel base rests on the turns' small "
+                     "imbalances (the little the robot travelled)")
+    elif straight == 0:
         notes.append("no straight runs: the left/right scale ratio rests on the turns alone")
     if cond > _MAX_CONDITION:
         notes.append("the two wheels always moved in the same proportion, so their scales "
                      "cannot be told apart")
-    return IdentifiabilityReport(left, right, straight, cond, tuple(notes))
+    return IdentifiabilityReport(left, right, straight, cond, tuple(notes), arcs=arcs,
+                                 windows=len(dn_w))
 
 
-def _closed_form(iv: _Intervals, *, sensor_pose: bool) -> tuple[OdometryIntrinsics, np.ndarray]:
-    """Censi et al. 2013 sec. V-A (rotation) and V-B (translation, constrained LS)."""
-    # V-A: dtheta_k = J21 dn_L + J22 dn_R, linear least squares
-    (j21, j22), *_ = np.linalg.lstsq(iv.dn_total, iv.ref_motion[:, 2], rcond=None)
-    # V-B: robot translation = b a_k, with a_k the odometry of (k_L, k_R, b) = (-J21, J22, 1)
-    if not (j21 < 0 < j22):
+def _check_identifiable(report: IdentifiabilityReport, dn_w: np.ndarray, iv: Intervals, *,
+                        interval_hint: str) -> None:
+    """The documented ``UnidentifiableError`` (or, for a reference that does not turn
+    with the counts, ``PoseReferenceError``) before anything is fitted."""
+    mag = np.max(np.abs(dn_w), axis=1)
+    moving = mag >= _MOVING * float(np.quantile(mag, 0.9))
+    imbalance = _imbalance(dn_w)
+    counts_turn = int(np.sum(moving & (imbalance >= _TURN)))
+    if counts_turn == 0:
+        raise UnidentifiableError("the drive has no turns (the wheels always moved alike): "
+                                  "the wheel base and the left/right scale ratio are not "
+                                  "determined; turn the robot (both ways) during the drive")
+    if report.turns_left + report.turns_right == 0:
         raise PoseReferenceError(
-            "the reference's rotation does not follow the wheel counts (a wheel would turn "
-            f"the robot the wrong way: J21={j21:.3g}, J22={j22:.3g}); is it this robot's "
-            "trajectory, and are left and right the right way round?")
-    a = _odometry_motion(iv, -j21, j22, 1.0)
-    s = iv.ref_motion
-    c, sn = np.cos(a[:, 2]), np.sin(a[:, 2])
-    k = len(a)
-    lin = np.zeros((2 * k, 3 if sensor_pose else 1))          # unknowns b (, l_x, l_y)
-    lin[0::2, 0], lin[1::2, 0] = -a[:, 0], -a[:, 1]
-    if sensor_pose:
-        lin[0::2, 1], lin[0::2, 2] = 1.0 - c, sn               # (I - R(o_theta)) l_t
-        lin[1::2, 1], lin[1::2, 2] = -sn, 1.0 - c
-    rot = np.zeros((2 * k, 2))                                  # R(l_theta) s_t
-    rot[0::2, 0], rot[0::2, 1] = s[:, 0], -s[:, 1]
-    rot[1::2, 0], rot[1::2, 1] = s[:, 1], s[:, 0]
-    if not sensor_pose:
-        b = float(np.sum(lin[:, 0] * rot[:, 0]) / -np.sum(lin[:, 0] ** 2))
-        pose = np.zeros(3)
-    else:
-        pinv = np.linalg.pinv(lin)
-        resid = rot - lin @ (pinv @ rot)                        # eliminate (b, l_x, l_y)
-        _, vecs = np.linalg.eigh(resid.T @ resid)
-        w = vecs[:, 0]                                          # unit-norm minimiser
-        u = -pinv @ rot @ w
-        if u[0] < 0:
-            w, u = -w, -u
-        b, pose = float(u[0]), np.array([u[1], u[2], np.arctan2(w[1], w[0])])
-    if not b > 0:
-        raise PoseReferenceError("the reference's travel does not follow the wheel counts "
-                                 f"(wheel base estimate {b:.3g} m); is it this robot's trajectory?")
-    return OdometryIntrinsics(-j21 * b, j22 * b, b), pose
+            f"the reference shows no turns while the wheel counts turn the robot in "
+            f"{counts_turn} windows; {_causes(sensor_pose=True, encoders=None)}")
+    precision = rotation_step_precision(iv)
+    if report.rotation_condition > _MAX_CONDITION or not precision < _MAX_ROTATION_ERROR:
+        raise UnidentifiableError(
+            f"{interval_hint}the wheels always moved in one proportion "
+            f"(condition {report.rotation_condition:.3g}, the wheels' turn rates "
+            f"{precision:.0%} uncertain): add straight runs to the turns or "
+            "turns to the straight runs" + (
+                ", or give a shorter interval_s if the manoeuvres alternate faster than that"
+                if interval_hint else ""))
 
 
-def _residuals(p: np.ndarray, iv: _Intervals, sigma: np.ndarray) -> np.ndarray:
-    pose = p[3:] if len(p) == 6 else np.zeros(3)
-    pred = _sensor_motion(_odometry_motion(iv, *p[:3]), pose)
-    r = pred - iv.ref_motion
-    r[:, 2] = wrap_angle(r[:, 2])
-    return (r / sigma).ravel()
+def _check_mount(iv: Intervals, rms_xy: float) -> None:
+    """A reference fitted as the axle centre's that a sensor off the axle explains far
+    better (the closed form with the mount estimated leaves under half the translation
+    residual): the mount is the likely cause, named with its option."""
+    n = len(iv.starts)
+    if n < 10:                       # too few intervals to tell a mount from noise
+        return
+    try:
+        k, pose = closed_form(iv, sensor_pose=True, causes="")
+    except CalibrationError:
+        return
+    r = residuals(iv, np.array([*k.as_dict().values(), *pose]))
+    # per degree of freedom: 2n translation equations, 2 more unknowns with the mount
+    free = float(np.sqrt(np.sum(r[:, :2] ** 2) / (2 * n - 3)))
+    if free < _MOUNT_GAIN * rms_xy * np.sqrt(2 * n / (2 * n - 1)):
+        raise PoseReferenceError(
+            f"the reference moves as a sensor off the axle centre would: its travel differs "
+            f"from the wheel counts' by {rms_xy:.3g} m RMS per interval, {free:.3g} m with "
+            f"a mount of x {pose[0]:.3f} m, y {pose[1]:.3f} m, {np.rad2deg(pose[2]):.1f} deg "
+            "estimated; estimate the mount (sensor_pose=True; --sensor-pose)")
 
 
-def _refine(iv: _Intervals, start: OdometryIntrinsics, pose: np.ndarray, *, sensor_pose: bool,
-            sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gauss-Newton (trust region) over all parameters; covariance s^2 (J^T J)^-1."""
-    p0 = np.array([start.m_per_tick_left, start.m_per_tick_right, start.wheel_base_m,
-                   *(pose if sensor_pose else ())])
-    scale = np.abs(p0) + np.array([0, 0, 0, 0.01, 0.01, 0.01])[:len(p0)]
-    fit = least_squares(_residuals, p0, args=(iv, sigma), x_scale=scale, method="trf",
-                        jac="3-point")
-    dof = max(fit.fun.size - len(p0), 1)
-    s2 = 2.0 * fit.cost / dof
-    jtj = fit.jac.T @ fit.jac
-    if np.linalg.cond(jtj) > 1e14:
-        raise UnidentifiableError("the refinement's normal matrix is singular: the drive does "
-                                  "not determine all parameters; add turns both ways and "
-                                  "straight runs")
-    cov = s2 * np.linalg.inv(jtj)
-    r = (fit.fun.reshape(-1, 3) * sigma)
-    rms = np.sqrt(np.mean(r ** 2, axis=0))
-    return fit.x, cov, np.array([np.hypot(rms[0], rms[1]), rms[2]])
+def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
+           sigma0: np.ndarray, rounds: int, fraction: float, causes: str,
+           mean_scale: float | None = None) -> IntrinsicsCalibration:
+    """Closed form, refinement and Censi et al.'s outlier rounds
+    (:mod:`lti_motion.calibration.intrinsics_solver`)."""
+    keep = np.ones(len(iv.starts), bool)
+    sigma = sigma0
+    p = None
+    for round_ in range(rounds + 1):
+        sub = iv.subset(keep)
+        closed, pose = closed_form(sub, sensor_pose=sensor_pose, causes=causes,
+                                   mean_scale=mean_scale)
+        if p is None:                          # later rounds start where the last ended
+            p = np.array([closed.m_per_tick_left, closed.m_per_tick_right,
+                          closed.wheel_base_m, *(pose if sensor_pose else ())])
+        p, cov = refine(sub, p, sigma, mean_scale=mean_scale)
+        r = residuals(sub, p)
+        sigma = noise_from_residuals(r, _NOISE_FLOOR)
+        if round_ < rounds:
+            kept = np.flatnonzero(keep)
+            keep[kept[~trim(r, fraction)]] = False
+    p, cov = refine(sub, p, sigma, mean_scale=mean_scale)   # weights from the residuals
+    r = residuals(sub, p)
+    if not (np.all(np.isfinite(p)) and np.all(p[:3] > 0)):
+        raise UnidentifiableError(f"the refinement left the physical range ({p[:3]}); "
+                                  "the drive does not determine the intrinsics")
+    rms_xy = float(np.sqrt(np.mean(np.sum(r[:, :2] ** 2, axis=1))))
+    rms_th = float(np.sqrt(np.mean(r[:, 2] ** 2)))
+    # medians: a few outliers left (outlier_rounds=0) must not trip the check
+    med_th, ref_th = np.median(np.abs(r[:, 2])), np.median(np.abs(sub.ref_motion[:, 2]))
+    med_xy = np.median(np.hypot(r[:, 0], r[:, 1]))
+    # the wheels' travel (a run that returns to its start still travelled)
+    wheels = 0.5 * (np.abs(p[0] * sub.dn[:, 0]) + np.abs(p[1] * sub.dn[:, 1]))
+    ref_xy = np.median(np.add.reduceat(wheels, sub.starts))
+    if not sensor_pose and mean_scale is None:
+        _check_mount(sub, rms_xy)
+    if med_th > _MAX_ROTATION_RESIDUAL * ref_th:
+        raise PoseReferenceError(
+            f"the reference's turns differ from the wheel counts' by {med_th:.3g} rad per "
+            f"interval (median) after calibration ({med_th / ref_th:.0%} of its own); {causes}")
+    if med_xy > _MAX_TRANSLATION_RESIDUAL * ref_xy:
+        raise PoseReferenceError(
+            f"the reference's travel differs from the wheel counts' by {med_xy:.3g} m per "
+            f"interval (median) after calibration ({med_xy / ref_xy:.0%} of the wheels' "
+            f"travel); {causes}")
+    n_kept = int(keep.sum())
+    _log.info("intrinsics: %s (closed form %s), %d intervals kept, %d rejected, residual RMS "
+              "%.4g m, %.4g rad", p[:3], closed.as_dict(), n_kept, len(keep) - n_kept,
+              rms_xy, rms_th)
+    return IntrinsicsCalibration(
+        intrinsics=OdometryIntrinsics(*p[:3]), closed_form=closed,
+        sensor_pose=np.asarray(p[3:] if sensor_pose else np.zeros(3)),
+        covariance=cov, std=np.sqrt(np.diag(cov)), residual_rms=(rms_xy, rms_th),
+        n_intervals=n_kept, report=report, n_rejected=len(keep) - n_kept, noise=sigma)
+
+
+def _windows(t, counts, rt, rp) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Count increments, reference rotations and the windows' halves' count increments
+    over about 1 s windows of the reference."""
+    step = max(1, round(_WINDOW_S / float(np.median(np.diff(rt)))))
+    tk = rt[::step]
+    mid = 0.5 * (tk[:-1] + tk[1:])
+    cum, half = (np.stack([np.interp(x, t, counts[:, i]) for i in range(2)], axis=1)
+                 for x in (tk, mid))
+    halves = np.stack([half - cum[:-1], cum[1:] - half], axis=1)
+    return np.diff(cum, axis=0), np.diff(np.unwrap(rp[:, 2])[::step]), halves
 
 
 def calibrate_intrinsics(
@@ -326,10 +463,12 @@ def calibrate_intrinsics(
     *,
     interval_s: float = 6.0,
     overlap: int = 10,
-    sensor_pose: bool = True,
+    sensor_pose: bool = False,
     position_std_m: float = 0.005,
     heading_std_rad: float = 0.01,
-    encoders: Literal["quadrature", "commanded"] = "quadrature",
+    encoders: _Encoders = "quadrature",
+    outlier_rounds: int = 4,
+    outlier_fraction: float = 0.01,
 ) -> IntrinsicsCalibration:
     """Both wheels' scale, the wheel base and the reference sensor's pose from a drive.
 
@@ -337,8 +476,10 @@ def calibrate_intrinsics(
     ----------
     t_s : ndarray, shape (n,)
         Encoder frame times [s], on the reference's clock.
-    ticks : ndarray of int, shape (n, 2)
-        Raw 16-bit encoder counts ``(left, right)``.
+    ticks : ndarray of int or float, shape (n, 2)
+        Encoder counts ``(left, right)``: integers are raw 16-bit counts (wrapping);
+        floats are cumulative counts in any unit that never wrap (wheel angles in
+        radians, say). The result's scales are metres per that count.
     ref_t_s : ndarray, shape (m,)
         Reference pose times [s].
     ref_poses : ndarray, shape (m, 3)
@@ -353,29 +494,51 @@ def calibrate_intrinsics(
         intervals, so every reference sample counts.
     sensor_pose : bool
         Estimate the reference frame's pose on the robot (Censi et al.); ``False``
-        when the reference tracks the wheel axle's centre itself.
+        (default, as the command line's ``--sensor-pose`` left out) when the reference
+        tracks the wheel axle's centre itself.
     position_std_m, heading_std_rad : float
-        Noise of one reference pose [m], [rad]: the residuals' weights.
+        Noise of one reference pose [m], [rad]: the weights of the first outlier round
+        only; later rounds and the covariance weigh by the noise the kept residuals show.
     encoders : {"quadrature", "commanded"}
-        As :func:`lti_motion.recordings.body_speeds_from_ticks`.
+        As :func:`lti_motion.recordings.body_speeds_from_ticks` ("commanded": a Roomba /
+        Create 2, whose encoders count in the commanded direction).
+    outlier_rounds : int
+        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none),
+        each rejecting only intervals also beyond 3 robust standard deviations (the
+        scale from the residuals' median; docs/intrinsics.md, "Outliers").
+    outlier_fraction : float
+        Fraction of intervals each round rejects by their largest rotation or
+        translation residual (0.01: those above the 99th percentile of either).
 
     Returns
     -------
     IntrinsicsCalibration
+        With the intervals kept and rejected counted.
 
     Raises
     ------
+    ValueError
+        An option out of range (one line naming it and its value).
     PoseReferenceError
         Wrong shapes, non-finite poses, no time overlap, or a reference whose motion
-        does not follow the wheel counts (another robot's trajectory).
+        does not follow the wheel counts; the message lists the likely causes (the
+        sensor's mount, the encoder kind, a clock offset) with the option that fixes each.
     UnidentifiableError
-        The drive cannot determine the intrinsics (no turns; the wheels always in the
-        same proportion); the message says what to add. Never NaN.
+        The drive cannot determine the intrinsics (no turns; turns in place only; the
+        wheels always in the same proportion); the message says what to add. Never NaN.
 
     Notes
     -----
-    Censi et al. 2013, sec. V-A and V-B (closed form), then a nonlinear refinement;
-    see the module docstring.
+    Censi et al. 2013, sec. V-A and V-B (closed form), then a nonlinear refinement in
+    scaled parameters and the authors' outlier rounds
+    (:mod:`lti_motion.calibration.intrinsics_solver`); see the module docstring.
+
+    References
+    ----------
+    A. Censi, A. Franchi, L. Marchionni, G. Oriolo, "Simultaneous calibration of odometry
+    and sensor parameters for mobile robots", IEEE T-RO 29(2):475-492, 2013, sec. V.
+    P. J. Huber, E. M. Ronchetti, "Robust Statistics", 2nd ed., Wiley 2009, sec. 1.4
+    (the median-based scale, Hampel's rejection rule) and sec. 3.3 (trimming).
 
     Examples
     --------
@@ -396,39 +559,115 @@ def calibrate_intrinsics(
     ...  cal.intrinsics.wheel_base_m / true.wheel_base_m)]
     [1.0, 1.0, 1.0]
     """
+    _check_options(interval_s=interval_s, overlap=overlap, position_std_m=position_std_m,
+                   heading_std_rad=heading_std_rad, encoders=encoders,
+                   outlier_rounds=outlier_rounds, outlier_fraction=outlier_fraction)
     t, n, rt, rp = _check_inputs(t_s, ticks, ref_t_s, ref_poses)
-    d = tick_deltas(n, axis=0)
+    if np.issubdtype(n.dtype, np.floating):
+        d = np.diff(n, axis=0)               # counts in any unit that never wrap
+    else:
+        d = tick_deltas(n, axis=0)
     if encoders == "commanded":
         d = unfold_commanded_direction(d)
     counts = np.vstack([[0, 0], np.cumsum(d, axis=0)]).astype(float)
     if not np.any(d):
         raise UnidentifiableError("the encoders did not move: nothing to calibrate")
     iv = _intervals(t, counts, rt, rp, interval_s, overlap=overlap)
-    report = _report(iv, rt, rp)
-    if report.turns_left + report.turns_right == 0:
-        raise UnidentifiableError("the reference shows no turns: the wheel base and the "
-                                  "left/right scale ratio are not determined; turn the robot "
-                                  "(both ways) during the drive")
-    if report.rotation_condition > _MAX_CONDITION:
-        raise UnidentifiableError(
-            f"over intervals of {interval_s:g} s the wheels always moved in one proportion "
-            f"(condition {report.rotation_condition:.3g}): add straight runs to the turns or "
-            "turns to the straight runs, or give a shorter interval_s if the manoeuvres "
-            "alternate faster than that")
-    closed, pose = _closed_form(iv, sensor_pose=sensor_pose)
+    dn_w, rot_w, halves = _windows(t, counts, rt, rp)
+    report = _report(dn_w, rot_w, iv, halves)
+    _check_identifiable(report, dn_w, iv, interval_hint=f"over intervals of {interval_s:g} s ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
-    p, cov, rms = _refine(iv, closed, pose, sensor_pose=sensor_pose, sigma=sigma)
-    if not (np.all(np.isfinite(p)) and np.all(p[:3] > 0)):
-        raise UnidentifiableError(f"the refinement left the physical range ({p[:3]}); "
-                                  "the drive does not determine the intrinsics")
-    if rms[1] > max(10.0 * sigma[2], 0.05):
-        raise PoseReferenceError(
-            f"the reference turns differ from the wheel counts' by {rms[1]:.3g} rad RMS per "
-            "interval after calibration; is it this robot's trajectory, on the same clock?")
-    _log.info("intrinsics: %s (closed form %s), residual RMS %.4g m, %.4g rad",
-              p[:3], closed.as_dict(), *rms)
-    return IntrinsicsCalibration(
-        intrinsics=OdometryIntrinsics(*p[:3]), closed_form=closed,
-        sensor_pose=np.asarray(p[3:] if sensor_pose else np.zeros(3)),
-        covariance=cov, std=np.sqrt(np.diag(cov)), residual_rms=(float(rms[0]), float(rms[1])),
-        n_intervals=len(iv.starts), report=report)
+    return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
+                  fraction=outlier_fraction,
+                  causes=_causes(sensor_pose=sensor_pose, encoders=encoders))
+
+
+def calibrate_intrinsics_intervals(
+    counts: np.ndarray,
+    sensor_motion: np.ndarray,
+    *,
+    sensor_pose: bool = False,
+    position_std_m: float = 0.005,
+    heading_std_rad: float = 0.01,
+    outlier_rounds: int = 4,
+    outlier_fraction: float = 0.01,
+) -> IntrinsicsCalibration:
+    """Both wheels' scale, the wheel base and the sensor's pose from interval samples.
+
+    Each sample is one interval: the wheels' count increments over it and the sensor's
+    own motion over it in its start frame (a scan matcher's, a visual odometry's), as
+    Censi et al.'s data (:func:`lti_motion.recordings.read_motion_intervals`). Within
+    an interval the wheels are taken to turn at constant speeds (the chord form).
+
+    Parameters
+    ----------
+    counts : ndarray, shape (K, 2)
+        Count increments ``(left, right)`` per interval, in any unit (ticks, or wheel
+        angle in radians: the scales are then metres per radian, the wheel radii).
+    sensor_motion : ndarray, shape (K, 3)
+        The sensor's displacement ``(x [m], y [m], theta [rad])`` over each interval,
+        in its frame at the interval's start.
+    sensor_pose : bool
+        Estimate the sensor's pose on the robot (``--sensor-pose``); ``False`` (default)
+        when it sits on the axle centre, facing forward.
+    position_std_m, heading_std_rad : float
+        Noise of one sample's motion [m], [rad]: the weights of the first outlier round
+        only; later rounds and the covariance weigh by the kept residuals' noise.
+    outlier_rounds : int
+        Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none),
+        each rejecting only intervals also beyond 3 robust standard deviations (the
+        scale from the residuals' median; docs/intrinsics.md, "Outliers").
+    outlier_fraction : float
+        Fraction each round rejects by the largest rotation or translation residual.
+
+    Returns
+    -------
+    IntrinsicsCalibration
+
+    Raises
+    ------
+    ValueError
+        An option out of range.
+    PoseReferenceError
+        Wrong shapes, non-finite samples, or motion that does not follow the counts.
+    UnidentifiableError
+        The samples cannot determine the intrinsics.
+
+    References
+    ----------
+    A. Censi, A. Franchi, L. Marchionni, G. Oriolo, "Simultaneous calibration of odometry
+    and sensor parameters for mobile robots", IEEE T-RO 29(2):475-492, 2013, sec. V.
+
+    Examples
+    --------
+    Wheel radii 21 and 21.1 mm, axle 88 mm, counts in radians, a sensor at the centre:
+
+    >>> from lti_motion.calibration.intrinsics_solver import Intervals, odometry_motion
+    >>> rng = np.random.default_rng(0)
+    >>> angles = rng.uniform(-0.4, 0.8, (300, 2))
+    >>> motion = odometry_motion(Intervals.from_samples(angles, np.zeros((300, 3))),
+    ...                          0.021, 0.0211, 0.088)
+    >>> cal = calibrate_intrinsics_intervals(angles, motion, sensor_pose=False)
+    >>> [round(v * 1e3, 3) for v in cal.intrinsics.as_dict().values()]
+    [21.0, 21.1, 88.0]
+    """
+    _check_options(interval_s=1.0, overlap=1, position_std_m=position_std_m,
+                   heading_std_rad=heading_std_rad, encoders="quadrature",
+                   outlier_rounds=outlier_rounds, outlier_fraction=outlier_fraction)
+    dn = np.asarray(counts, float)
+    sm = np.asarray(sensor_motion, float)
+    if dn.ndim != 2 or dn.shape[1] != 2 or sm.shape != (len(dn), 3):
+        raise PoseReferenceError(f"expected counts of shape (K, 2) and sensor motion of shape "
+                                 f"(K, 3), got {dn.shape} and {sm.shape}")
+    bad = np.flatnonzero(~(np.all(np.isfinite(dn), axis=1) & np.all(np.isfinite(sm), axis=1)))
+    if bad.size:
+        raise PoseReferenceError(f"sample {bad[0]} holds NaN or infinite values; drop it first")
+    if not np.any(dn):
+        raise UnidentifiableError("the encoders did not move: nothing to calibrate")
+    iv = Intervals.from_samples(dn, sm)
+    report = _report(dn, sm[:, 2], iv)
+    _check_identifiable(report, dn, iv, interval_hint="")
+    sigma = np.array([position_std_m, position_std_m, heading_std_rad])
+    return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
+                  fraction=outlier_fraction,
+                  causes=_causes(sensor_pose=sensor_pose, encoders=None))

@@ -11,7 +11,9 @@
 - :mod:`lti_motion.recordings.resample`: any recording onto the model's grid of periods;
 - :mod:`lti_motion.recordings.ticks`: encoder-count arithmetic (the ring step of a wrapping
   counter, unwrapping, speeds from counts);
-- :mod:`lti_motion.recordings.tum`: planar trajectories in the TUM text format.
+- :mod:`lti_motion.recordings.tum`: planar trajectories in the TUM text format;
+- :mod:`lti_motion.recordings.motion_intervals`: interval samples of a sensor's own motion
+  and runs with only a start and an end pose, the references of the intrinsics fit.
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
 importing the door costs nothing until a name is read.
@@ -30,13 +32,16 @@ __all__ = [
     "MAX_WHEEL_SPEED_M_S",
     "N_LIGHT_BUMPS",
     "RECORDING_VERSION",
+    "RUNS_HEADER",
     "STREAMS",
     "TICK_MODULUS",
     "TUM_HEADER",
     "WHEEL_KINDS",
     "ClockFit",
+    "EndPoseRuns",
     "FrameLog",
     "GridSignals",
+    "MotionIntervals",
     "PeriodAssignment",
     "Recording",
     "RecordingSource",
@@ -47,12 +52,15 @@ __all__ = [
     "commands_at",
     "fit_clock",
     "frame_stamps",
+    "is_end_pose_runs",
     "load_log",
     "load_recording",
     "median_period_s",
     "on_grid",
     "poses_at",
     "poses_from_tum",
+    "read_end_pose_runs",
+    "read_motion_intervals",
     "read_tum",
     "save_log",
     "save_recording",
@@ -91,6 +99,14 @@ __getattr__, __dir__ = lazy_exports(
             "load_recording",
             "save_log",
             "save_recording",
+        ),
+        "lti_motion.recordings.motion_intervals": (
+            "EndPoseRuns",
+            "MotionIntervals",
+            "RUNS_HEADER",
+            "is_end_pose_runs",
+            "read_end_pose_runs",
+            "read_motion_intervals",
         ),
         "lti_motion.recordings.recording": (
             "COMMAND_KINDS",
@@ -147,6 +163,14 @@ if TYPE_CHECKING:
         load_recording,
         save_log,
         save_recording,
+    )
+    from lti_motion.recordings.motion_intervals import (
+        RUNS_HEADER,
+        EndPoseRuns,
+        MotionIntervals,
+        is_end_pose_runs,
+        read_end_pose_runs,
+        read_motion_intervals,
     )
     from lti_motion.recordings.recording import (
         COMMAND_KINDS,

@@ -228,7 +228,7 @@ def test_replay_mrclam_fits_on_the_first_half_and_replays_the_second(mrclam_path
 @pytest.mark.parametrize("argv, message", [
     (["replay", "missing.npz", "--model", "{model}"], "no such log file"),
     (["replay", "{log}", "--model", "missing.json"], "no model file missing.json"),
-    (["replay", "{log}", "--model", "{log}"], "damaged"),
+    (["replay", "{log}", "--model", "{log}"], "is a NumPy .npz archive (a recorded log?), not a "),
     (["replay", "{log}"], "give --model FILE"),
     (["replay", "{log}", "--model", "{model}", "--estimators", "ekf_landmarks"],
      "needs landmark sightings"),

@@ -1,6 +1,7 @@
 """``lti-motion calibrate --log LOG --reference FILE.tum``: a recorded drive and a motion
 capture give both wheels' scale; bad input is one line and exit 2."""
 
+import itertools
 import json
 
 import numpy as np
@@ -94,3 +95,66 @@ def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, caps
 def test_reference_without_log_is_refused(capsys):
     assert main(["calibrate", "--robot", "create2", "--reference", "x.tum"]) == 2
     assert "--reference goes with --log" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--reference-std", "-0.005", "0.5"], "--reference-std M must be a positive"),
+    (["--outlier-rounds", "-1"], "--outlier-rounds must be an integer of at least 0"),
+    (["--outlier-fraction", "0.7"], r"--outlier-fraction must be in (0, 0.5]"),
+])
+def test_bad_options_are_one_line_and_exit_2(drive, capsys, extra, message):
+    args = ["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+            "--out", str(drive["folder"] / "bad"), *extra]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_the_command_line_and_the_api_give_the_same_result(drive):
+    """One set of defaults: the command with no options and the API with none."""
+    from lti_motion.calibration import calibrate_intrinsics
+    from lti_motion.recordings import load_log, read_tum
+
+    out = drive["folder"] / "same"
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
+                 "--out", str(out)]) == 0
+    log = load_log(drive["log"])
+    cal = calibrate_intrinsics(log.t_s[log.valid], log.ticks[log.valid], *read_tum(drive["ref"]))
+    written = json.loads((out / "intrinsics.json").read_text())
+    assert written["intrinsics"] == cal.intrinsics.as_dict()
+    assert written["intervals_rejected"] == cal.n_rejected
+
+
+def test_runs_with_only_start_and_end_poses(drive, tmp_path, capsys):
+    """The drive cut into 20 runs, each localised only at its ends by the motion capture
+    (5 mm, 0.5 deg): ``--reference RUNS`` with the runs header."""
+    from lti_motion.recordings import RUNS_HEADER, read_tum
+
+    t, poses = read_tum(drive["ref"])
+    heading = np.unwrap(poses[:, 2])
+    edges = np.linspace(0, len(t) - 1, 21).astype(int)
+    lines = [RUNS_HEADER]
+    for a, b in itertools.pairwise(edges):
+        seen = np.angle(np.exp(1j * (poses[b, 2] - poses[a, 2])))
+        turns = int(np.round((heading[b] - heading[a] - seen) / (2 * np.pi)))
+        lines.append(" ".join(f"{v:.6f}" for v in [t[a], t[b], *poses[a], *poses[b]])
+                     + f" {turns}")
+    runs = tmp_path / "runs.txt"
+    runs.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(runs),
+                 "--out", str(tmp_path / "o")]) == 0
+    written = json.loads((tmp_path / "o" / "intrinsics.json").read_text())
+    k = written["intrinsics"]
+    assert k["m_per_tick_left"] / k["m_per_tick_right"] == pytest.approx(1.01, rel=3e-3)
+    assert written["intervals_used"] == 20
+    capsys.readouterr()
+    assert main(["calibrate", "--reference", str(runs), "--out", str(tmp_path / "p")]) == 2
+    assert "goes with --log" in capsys.readouterr().err
+
+
+def test_a_clock_offset_is_named_and_fixed_by_its_option(drive, capsys):
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["late"]),
+                 "--out", str(drive["folder"] / "late")]) == 2
+    assert "--reference-offset S" in capsys.readouterr().err
+    assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["late"]),
+                 "--reference-offset=-1e4", "--out", str(drive["folder"] / "late")]) == 0

@@ -155,3 +155,97 @@ def test_arcs_both_ways_without_straight_runs_work_and_say_so(rng):
     # manoeuvres alternating as fast as the intervals: the message says what to change
     with pytest.raises(UnidentifiableError, match="shorter interval_s"):
         calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=6.0)
+
+
+@pytest.mark.parametrize(("option", "value", "message"), [
+    ("interval_s", 0.0, "interval_s must be a positive"),
+    ("interval_s", -1.0, "interval_s must be a positive"),
+    ("interval_s", float("nan"), "interval_s must be a positive"),
+    ("overlap", 0, "overlap must be an integer of at least 1"),
+    ("overlap", 2.5, "overlap must be an integer"),
+    ("encoders", "foo", "encoders must be 'quadrature' or 'commanded'"),
+    ("position_std_m", -0.005, "position_std_m must be a positive"),
+    ("heading_std_rad", 0.0, "heading_std_rad must be a positive"),
+    ("outlier_rounds", -1, "outlier_rounds must be an integer of at least 0"),
+    ("outlier_fraction", 0.0, r"outlier_fraction must be in \(0, 0.5\]"),
+    ("outlier_fraction", 0.6, r"outlier_fraction must be in \(0, 0.5\]"),
+])
+def test_every_option_is_validated_in_one_line(rng, option, value, message):
+    t, ticks, poses = _drive(*RICH)
+    rt, rp = _reference(rng, poses, t)
+    with pytest.raises(ValueError, match=message) as info:
+        calibrate_intrinsics(t, ticks, rt, rp, **{option: value})
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("sensor_pose", [True, False])
+def test_turns_in_place_only_are_unidentifiable_with_the_default_options(rng, sensor_pose):
+    t, ticks, poses = _drive([[-250, 250], [250, -250]] * 3, [3.0, 3.0] * 3)
+    rt, rp = _reference(rng, poses, t)
+    with pytest.raises(UnidentifiableError, match="one proportion"):
+        calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=sensor_pose)
+
+
+def test_a_constant_arc_is_unidentifiable_and_does_not_blame_the_reference(rng):
+    t, ticks, poses = _drive([[500, 300]], [40.0])
+    rt, rp = _reference(rng, poses, t)
+    for interval_s in (2.0, 6.0):
+        with pytest.raises(UnidentifiableError, match="one proportion") as info:
+            calibrate_intrinsics(t, ticks, rt, rp, interval_s=interval_s)
+        assert "this robot's" not in str(info.value)
+
+
+def test_outlying_reference_samples_are_rejected_and_counted(rng):
+    """1% of the reference poses thrown 10 cm away: the four rounds reject the intervals
+    they spoil, and the estimate and its covariance come from the rest. (The rule drops
+    the intervals above the 99th percentile: under about 100 intervals it drops none.)"""
+    t, ticks, poses = _drive(*RICH)
+    rt, rp = _reference(rng, poses, t, std=(0.002, 0.003))
+    bad = rng.choice(len(rp), size=len(rp) // 100, replace=False)
+    rp = rp.copy()
+    rp[bad, :2] += rng.choice([-0.1, 0.1], size=(len(bad), 2))
+    clean = calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=0.2,
+                                 overlap=1)
+    raw = calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False, interval_s=0.2,
+                               overlap=1, outlier_rounds=0)
+    assert raw.n_rejected == 0 and clean.n_rejected > 0
+    assert clean.n_intervals + clean.n_rejected == raw.n_intervals
+    err = abs(clean.intrinsics.wheel_base_m / TRUE.wheel_base_m - 1.0)
+    err_raw = abs(raw.intrinsics.wheel_base_m / TRUE.wheel_base_m - 1.0)
+    assert err < 2e-3 and err < err_raw
+    assert clean.std[2] < raw.std[2]
+
+
+def test_a_slow_robot_has_straight_runs_in_its_own_terms(rng):
+    """A robot ten times slower than a Create 2 (a Khepera's speeds): its straight runs
+    and turns are judged against its own wheel increments."""
+    slow = ([[r / 10 for r in rate] for rate in RICH[0]], RICH[1])
+    k = OdometryIntrinsics(4.49e-4, 4.4455e-4, 0.088)
+    t, ticks, poses = _drive(*slow, k=k)
+    rt, rp = _reference(rng, poses, t, std=(0.0003, 0.001))
+    cal = calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False)
+    assert cal.report.straight_runs > 10 and cal.report.turns_left > 5
+    assert cal.report.turns_right > 5 and cal.report.undetermined == ()
+
+
+def test_ticks_in_a_finer_unit_give_the_same_physical_result(rng):
+    t, ticks, poses = _drive(*RICH)
+    rt, rp = _reference(rng, poses, t)
+    fine = np.round(np.unwrap(ticks.astype(float), period=65536, axis=0) * 10).astype(np.int64)
+    a = calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=True)
+    b = calibrate_intrinsics(t, fine % 65536, rt, rp, sensor_pose=True)
+    ka, kb = a.intrinsics, b.intrinsics
+    np.testing.assert_allclose([kb.m_per_tick_left * 10, kb.m_per_tick_right * 10,
+                                kb.wheel_base_m], [ka.m_per_tick_left, ka.m_per_tick_right,
+                                                   ka.wheel_base_m], rtol=1e-4)
+    np.testing.assert_allclose(b.std[2:], a.std[2:], rtol=1e-2)
+
+
+@pytest.mark.parametrize("offset", [(0.08, -0.03, 0.3), (0.1, 0.0, 0.0)])
+def test_a_sensor_off_the_axle_fitted_as_the_axle_names_the_mount(rng, offset):
+    t, ticks, poses = _drive(*RICH)
+    rt, rp = _reference(rng, _compose(poses, np.array(offset)), t,
+                        std=(0.001, np.deg2rad(0.1)))
+    with pytest.raises(PoseReferenceError, match=r"sensor_pose=True; --sensor-pose") as info:
+        calibrate_intrinsics(t, ticks, rt, rp, sensor_pose=False)
+    assert "this robot's" not in str(info.value)
