@@ -108,3 +108,15 @@ def test_plots_and_examples_choose_no_backend_at_import():
     """The application's plots and the examples draw with matplotlib's object-oriented
     API: importing them neither calls ``matplotlib.use`` nor loads pyplot."""
     assert loaded_after(NO_BACKEND, ("matplotlib.pyplot",)) == []
+
+
+@pytest.mark.parametrize("door", DOORS)
+def test_no_door_re_exports_a_name_of_one_of_its_modules(door):
+    """``from pkg import name`` must give the same object whether or not ``pkg.name`` the
+    module has been imported: importing a submodule sets it as the package's attribute,
+    over a lazily re-exported function of the same name."""
+    package = importlib.import_module(door)
+    here = Path(package.__file__).parent
+    modules = {p.stem for p in here.glob("*.py")} | {p.name for p in here.iterdir()
+                                                      if (p / "__init__.py").is_file()}
+    assert not set(getattr(package, "__all__", [])) & modules

@@ -43,7 +43,6 @@ __all__ = [
     "ground_m_per_tick",
     "intrinsics_drive",
     "load_robot",
-    "motion_capture",
     "preset_names",
     "print_progress",
     "read_robot_file",
@@ -84,10 +83,7 @@ __getattr__, __dir__ = lazy_exports(
             "QUEUE_LEN",
             "run_periods",
         ),
-        "drivers.sim.motion_capture": (
-            "intrinsics_drive",
-            "motion_capture",
-        ),
+        "drivers.sim.motion_capture": ("intrinsics_drive",),
         "drivers.sim.robot_file": (
             "FAULT_FIELDS",
             "Field",
@@ -134,7 +130,7 @@ if TYPE_CHECKING:
         QUEUE_LEN,
         run_periods,
     )
-    from drivers.sim.motion_capture import intrinsics_drive, motion_capture
+    from drivers.sim.motion_capture import intrinsics_drive
     from drivers.sim.robot_file import (
         FAULT_FIELDS,
         SCHEMA,

@@ -66,7 +66,6 @@ __all__ = [
     "WindowIntegrator",
     "WindowResiduals",
     "WindowStatistics",
-    "change_time",
     "change_time_posterior",
     "cusum_arl",
     "cusum_llr_threshold",
@@ -102,7 +101,6 @@ __getattr__, __dir__ = lazy_exports(
             "ChangeTime",
             "ChangeTimeRule",
             "ChangeTimeTracker",
-            "change_time",
             "change_time_posterior",
         ),
         "fusion.monitoring.cusum": (
@@ -196,7 +194,6 @@ if TYPE_CHECKING:
         ChangeTime,
         ChangeTimeRule,
         ChangeTimeTracker,
-        change_time,
         change_time_posterior,
     )
     from fusion.monitoring.cusum import (
