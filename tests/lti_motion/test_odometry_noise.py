@@ -120,9 +120,10 @@ def test_the_growth_is_never_below_zero_when_the_rounding_exceeds_r():
     assert np.all(np.linalg.eigvalsh(noise.growth_cov) > 0)
 
 
-def test_speed_error_over_one_period_is_r_and_grows_with_the_period():
+def test_speed_error_over_one_period_is_c_q_ct_plus_r_and_grows_with_the_period():
     model = _model()
-    np.testing.assert_allclose(speed_error_over(model, model.dt_s), model.output_error_covariance(2)[1])
+    one = model.C @ model.Q @ model.C.T + model.R
+    np.testing.assert_allclose(speed_error_over(model, model.dt_s), one, rtol=1e-12)
     assert speed_error_over(model, 0.1)[1, 1] >= speed_error_over(model, 0.015)[1, 1]
 
 
