@@ -338,7 +338,7 @@ def _scalar(value: object) -> str:
     if isinstance(value, float):
         if not math.isfinite(value):
             raise ValueError(f"a parameter value is {value}; nothing exported")
-        text = f"{value:.10g}"
+        text = f"{value:.7g}"           # 7 digits: what a run reproduces, to 1e-6
         mantissa, _, exponent = text.partition("e")
         if "." not in mantissa:
             mantissa += ".0"
