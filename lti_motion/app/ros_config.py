@@ -231,7 +231,7 @@ def diff_drive_parameters(model: MotionModel, nominal: Nominal, *,
         names = ("left_wheel", "right_wheel") if ros1 else ("left_wheel_names",
                                                            "right_wheel_names")
         out += [Parameter(names[0], (nominal.left_joint,), f"from {nominal.source}"),
-                Parameter(names[1], (nominal.right_joint,))]
+                Parameter(names[1], (nominal.right_joint,), f"from {nominal.source}")]
     how = (f"calibrated travel per tick {k.m_per_tick_left * 1e3:.6g} / "
            f"{k.m_per_tick_right * 1e3:.6g} mm (left / right) times {nominal.ticks_source} "
            f"ticks per revolution over 2 pi: radii {_g(r_left)} / {_g(r_right)} m")
@@ -245,7 +245,8 @@ def diff_drive_parameters(model: MotionModel, nominal: Nominal, *,
                              f"no nominal radius given: the calibrated wheels' mean ({how})"))
         radius_note = "each calibrated radius over their mean"
     out += [Parameter("left_wheel_radius_multiplier", r_left / radius, radius_note),
-            Parameter("right_wheel_radius_multiplier", r_right / radius)]
+            Parameter("right_wheel_radius_multiplier", r_right / radius,
+                      "the same for the right wheel")]
     if nominal.wheel_separation_m is not None:
         out += [Parameter("wheel_separation", nominal.wheel_separation_m,
                           f"nominal, from {nominal.source}"),
@@ -255,7 +256,8 @@ def diff_drive_parameters(model: MotionModel, nominal: Nominal, *,
     else:
         out += [Parameter("wheel_separation", k.wheel_base_m,
                           "no nominal separation given: the calibrated wheel base"),
-                Parameter("wheel_separation_multiplier", 1.0)]
+                Parameter("wheel_separation_multiplier", 1.0,
+                          "1: the separation above is the calibrated one")]
     twist = averaged_covariance(model.R, dt_s=model.dt_s, period_s=period)
     u = UNESTIMATED_VARIANCE
     out += [
