@@ -6,7 +6,7 @@ rad/s/sqrt(Hz), bias 0.006 rad/s), 5 s at rest, then 20 s of curves that keep
 turning left (0.34 rad/s on average), 5% of frames lost after 6 s; drive seeds
 ``SEED0 .. SEED0 + N_RUNS - 1``. Each drive is written to a ROS 1 bag with
 ``/imu/data`` (:func:`drivers.bags.write_drive_bag`) and read back the way
-``lti-motion replay --bag`` reads it (:func:`lti_motion.app.bag_commands.load_bag_log`
+``lti-motion replay --bag`` reads it (:func:`lti_motion.app.bag_commands.replay_source`
 on the model's period); the ``ekf`` estimator runs on it with the Imu and with
 no ``--gyro``, and on the in-memory log (the simulator's own readings, no bag).
 One ARX model (``calibrate_simulator("create2", seed=4)``, 40 s of excitation). The
@@ -35,7 +35,7 @@ from drivers.bags.writer import write_drive_bag
 from drivers.sim.calibration import calibrate_simulator
 from drivers.sim.config import Fault, Room, get_preset
 from drivers.sim.simulator import Simulator
-from lti_motion.app.bag_commands import BagOptions, load_bag_log
+from lti_motion.app.bag_commands import BagOptions, replay_source
 from lti_motion.app.replay import estimate
 from lti_motion.app.replay_sources import source_from_frame_log
 from lti_motion.calibration.manoeuvres import CalibrationPlan
@@ -67,10 +67,8 @@ def heading_errors(model: MotionModel, log: FrameLog, folder: Path) -> dict[str,
     bag = write_drive_bag(folder / "drive.bag", log, gyro_noise_density_rad_s_sqrt_hz=DENSITY)
     out = {}
     for name, gyro in (("imu", True), ("no_gyro", False)):
-        kinds = ("cmd", "wheels", "truth") + (("imu",) if gyro else ())
-        bag_log = load_bag_log(bag, wheel_base_m=model.wheel_base_m,
-                               options=BagOptions(dt_s=model.dt_s, gyro=gyro), kinds=kinds)
-        sources = {name: source_from_frame_log(bag_log, name)}
+        _, src = replay_source(bag, model, options=BagOptions(dt_s=model.dt_s, gyro=gyro))
+        sources = {name: src}
         if gyro:
             sources["memory"] = source_from_frame_log(log, "memory")
         for key, src in sources.items():

@@ -7,7 +7,7 @@
   them, the in-memory log keeps their counts). Both models run free on a fresh 1-minute
   drive; the figure is the largest difference of their fit percentages (v and w) over
   five seeds (target: within 1 percentage point).
-- ``bags.read_*_msgs_per_s``: :func:`drivers.bags.read_bag` on a 10-minute 50 Hz drive
+- ``bags.read_*_msgs_per_s``: :func:`drivers.bags.read_topics` on a 10-minute 50 Hz drive
   (commands, wheel angles, odometry, reference poses: 120,000 messages) in each format.
 - ``bags.calibrate_10min_s``: :func:`lti_motion.app.bag_commands.calibrate_from_bag` on
   that drive (ROS 2 MCAP), against the same fit from its in-memory log (baseline);
@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.harness import Figure, benchmark, median_seconds
-from drivers.bags.reader import read_bag
-from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
+from drivers.bags.reader import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
+from drivers.bags.topics import read_topics
 from drivers.bags.writer import write_drive_bag
 from drivers.sim.config import PRESETS, Fault
 from drivers.sim.simulator import Simulator
@@ -79,7 +79,7 @@ def fit_gaps(folder: Path, seeds=SEEDS, *, excitation_s: float = 180.0,
     for seed in seeds:
         log = _drive(seed, excitation_s)
         bag = write_drive_bag(folder / f"cal_{seed}", _jittered(log, seed))
-        from_bag, _ = calibrate_from_bag(bag, wheel_base_m=WHEEL_BASE_M)
+        from_bag = calibrate_from_bag(bag, wheel_base_m=WHEEL_BASE_M)[0].model
         memory = _memory_model(log)
         fresh = _drive(1000 + seed, fresh_s, lost=0.0)
         cmd_m_s, speeds = speeds_from_log(fresh, m_per_tick=M_PER_TICK,
@@ -106,9 +106,9 @@ def bags() -> list[Figure]:
         for fmt, name, storage in (("ros1", "long.bag", "mcap"), ("db3", "long_db3", "sqlite3"),
                                    ("mcap", "long_mcap", "mcap")):
             path = write_drive_bag(folder / name, _jittered(long, 7), storage=storage)
-            rec = read_bag(path)
+            rec = read_topics(path)
             n_msgs = sum(len(s) for s in (rec.cmd, rec.wheels, rec.odom, rec.truth))
-            t = median_seconds(lambda p=path: read_bag(p), repeat=3)
+            t = median_seconds(lambda p=path: read_topics(p), repeat=3)
             figures.append(Figure(f"bags.read_{fmt}_msgs_per_s", n_msgs / t, "msg/s",
                                   target=200_000.0))
         print(f"  the 10-minute bag holds {n_msgs} messages")

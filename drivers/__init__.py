@@ -5,7 +5,7 @@
 - :mod:`drivers.roomba`: the Roomba / Create 2 Open Interface, the pyserial robot,
   the virtual Roomba on a pseudo-terminal, the stream clock;
 - :mod:`drivers.logs`, :mod:`drivers.datasets`: recorded logs and public data sets;
-- :mod:`drivers.bags.reader`, :mod:`drivers.bags.to_log`, :mod:`drivers.bags.writer`: ROS bags in
+- :mod:`drivers.bags.reader`, :mod:`drivers.bags.topics`, :mod:`drivers.bags.writer`: ROS bags in
   and out (``rosbags``).
 
 Importing this package loads only its exceptions; each wing loads what it needs.

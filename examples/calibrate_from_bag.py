@@ -7,8 +7,9 @@ The steps of ``docs/guide_ros_bags.md`` on the library's public API:
    ``--bag``, the script records stand-ins on the simulator instead: a 3-minute
    random excitation and a 1-minute drive with its true poses as ``/ground_truth``,
    by a Create 2 carrying a MEMS gyro (``/imu/data``, ``sensor_msgs/Imu``);
-2. calibrate: the ARX model from the excitation bag (commands against the speeds
-   from the wheel angles);
+2. calibrate: the bag read once as one ``Recording`` (wheel angles, twist commands),
+   put on the model's grid once, the ARX model fitted on that grid (commands against
+   the speeds from the wheel angles), the same grid plotted;
 3. replay: encoder odometry and the model's EKF on the second bag (and, when it has
    an Imu, the EKF that also fuses its yaw rate), their error against its
    reference poses;
@@ -32,16 +33,24 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivers.bags import BagAlarm, bag_to_log, read_bag, write_drive_bag, write_estimates_bag
+from drivers.bags import (
+    CREATE2_TICKS_PER_RAD,
+    CREATE2_WHEEL_RADIUS_M,
+    BagAlarm,
+    bag_grid,
+    read_bag,
+    write_drive_bag,
+    write_estimates_bag,
+)
 from drivers.sim import Fault, Room, Simulator, get_preset
 from fusion.ekf import ModelEKF
 from fusion.monitoring import MonitoredFilter
 from fusion.noise import GyroNoise
-from lti_motion.calibration import CalibrationPlan, speeds_from_log
-from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.calibration import CalibrationPlan, calibrate_recording
+from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, fit_percent
-from lti_motion.model import MotionModel, fit_arx, random_held_normal
-from lti_motion.recordings import FrameLog, tick_deltas
+from lti_motion.model import MotionModel, random_held_normal
+from lti_motion.recordings import GridSignals, frame_stamps, poses_at, snap_period_s
 
 WHEEL_BASE_M = 0.235                   # the Create 2's; give your robot's
 GYRO_DENSITY = 0.005                   # the stand-ins' gyro: a MEMS one [rad/s/sqrt(Hz)]
@@ -76,92 +85,111 @@ def record_stand_ins(folder: Path, *, seed: int = 0, excitation_s: float = 180.0
     return cal, ref
 
 
-def calibrate_from_bag(path: Path) -> tuple[MotionModel, FrameLog]:
-    """The ARX model of the drive in a bag, and the drive (the nominal encoder scale)."""
-    log = bag_to_log(read_bag(path), wheel_base_m=WHEEL_BASE_M)
-    cmd_m_s, speeds = speeds_from_log(log, m_per_tick=log.meta["m_per_tick"],
-                                      wheel_base_m=WHEEL_BASE_M)
-    model = fit_arx([(cmd_m_s, speeds)], dt_s=log.dt_s, wheel_base_m=WHEEL_BASE_M,
-                    m_per_tick=log.meta["m_per_tick"], dc_gain="wheel_servo")
-    return model, log
+def calibrate_from_bag(path: Path) -> tuple[MotionModel, GridSignals]:
+    """The ARX model of the drive in a bag, and the drive on its grid (the nominal encoder
+    scale: a bag holds no rotation in place beside a wall)."""
+    rec = read_bag(path, imu=False, truth=False)
+    grid = bag_grid(rec, wheel_base_m=WHEEL_BASE_M, wheel_radius_m=CREATE2_WHEEL_RADIUS_M,
+                    encoders="commanded")                    # a Create 2's encoders
+    cal = calibrate_recording(rec, wheel_base_m=WHEEL_BASE_M, grid=grid,
+                              m_per_tick=CREATE2_WHEEL_RADIUS_M / CREATE2_TICKS_PER_RAD,
+                              scale_from="the nominal wheel radius / ticks per radian",
+                              dt_s=snap_period_s(grid.period_s))
+    return cal.model, grid
 
 
-def _gyro_readings(log: FrameLog) -> np.ndarray | None:
-    """Each frame's Imu yaw rate [rad/s], NaN at lost frames (a new gyro window); None
-    without an Imu."""
-    if log.yaw_rate_rad_s is None:
-        return None
-    return np.where(log.valid, log.yaw_rate_rad_s, np.nan)
+class Frames:
+    """A bag's drive on the model's grid as the robot's stream would give it: frame ``k``
+    closes period ``k`` (0 .. P), its counts the wheels' travel in the model's ticks."""
+
+    def __init__(self, path: Path, model: MotionModel) -> None:
+        rec = read_bag(path, dt_s=model.dt_s)
+        grid = bag_grid(rec, wheel_base_m=model.wheel_base_m,
+                        wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+        clock = grid.assignment.clock
+        self.t_s = clock.times_s(np.arange(len(grid.closed))) + clock.latency_median_s
+        self.start_ns = rec.source.start_ns
+        travel = np.cumsum(wheel_from_body(grid.speeds, wheel_base_m=model.wheel_base_m)
+                           * grid.period_s, axis=0)
+        self.ticks = np.vstack([np.zeros((1, 2), np.int64),
+                                np.rint(travel / model.m_per_tick).astype(np.int64)])
+        self.cmd_m_s = np.vstack([grid.cmd_m_s[:1], grid.cmd_m_s])
+        self.valid = grid.closed
+        self.true_pose = (None if rec.true_pose is None else poses_at(
+            rec.true_pose, frame_stamps(rec, grid.assignment), max_gap_s=0.25))
+        self.yaw_rate_rad_s = (None if grid.yaw_rate_rad_s is None else np.where(
+            self.valid, np.concatenate([[np.nan], grid.yaw_rate_rad_s]), np.nan))
+
+    def __len__(self) -> int:
+        return len(self.t_s)
 
 
-def _ekf_poses(model: MotionModel, log: FrameLog, start: np.ndarray,
+def _ekf_poses(model: MotionModel, frames: Frames, start: np.ndarray,
                gyro: np.ndarray | None) -> np.ndarray:
     """The model's EKF over the frames: encoders, and the gyro's readings when given."""
     ekf = ModelEKF(model, initial_pose=start, pose_std=(0.005, 0.005, 0.005),
-                   initial_ticks=log.ticks[0], history=0,
+                   initial_ticks=frames.ticks[0], history=0, counter_bits=64,
                    gyro=None if gyro is None else GyroNoise())
-    poses = np.empty((len(log), 3))
+    poses = np.empty((len(frames), 3))
     poses[0] = ekf.pose
-    for k in range(1, len(log)):
-        ekf.predict(log.cmd_m_s[k])
-        if log.valid[k]:
-            ekf.update_encoders(log.ticks[k])
+    for k in range(1, len(frames)):
+        ekf.predict(frames.cmd_m_s[k])
+        if frames.valid[k]:
+            ekf.update_encoders(frames.ticks[k])
         if gyro is not None:
             ekf.update_gyro(gyro[k])
         poses[k] = ekf.pose
     return poses
 
 
-def replay(path: Path, model: MotionModel) -> tuple[FrameLog, dict[str, np.ndarray]]:
+def replay(path: Path, model: MotionModel) -> tuple[Frames, dict[str, np.ndarray]]:
     """Encoder odometry and the model's EKF (and with an Imu, the EKF fusing its yaw rate)
     over a bag, from its first reference pose."""
-    log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
-    start = log.true_pose[0] if log.has_truth else np.zeros(3)
-    rows = np.flatnonzero(log.valid)
-    travel = tick_deltas(log.ticks[rows], axis=0) * model.m_per_tick
+    frames = Frames(path, model)
+    start = frames.true_pose[0] if frames.true_pose is not None else np.zeros(3)
+    travel = np.diff(frames.ticks, axis=0) * model.m_per_tick       # each period's [m]
     odometry = integrate_poses(body_from_wheel(travel, wheel_base_m=model.wheel_base_m), 1.0,
                                initial_pose=start)
-    held = np.searchsorted(rows, np.arange(len(log)), side="right") - 1
-    poses = {"encoder odometry": odometry[held],
-             "EKF, model and encoders": _ekf_poses(model, log, start, None)}
-    gyro = _gyro_readings(log)
-    if gyro is not None:
-        poses["EKF, model, encoders and gyro"] = _ekf_poses(model, log, start, gyro)
-    return log, poses
+    poses = {"encoder odometry": odometry,
+             "EKF, model and encoders": _ekf_poses(model, frames, start, None)}
+    if frames.yaw_rate_rad_s is not None:
+        poses["EKF, model, encoders and gyro"] = _ekf_poses(model, frames, start,
+                                                           frames.yaw_rate_rad_s)
+    return frames, poses
 
 
 def monitor(path: Path, model: MotionModel, out_bag: Path) -> list[str]:
     """The EKF and the residual monitor over a bag; alarms with bag time into a new bag."""
-    log = bag_to_log(read_bag(path), wheel_base_m=model.wheel_base_m, dt_s=model.dt_s)
-    start_ns = log.meta["bag_start_ns"] + round(log.t_s[0] * 1e9)
-    gyro = _gyro_readings(log)
-    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005),
+    frames = Frames(path, model)
+    start_ns = frames.start_ns + round(frames.t_s[0] * 1e9)
+    gyro = frames.yaw_rate_rad_s
+    mf = MonitoredFilter(model, pose_std=(0.005, 0.005, 0.005), counter_bits=64,
                          gyro=None if gyro is None else GyroNoise())
-    poses, covs = np.zeros((len(log), 3)), np.zeros((len(log), 3, 3))
-    for k in range(len(log)):
-        result = mf.step(log.ticks[k], log.cmd_m_s[k], valid=bool(log.valid[k]),
+    poses, covs = np.zeros((len(frames), 3)), np.zeros((len(frames), 3, 3))
+    for k in range(len(frames)):
+        result = mf.step(frames.ticks[k], frames.cmd_m_s[k], valid=bool(frames.valid[k]),
                          yaw_rate_rad_s=None if gyro is None else float(gyro[k]))
         poses[k], covs[k] = result.pose, mf.ekf.P[:3, :3]
     alarms = [BagAlarm(start_ns + round(e.t_s * 1e9), f"lti_motion/{e.kind}",
                        f"{e.kind}: {e.test} statistic {e.statistic:.3g} > {e.threshold:.3g}",
                        (("onset_s", f"{e.onset_s:.3f}"),)) for e in mf.events]
-    t_ns = log.meta["bag_start_ns"] + np.rint(log.t_s * 1e9).astype(np.int64)
+    t_ns = frames.start_ns + np.rint(frames.t_s * 1e9).astype(np.int64)
     write_estimates_bag(out_bag, t_ns, poses, covs, alarms=alarms)
     return [f"{a.name} at bag time {a.t_ns // 10**9}.{a.t_ns % 10**9:09d}: {a.message}"
             for a in alarms]
 
 
-def plot_fit(model: MotionModel, log: FrameLog, path: Path, *, seconds: float = 20.0) -> None:
+def plot_fit(model: MotionModel, grid: GridSignals, path: Path, *,
+             seconds: float = 20.0) -> None:
     """Measured speeds of the calibration drive against the model's free run."""
-    cmd_m_s, speeds = speeds_from_log(log, m_per_tick=model.m_per_tick,
-                                      wheel_base_m=model.wheel_base_m)
-    predicted = model.simulate(cmd_m_s)
-    n = round(seconds / log.dt_s)
+    speeds = grid.speeds
+    predicted = model.simulate(grid.cmd_m_s)
+    n = round(seconds / model.dt_s)
     fig = Figure(figsize=(10, 5))
     axes = fig.subplots(2, 1, sharex=True)
     for ax, j, unit in ((axes[0], 0, "v [m/s]"), (axes[1], 1, "w [rad/s]")):
-        ax.plot(np.arange(n) * log.dt_s, speeds[:n, j], lw=0.8, label="wheel angles")
-        ax.plot(np.arange(n) * log.dt_s, predicted[:n, j], lw=0.8, label="model, free run")
+        ax.plot(np.arange(n) * model.dt_s, speeds[:n, j], lw=0.8, label="wheel angles")
+        ax.plot(np.arange(n) * model.dt_s, predicted[:n, j], lw=0.8, label="model, free run")
         ax.set(ylabel=unit)
         ax.legend(fontsize=8)
     axes[1].set(xlabel="time [s]")
@@ -169,12 +197,12 @@ def plot_fit(model: MotionModel, log: FrameLog, path: Path, *, seconds: float = 
     fig.savefig(path, dpi=110)
 
 
-def plot_trajectories(log: FrameLog, poses: dict[str, np.ndarray], path: Path) -> None:
+def plot_trajectories(frames: Frames, poses: dict[str, np.ndarray], path: Path) -> None:
     """The estimates and the reference poses in the plane."""
     fig = Figure(figsize=(6, 6))
     ax = fig.subplots()
-    if log.has_truth:
-        ax.plot(log.true_pose[:, 0], log.true_pose[:, 1], "k-", lw=2, label="reference")
+    if frames.true_pose is not None:
+        ax.plot(frames.true_pose[:, 0], frames.true_pose[:, 1], "k-", lw=2, label="reference")
     for name, p in poses.items():
         ax.plot(p[:, 0], p[:, 1], lw=1, label=name)
     ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
@@ -198,22 +226,20 @@ def main(argv: list[str] | None = None) -> int:
                                                 excitation_s=args.excitation_s,
                                                 drive_s=args.drive_s)
         print(f"recorded stand-ins on the simulator: {args.bag}, {args.drive}")
-    model, cal_log = calibrate_from_bag(args.bag)
-    cmd_m_s, speeds = speeds_from_log(cal_log, m_per_tick=model.m_per_tick,
-                                      wheel_base_m=model.wheel_base_m)
-    fit = fit_percent(speeds, model.simulate(cmd_m_s), axis=0)
+    model, grid = calibrate_from_bag(args.bag)           # the grid computed once
+    fit = fit_percent(grid.speeds, model.simulate(grid.cmd_m_s), axis=0)
     saved = model.save(args.out / "model_arx.json")
     print(f"calibrated: ARX order {model.orders['na']}, delay {model.orders['delay']}; "
           f"free-run fit v {fit[0]:.1f} %, w {fit[1]:.1f} %; saved {saved}")
-    plot_fit(model, cal_log, args.out / "fit.png")
+    plot_fit(model, grid, args.out / "fit.png")
     if args.drive is not None:
-        log, poses = replay(args.drive, model)
+        frames, poses = replay(args.drive, model)
         for name, p in poses.items():
-            if log.has_truth:
-                ok = np.all(np.isfinite(log.true_pose), axis=1)
-                err = ate_stats(log.true_pose[ok], p[ok])
+            if frames.true_pose is not None:
+                ok = np.all(np.isfinite(frames.true_pose), axis=1)
+                err = ate_stats(frames.true_pose[ok], p[ok])
                 print(f"{name}: ATE rmse {err.rmse_m:.3f} m, max {err.max_m:.3f} m")
-        plot_trajectories(log, poses, args.out / "trajectories.png")
+        plot_trajectories(frames, poses, args.out / "trajectories.png")
         for line in monitor(args.drive, model, args.out / "estimates.bag"):
             print(line)
         print(f"wrote {args.out / 'estimates.bag'}, fit.png and trajectories.png to {args.out}")

@@ -26,6 +26,7 @@ __all__ = [
     "UnidentifiableError",
     "UnstableModelError",
     "WallRunError",
+    "WheelSpeedError",
 ]
 
 
@@ -43,6 +44,32 @@ class NotExcitedError(CalibrationError):
 
 class UnstableModelError(CalibrationError):
     """A fitted model has poles on or outside the unit circle."""
+
+
+class WheelSpeedError(ValueError):
+    """A wheel (measured or commanded) moves faster than can be right: wrong field, unit or
+    scale. Besides the message, it says where, for a reader to name the source.
+
+    Attributes
+    ----------
+    field : str
+        The recording's stream kind (e.g. ``"wheel_angles_rad"``, ``"cmd_body"``).
+    side : int
+        The wheel: 0 left, 1 right.
+    sample : int
+        Index, in that stream, of the sample behind the speed (the wheel frame closing
+        the period, or the command held in it).
+    speed_m_s, limit_m_s : float
+        The wheel's speed and the limit [m/s].
+    t_s : float
+        End of the period [s].
+    """
+
+    def __init__(self, message: str, *, field: str, side: int, sample: int,
+                 speed_m_s: float, t_s: float, limit_m_s: float) -> None:
+        super().__init__(message)
+        self.field, self.side, self.sample = field, side, sample
+        self.speed_m_s, self.t_s, self.limit_m_s = speed_m_s, t_s, limit_m_s
 
 
 class ModelFileError(ValueError):

@@ -188,6 +188,16 @@ def _create_beside(path: Path) -> tuple[int, Path]:
     raise FileExistsError(f"no free temporary name beside {path}")
 
 
+#: Files a user may give where a document is expected, known by their first bytes: said as
+#: what they are, not as a damaged document.
+_OTHER_KINDS = (
+    (b"PK\x03\x04", "a NumPy .npz archive (a recorded log?)"),
+    (b"#ROSBAG", "a ROS 1 bag"),
+    (b"\x89MCAP", "an MCAP (ROS 2) bag"),
+    (b"SQLite format 3\x00", "an SQLite (ROS 2) bag"),
+)
+
+
 def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...]) -> dict:
     """Read a document written by :func:`write_document` and check it.
 
@@ -215,8 +225,13 @@ def read_document(path: str | os.PathLike, *, fmt: str, versions: tuple[int, ...
         (damaged or edited by hand).
     """
     path = Path(path)
+    raw = path.read_bytes()
+    kind = next((what for magic, what in _OTHER_KINDS if raw.startswith(magic)), None)
+    if kind is not None:
+        raise ModelFileError(f"{path} is {kind}, not a {fmt!r} file: give the JSON file "
+                             "lti-motion wrote (a model: model_arx.json)")
     try:
-        doc = json.loads(path.read_bytes().decode("utf-8"))
+        doc = json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ModelFileError(f"{path} is damaged or truncated: not valid JSON ({exc}); "
                              "restore it from a backup or calibrate again") from None

@@ -1,10 +1,12 @@
 """The bags wing: ROS 1 and ROS 2 bags in and out, through ``rosbags`` (no ROS install).
 
-- :mod:`drivers.bags.reader`: :func:`read_bag`, a drive's topics found by message type;
+- :mod:`drivers.bags.reader`: :func:`read_bag`, a bag's drive as one
+  :class:`~lti_motion.recordings.Recording` (topics found by message type), and
+  :func:`bag_grid`, that recording on the model's grid;
+- :mod:`drivers.bags.topics`: the raw per-topic series the reader starts from;
 - :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
-- :mod:`drivers.bags.to_log`: a bag's drive on the grid of the sensor period;
 - :mod:`drivers.bags.imu_noise`: the gyro's noise measured from the bag;
 - :mod:`drivers.bags.writer`: estimates and simulated drives written as bags.
 
@@ -22,6 +24,8 @@ __all__ = [
     "CREATE2_TICKS_PER_RAD",
     "CREATE2_WHEEL_RADIUS_M",
     "LEFT_JOINT",
+    "MAX_GAP_S",
+    "MAX_WHEEL_M_S",
     "RIGHT_JOINT",
     "TF_TYPE",
     "TOPIC_OPTIONS",
@@ -29,12 +33,12 @@ __all__ = [
     "TRUTH_CHILDREN",
     "TRUTH_PARENTS",
     "BagAlarm",
-    "BagRecording",
+    "BagTopics",
     "ImuRateNoise",
     "StampedSeries",
     "TfTruth",
+    "bag_grid",
     "bag_paths",
-    "bag_to_log",
     "bag_topics",
     "decode_fields",
     "field_value",
@@ -43,6 +47,7 @@ __all__ = [
     "open_bag",
     "raw_messages",
     "read_bag",
+    "read_topics",
     "tf_truth",
     "with_rate_data",
     "write_drive_bag",
@@ -68,13 +73,11 @@ __getattr__, __dir__ = lazy_exports(
             "raw_messages",
         ),
         "drivers.bags.reader": (
-            "BagRecording",
-            "LEFT_JOINT",
-            "RIGHT_JOINT",
-            "StampedSeries",
-            "TOPIC_OPTIONS",
-            "TOPIC_TYPES",
-            "bag_topics",
+            "CREATE2_TICKS_PER_RAD",
+            "CREATE2_WHEEL_RADIUS_M",
+            "MAX_GAP_S",
+            "MAX_WHEEL_M_S",
+            "bag_grid",
             "read_bag",
         ),
         "drivers.bags.tf": (
@@ -84,10 +87,15 @@ __getattr__, __dir__ = lazy_exports(
             "TfTruth",
             "tf_truth",
         ),
-        "drivers.bags.to_log": (
-            "CREATE2_TICKS_PER_RAD",
-            "CREATE2_WHEEL_RADIUS_M",
-            "bag_to_log",
+        "drivers.bags.topics": (
+            "BagTopics",
+            "LEFT_JOINT",
+            "RIGHT_JOINT",
+            "StampedSeries",
+            "TOPIC_OPTIONS",
+            "TOPIC_TYPES",
+            "bag_topics",
+            "read_topics",
         ),
         "drivers.bags.writer": (
             "BagAlarm",
@@ -103,15 +111,22 @@ if TYPE_CHECKING:
     from drivers.bags.imu_noise import ImuRateNoise, imu_rate_noise, with_rate_data
     from drivers.bags.messages import bag_paths, is_mcap, open_bag, raw_messages
     from drivers.bags.reader import (
+        CREATE2_TICKS_PER_RAD,
+        CREATE2_WHEEL_RADIUS_M,
+        MAX_GAP_S,
+        MAX_WHEEL_M_S,
+        bag_grid,
+        read_bag,
+    )
+    from drivers.bags.tf import TF_TYPE, TRUTH_CHILDREN, TRUTH_PARENTS, TfTruth, tf_truth
+    from drivers.bags.topics import (
         LEFT_JOINT,
         RIGHT_JOINT,
         TOPIC_OPTIONS,
         TOPIC_TYPES,
-        BagRecording,
+        BagTopics,
         StampedSeries,
         bag_topics,
-        read_bag,
+        read_topics,
     )
-    from drivers.bags.tf import TF_TYPE, TRUTH_CHILDREN, TRUTH_PARENTS, TfTruth, tf_truth
-    from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_to_log
     from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag

@@ -15,7 +15,7 @@ and ``zz == 0`` (the all-zero matrix, or a zero yaw entry) is unknown.
 [rad/s/sqrt(Hz)] (:class:`fusion.noise.GyroNoise`); a message's rate at the Imu's
 period ``tau`` has variance ``sigma^2 = q^2 / tau`` (Woodman 2007, section
 3.2.1), so ``q = sqrt(sigma^2 tau)``. The resampling rule of
-:mod:`drivers.bags.to_log` integrates the messages over their stamps (trapezoid rule),
+:func:`lti_motion.recordings.on_grid` integrates the messages over their stamps (trapezoid rule),
 and the EKF sums the periods over its window ``T``: the window's integral of
 ``T / tau`` messages, each weighted ``tau``, has variance ``(T / tau) tau^2
 sigma^2 = q^2 T``, the window's noise of :func:`fusion.ekf.gyro_cov`, for an
@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drivers.bags.reader import StampedSeries
+from drivers.bags.topics import StampedSeries
 from drivers.exceptions import BagError
 
 __all__ = ["ImuRateNoise", "imu_rate_noise", "with_rate_data"]

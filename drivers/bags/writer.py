@@ -10,12 +10,6 @@ renamed into place when complete; an existing path is refused.
 
 - :func:`write_estimates_bag`: poses with covariance as ``nav_msgs/Odometry``,
   alarms as ``diagnostic_msgs/DiagnosticArray``;
-
-No ``Odometry`` written here holds a zero variance (robot_localization replaces one with
-a warning): the estimates' twist carries the model's output noise, or "unknown"
-(:data:`UNESTIMATED_VARIANCE`) when none is given; the drive's ``/odom`` its
-:class:`~lti_motion.odometry_noise.OdometryNoise` (the twist's, and the pose's grown along
-the path); every variance is at least :data:`~lti_motion.odometry_noise.VARIANCE_FLOOR`.
 - :func:`write_drive_bag`: a :class:`~lti_motion.recordings.FrameLog` (a simulator
   drive) as a robot running ROS would record it: ``/cmd_vel`` (``Twist``),
   ``/joint_states`` (wheel angles from the counts), ``/odom`` (encoder odometry)
@@ -30,6 +24,12 @@ the path); every variance is at least :data:`~lti_motion.odometry_noise.VARIANCE
   drive has a yaw-rate gyro (``log.yaw_rate_rad_s``), ``/imu/data``
   (``sensor_msgs/Imu``: the yaw rate and its variance, orientation and acceleration
   marked absent, REP 145).
+
+No ``Odometry`` written here holds a zero variance (robot_localization replaces one with
+a warning): the estimates' twist carries the model's output noise, or "unknown"
+(:data:`UNESTIMATED_VARIANCE`) when none is given; the drive's ``/odom`` its
+:class:`~lti_motion.odometry_noise.OdometryNoise` (the twist's, and the pose's grown along
+the path); every variance is at least :data:`~lti_motion.odometry_noise.VARIANCE_FLOOR`.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
+from drivers.bags.reader import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
 from drivers.exceptions import BagError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, integrate_poses

@@ -1,31 +1,36 @@
 """``lti-motion calibrate / replay / monitor --bag``: the commands on a recorded ROS bag.
 
-A bag is read with :func:`drivers.bags.read_bag` (topics found by message type,
-or named) and turned into a :class:`~lti_motion.recordings.FrameLog` by
-:func:`drivers.bags.bag_to_log`, the one conversion; from there each command
-runs as it does on a log (``docs/guide_ros_bags.md``):
+A bag is read once with :func:`drivers.bags.read_bag` (topics found by message type,
+or named) into one :class:`~lti_motion.recordings.Recording`: wheel angles as
+angles, the twist commands as a twist, the robot's odometry twist as body speeds
+when it has no wheel angles. :func:`drivers.bags.bag_grid` puts it on the model's
+grid once (:func:`lti_motion.recordings.on_grid`, the one path of every recording),
+and each command runs on that grid (``docs/guide_ros_bags.md``):
 
-- :func:`calibrate_from_bag`: the ARX model from the whole drive (commands
-  against the wheel-angle speeds; the last 30 % held out to choose order and
-  delay). A bag holds no rotation in place next to a wall, so the encoder scale
-  is the nominal one, ``wheel_radius_m / ticks_per_rad``. A bag without
-  ``JointState`` wheel angles but with ``nav_msgs/Odometry`` (a robot that
-  publishes only its odometry, as ``diff_drive_controller`` does) is calibrated
-  on the odometry's twist as body speeds instead (:func:`odometry_recording`,
-  then :func:`lti_motion.calibration.calibrate_recording`, as ``calibrate --log``);
+- :func:`calibrate_from_bag`: the ARX model from the whole drive through
+  :func:`lti_motion.calibration.calibrate_recording`, as ``calibrate --log`` (the
+  excitation report; the last 30 % held out to choose order and delay). A bag holds
+  no rotation in place next to a wall, so the encoder scale of wheel angles is the
+  nominal one, ``wheel_radius_m / ticks_per_rad``, kept in the model
+  (:attr:`OfflineCalibration.m_per_tick
+  <lti_motion.calibration.OfflineCalibration.m_per_tick>`); a robot's odometry twist
+  needs none;
 - :func:`replay_bag`: the estimators against the bag's reference poses
-  (``PoseStamped``) if it has any; TUM files, plots, and with ``out_bag`` the EKF's
-  estimates as ``nav_msgs/Odometry`` with covariance in a new bag;
+  (``PoseStamped`` or tf) if it has any; TUM files, plots, and with ``out_bag`` the
+  EKF's estimates as ``nav_msgs/Odometry`` with covariance in a new bag;
 - :func:`monitor_bag`: the EKF and the residual monitor over the recorded drive,
   alarms printed with their bag time, and with ``out_bag`` the estimates and the
   alarms (``diagnostic_msgs/DiagnosticArray``) in a new bag.
 
-In replay and monitor, a bag's ``sensor_msgs/Imu`` yaw rate (found by type, or
-``--imu-topic``) is put on the frames (:func:`drivers.bags.bag_to_log`) and
-fused by the EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNoise`
-defaults) with ``BagOptions(gyro=True)`` (``--gyro``); by default the Imu is not read
-(opt-in: on a hard floor with the default scale priors the gyro can cost accuracy,
-``docs/ekf.md``).
+In replay and monitor the wheels' travel on the grid is counted in the encoder's ticks
+(``ticks_per_rad``; :func:`~lti_motion.app.replay_sources.source_from_wheel_grid`), what
+the model's encoder scale reads (a twist: in the model's ticks,
+:func:`~lti_motion.app.replay.twist_counts`), and a bag's ``sensor_msgs/Imu`` yaw
+rate (found by type, or ``--imu-topic``), the mean over each period, is fused by the
+EKF as a gyro (:mod:`fusion.ekf.gyro`, :class:`~fusion.noise.GyroNoise` defaults or
+the density the Imu states) with ``BagOptions(gyro=True)`` (``--gyro``); by default
+the Imu is not read (opt-in: on a hard floor with the default scale priors the gyro
+can cost accuracy, ``docs/ekf.md``).
 
 The paper: ``docs/architecture.md``, "The paper".
 """
@@ -33,7 +38,7 @@ The paper: ``docs/architecture.md``, "The paper".
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -43,11 +48,10 @@ import numpy as np
 from drivers.bags import (
     CREATE2_TICKS_PER_RAD,
     CREATE2_WHEEL_RADIUS_M,
-    TOPIC_TYPES,
+    MAX_GAP_S,
+    MAX_WHEEL_M_S,
     BagAlarm,
-    StampedSeries,
-    bag_to_log,
-    bag_topics,
+    bag_grid,
     read_bag,
     write_estimates_bag,
 )
@@ -56,14 +60,18 @@ from fusion.monitoring import AlarmEvent, FrameResult
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
 from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
-from lti_motion.app.replay_sources import source_from_frame_log, source_from_grid
-from lti_motion.calibration import speeds_from_log
+from lti_motion.app.replay_sources import (
+    ReplaySource,
+    source_from_grid,
+    source_from_wheel_grid,
+)
+from lti_motion.calibration import OfflineCalibration, calibrate_recording
 from lti_motion.exceptions import MissingEncoderScaleError
-from lti_motion.model import MotionModel, fit_arx
-from lti_motion.recordings import FrameLog, Recording, SensorFrame, median_period_s, on_grid
+from lti_motion.model import MotionModel
+from lti_motion.recordings import GridSignals, Recording, SensorFrame, snap_period_s
 
-__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_log", "monitor_bag",
-           "odometry_recording", "plot_bag_fit", "replay_bag"]
+__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording", "monitor_bag",
+           "plot_bag_fit", "replay_bag", "replay_source"]
 
 
 @dataclass(frozen=True)
@@ -88,13 +96,13 @@ class BagOptions:
     dt_s : float or None
         Sensor period [s]; default from the stamps (calibrate) or the model's.
     encoders : {"commanded", "quadrature"}
-        How the wheel angles count (:func:`lti_motion.calibration.speeds_from_log`):
+        How the wheel angles count, for calibration (:func:`lti_motion.recordings.on_grid`):
         ``"commanded"`` (default) for a Roomba / Create 2, whose encoders count in
         the commanded direction; ``"quadrature"`` for encoders that know which way
         the wheel turns (most ROS robots).
     max_wheel_m_s : float
         Wheel speeds above this are refused as impossible [m/s]
-        (:func:`drivers.bags.bag_to_log`).
+        (:func:`drivers.bags.bag_grid`).
     gyro : bool
         Replay and monitor: read the bag's Imu yaw rate and fuse it (``--gyro``;
         default ``False``: the Imu is not read).
@@ -109,34 +117,49 @@ class BagOptions:
     wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M
     dt_s: float | None = None
     encoders: Literal["commanded", "quadrature"] = "commanded"
-    max_wheel_m_s: float = 20.0
+    max_wheel_m_s: float = MAX_WHEEL_M_S
     gyro: bool = False
 
+    @property
+    def m_per_tick(self) -> float:
+        """The nominal encoder scale of the wheel angles, ``wheel_radius_m / ticks_per_rad``
+        [m/tick]."""
+        return self.wheel_radius_m / self.ticks_per_rad
 
-def load_bag_log(path: str | os.PathLike, *, wheel_base_m: float,
-                 options: BagOptions | None = None,
-                 kinds: Sequence[str] = ("cmd", "wheels", "odom", "imu", "truth")) -> FrameLog:
-    """The drive in a bag as a log (:func:`drivers.bags.read_bag`, then ``bag_to_log``);
-    only the topics of ``kinds`` are read.
+
+def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
+                       imu: bool = True, truth: bool = True,
+                       dt_s: float | None = None) -> Recording:
+    """The drive in a bag as one recording (:func:`drivers.bags.read_bag` with the
+    options' topics and joints); the Imu and the reference read only when asked.
 
     Raises
     ------
     FileNotFoundError, BagError
-        From the reader and the conversion.
+        From the reader.
     """
     opt = options or BagOptions()
-    rec = read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint, kinds=kinds,
-                   truth_parent=opt.truth_parent, truth_child=opt.truth_child,
-                   **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
-    return bag_to_log(rec, wheel_base_m=wheel_base_m, ticks_per_rad=opt.ticks_per_rad,
-                      wheel_radius_m=opt.wheel_radius_m, dt_s=opt.dt_s,
-                      max_wheel_m_s=opt.max_wheel_m_s)
+    return read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint,
+                    truth_parent=opt.truth_parent, truth_child=opt.truth_child, imu=imu,
+                    truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s,
+                    **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
+
+
+def _grid(rec: Recording, *, wheel_base_m: float, options: BagOptions,
+          encoders: Literal["commanded", "quadrature"]) -> GridSignals:
+    angles = rec.wheel_kind == "wheel_angles_rad"
+    return bag_grid(rec, wheel_base_m=wheel_base_m,
+                    wheel_radius_m=options.wheel_radius_m if angles else None,
+                    encoders=encoders, max_wheel_m_s=options.max_wheel_m_s)
 
 
 def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
                        options: BagOptions | None = None, floor: str | None = None,
-                       validation: float = 0.3) -> tuple[MotionModel, FrameLog]:
+                       validation: float = 0.3) -> tuple[OfflineCalibration, Recording]:
     """Calibrate an ARX model on the drive recorded in a bag.
+
+    The bag is read once, put on the grid once (:func:`drivers.bags.bag_grid`), and
+    fitted through :func:`lti_motion.calibration.calibrate_recording`, as any recording.
 
     Parameters
     ----------
@@ -153,97 +176,54 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
 
     Returns
     -------
-    model : MotionModel
-        ARX, wheel-servo DC gain (:class:`~lti_motion.calibration.CalibrationPlan`),
-        ``m_per_tick`` the nominal scale.
-    log : FrameLog
-        The drive it was fitted on.
+    calibration : OfflineCalibration
+        The ARX model (wheel-servo DC gain; period the fitted one as the robot is
+        configured, :func:`lti_motion.recordings.snap_period_s`, or ``options.dt_s``),
+        the excitation report, the grid it was fitted on, and the encoder scale
+        ``m_per_tick``: the nominal ``wheel_radius_m / ticks_per_rad`` for wheel
+        angles, ``None`` for an odometry twist.
+    recording : Recording
+        The drive as read.
 
     Raises
     ------
     BagError
-        For a bag without wheel angles or commands (and the reader's errors).
-    CalibrationError
-        If the drive does not excite the model enough.
+        For a bag without wheel angles (nor odometry) or without commands (and the
+        reader's errors).
+    NotExcitedError
+        If the drive cannot identify the model (the reasons given).
     """
     opt = options or BagOptions()
-    log = load_bag_log(path, wheel_base_m=wheel_base_m, options=opt, kinds=("cmd", "wheels"))
-    if not log.meta["has_commands"]:
+    rec = load_bag_recording(path, options=opt, imu=False, truth=False)
+    if not rec.source.has("cmd"):
         raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
                        "commands; calibration needs what was commanded (record /cmd_vel)")
-    cmd_m_s, speeds = speeds_from_log(log, m_per_tick=log.meta["m_per_tick"],
-                                      wheel_base_m=wheel_base_m, encoders=opt.encoders)
-    model = fit_arx([(cmd_m_s, speeds)], dt_s=log.dt_s, wheel_base_m=wheel_base_m,
-                    m_per_tick=log.meta["m_per_tick"], floor=floor, validation=validation,
-                    dc_gain="wheel_servo")
-    return model, log
+    grid = _grid(rec, wheel_base_m=wheel_base_m, options=opt, encoders=opt.encoders)
+    angles = rec.wheel_kind == "wheel_angles_rad"
+    cal = calibrate_recording(
+        rec, wheel_base_m=wheel_base_m, grid=grid, validation=validation, floor=floor,
+        m_per_tick=opt.m_per_tick if angles else None,
+        wheel_radius_m=opt.wheel_radius_m if angles else None, encoders=opt.encoders,
+        scale_from=("the nominal wheel radius / ticks per radian" if angles
+                    else "the robot's odometry (body speeds)"),
+        dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s)
+    return cal, rec
 
 
-def odometry_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
-                       reference: bool = False) -> Recording | None:
-    """The drive as body speeds from the bag's ``nav_msgs/Odometry`` twist, for a bag that
-    has no ``sensor_msgs/JointState`` wheel angles; ``None`` when it has them (or no
-    Odometry: :func:`calibrate_from_bag` then says what is missing).
-
-    The twist ``(linear.x [m/s], angular.z [rad/s])`` of each message is the robot's own
-    estimate of its body speeds over the time since its last message
-    (``diff_drive_controller``'s ``/odom``); the commands are the bag's Twist topic. Both
-    keep their stamps; :func:`lti_motion.recordings.on_grid` puts them on the sensor
-    period's grid, as for any recording. With ``reference`` (replay), the reference poses
-    (``PoseStamped`` or tf) and, with ``options.gyro``, the Imu's yaw rate come along;
-    ``meta["bag_start_ns"]`` is the bag's first stamp.
-
-    Raises
-    ------
-    FileNotFoundError, BagError
-        The reader's errors; a bag with odometry and no commands.
-    """
-    opt = options or BagOptions()
-    types = bag_topics(path).values()
-    if (opt.topics.get("wheels") or TOPIC_TYPES["wheels"][0] in types
-            or not any(t in TOPIC_TYPES["odom"] for t in types)):
-        return None
-    kinds = ("cmd", "odom") + (("truth",) + (("imu",) if opt.gyro else ()) if reference else ())
-    rec = read_bag(path, kinds=kinds, truth_parent=opt.truth_parent,
-                   truth_child=opt.truth_child,
-                   **{f"{kind}_topic": opt.topics.get(kind) for kind in kinds})
-    if rec.cmd is None:
-        raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
-                       "commands; calibration needs what was commanded (record /cmd_vel)")
-
-    def seconds(series: StampedSeries) -> np.ndarray:
-        return (series.t_ns - rec.start_ns) * 1e-9
-
-    t_s = seconds(rec.odom)
-    extra = {}
-    if rec.truth is not None:
-        extra.update(true_pose_t_s=seconds(rec.truth), true_pose=rec.truth.values)
-    if rec.imu is not None:
-        extra.update(yaw_rate_t_s=seconds(rec.imu), yaw_rate_rad_s=rec.imu.values[:, 0])
-    return Recording.from_streams(
-        wheel_t_s=t_s, body_speeds=rec.odom.values[:, 3:5],
-        dt_s=opt.dt_s if opt.dt_s is not None else median_period_s(t_s),
-        cmd_t_s=seconds(rec.cmd), cmd_body=rec.cmd.values, rates="since_last", **extra,
-        meta={"source": "ROS bag", "bag": str(Path(path)), "bag_start_ns": int(rec.start_ns),
-              "topics": {"cmd": rec.cmd.topic, "odom": rec.odom.topic}})
-
-
-def plot_bag_fit(model: MotionModel, log: FrameLog, path: str | os.PathLike, *,
-                 seconds: float = 30.0,
-                 encoders: Literal["commanded", "quadrature"] = "commanded") -> np.ndarray:
+def plot_bag_fit(model: MotionModel, grid: GridSignals, path: str | os.PathLike, *,
+                 seconds: float = 30.0) -> np.ndarray:
     """Plot the measured speeds of a bag's drive against the model's free run; return the fit.
 
     Parameters
     ----------
     model : MotionModel
-    log : FrameLog
-        The drive (its ``meta["m_per_tick"]`` scales the counts).
+    grid : GridSignals
+        The drive on the model's grid (:attr:`OfflineCalibration.grid
+        <lti_motion.calibration.OfflineCalibration.grid>`, the one it was fitted on).
     path : str or path-like
         The PNG written.
     seconds : float
         How much of the drive is drawn [s] (the fit covers all of it).
-    encoders : {"commanded", "quadrature"}
-        As for :class:`BagOptions`.
 
     Returns
     -------
@@ -255,16 +235,15 @@ def plot_bag_fit(model: MotionModel, log: FrameLog, path: str | os.PathLike, *,
 
     from lti_motion.metrics import fit_percent
 
-    cmd_m_s, speeds = speeds_from_log(log, m_per_tick=model.m_per_tick,
-                                      wheel_base_m=model.wheel_base_m, encoders=encoders)
+    cmd_m_s, speeds = grid.cmd_m_s, grid.speeds
     predicted = model.simulate(cmd_m_s)
     fit = np.asarray(fit_percent(speeds, predicted, axis=0))
-    n = min(len(speeds), round(seconds / log.dt_s))
-    t = np.arange(n) * log.dt_s
+    n = min(len(speeds), round(seconds / grid.period_s))
+    t = np.arange(n) * grid.period_s
     fig = Figure(figsize=(10, 5))
     axes = fig.subplots(2, 1, sharex=True)
     for ax, j, unit in ((axes[0], 0, "v [m/s]"), (axes[1], 1, "w [rad/s]")):
-        ax.plot(t, speeds[:n, j], lw=0.8, label="from the wheel angles")
+        ax.plot(t, speeds[:n, j], lw=0.8, label="measured")
         ax.plot(t, predicted[:n, j], lw=0.8, label=f"model, free run (fit {fit[j]:.1f} %)")
         ax.set(ylabel=unit)
         ax.grid(alpha=0.3)
@@ -281,47 +260,47 @@ def _bag_ns(start_ns: int, t_s: np.ndarray | float) -> np.ndarray:
     return start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
 
 
-def _twist_log(path: str | os.PathLike, model: MotionModel,
-               options: BagOptions | None) -> FrameLog | None:
-    """For a bag with an odometry twist and no wheel angles: the drive as a log of the counts
-    the twist stands for (:func:`~lti_motion.app.replay.twist_counts`, never wrapping) on
-    the model's period; ``None`` for a bag with wheel angles.
+def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptions | None,
+                  *, start_s: float = 0.0, duration_s: float | None = None
+                  ) -> tuple[Recording, GridSignals, ReplaySource]:
+    """The bag's drive read once, on the model's grid once (on the model's period unless a
+    period is given; with the Imu's yaw rate when ``options.gyro``), as the estimators'
+    source: wheel angles as the encoder's counts (the angles times ticks per radian, which
+    the model's encoder scale turns into metres), a twist as body speeds."""
+    opt = options or BagOptions()
+    rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True,
+                             dt_s=opt.dt_s or model.dt_s)
+    # the counts go to the EKF as the robot's stream gives them: no unfolding
+    grid = _grid(rec, wheel_base_m=model.wheel_base_m, options=opt, encoders="quadrature")
+    name = Path(path).name
+    if rec.wheel_kind == "body_speeds":          # the robot's own odometry twist
+        src = source_from_grid(grid, name, dt_s=rec.dt_s, start_s=start_s,
+                               duration_s=duration_s)
+    else:                   # the encoder's own counts: the angles times ticks per radian
+        first = np.flatnonzero(grid.assignment.keep & rec.wheel_valid)[0]
+        src = source_from_wheel_grid(rec, grid, name, m_per_tick=(opt.m_per_tick,) * 2,
+                                     wheel_base_m=model.wheel_base_m, dt_s=rec.dt_s,
+                                     origin_m=tuple(rec.wheel.values[first] * opt.wheel_radius_m),
+                                     start_s=start_s, duration_s=duration_s,
+                                     max_gap_s=MAX_GAP_S)
+    return rec, grid, src
+
+
+def replay_source(path: str | os.PathLike, model: MotionModel, *,
+                  options: BagOptions | None = None, start_s: float = 0.0,
+                  duration_s: float | None = None) -> tuple[Recording, ReplaySource]:
+    """The bag's drive as :func:`replay_bag` replays it: read once, on the model's grid
+    once, the estimators' source (a lost frame's yaw rate NaN: a new gyro window).
 
     Raises
     ------
-    MissingEncoderScaleError
-        If the model has no encoder scale to count the twist's travel in.
+    FileNotFoundError, BagError
+        From the reader and the grid.
     """
-    opt = options or BagOptions()
-    rec = odometry_recording(path, options=replace(opt, dt_s=opt.dt_s or model.dt_s),
-                             reference=True)
-    if rec is None:
-        return None
-    if model.encoder_intrinsics is None:
-        raise MissingEncoderScaleError(
-            f"{Path(path).name} has an odometry twist and no wheel angles; monitoring it "
-            "needs a model with an encoder scale to count the twist's travel in, and this "
-            "one has none: calibrate with the rotation in place or from wheel angles")
-    grid = on_grid(rec, wheel_base_m=model.wheel_base_m, max_wheel_speed_m_s=opt.max_wheel_m_s)
-    src = source_from_grid(grid, Path(path).name, dt_s=rec.dt_s)
-    n = len(src)
-    return FrameLog(t_s=src.t_s, ticks=twist_counts(src, model.encoder_intrinsics),
-                    cmd_m_s=src.cmd_m_s, light_bump=np.zeros((n, 6), np.int64),
-                    bumps=np.zeros((n, 2), bool), valid=src.valid, dt_s=rec.dt_s,
-                    yaw_rate_rad_s=src.yaw_rate_rad_s,
-                    meta={**rec.meta, "counter_bits": 64,
-                          "lost_frames": int(np.count_nonzero(~src.valid))})
-
-
-def _model_log(path: str | os.PathLike, model: MotionModel,
-               options: BagOptions | None) -> FrameLog:
-    """The bag's drive on the model's period (unless a period is given), with the Imu's yaw
-    rate unless ``options.gyro`` is false."""
-    opt = options or BagOptions()
-    if opt.dt_s is None:
-        opt = replace(opt, dt_s=model.dt_s)
-    kinds = ("cmd", "wheels", "odom", "truth") + (("imu",) if opt.gyro else ())
-    return load_bag_log(path, wheel_base_m=model.wheel_base_m, options=opt, kinds=kinds)
+    rec, _, src = _model_source(path, model, options, start_s=start_s, duration_s=duration_s)
+    if src.yaw_rate_rad_s is not None:
+        src = replace(src, yaw_rate_rad_s=np.where(src.valid, src.yaw_rate_rad_s, np.nan))
+    return rec, src
 
 
 def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.PathLike, *,
@@ -345,28 +324,16 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
     opt = options or BagOptions()
-    odometry = odometry_recording(path, options=replace(opt, dt_s=opt.dt_s or model.dt_s),
-                                  reference=True)
-    if odometry is not None:            # the robot's own odometry twist, no wheel angles
-        grid = on_grid(odometry, wheel_base_m=model.wheel_base_m,
-                       max_wheel_speed_m_s=opt.max_wheel_m_s)
-        src = source_from_grid(grid, Path(path).name, dt_s=odometry.dt_s, start_s=start_s,
-                               duration_s=duration_s)
-        start_ns = odometry.meta["bag_start_ns"]
-    else:
-        log = _model_log(path, model, options)
-        if "imu_noise" in log.meta:
-            print_fn(log.meta["imu_noise"]["summary"])
-        src = source_from_frame_log(log, Path(path).name, start_s=start_s,
-                                    duration_s=duration_s)
-        start_ns = log.meta["bag_start_ns"]
+    rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s)
+    if "imu_noise" in rec.meta:
+        print_fn(rec.meta["imu_noise"]["summary"])
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
-                        rpe_s=rpe_s, gyro=(options or BagOptions()).gyro, print_fn=print_fn)
+                        rpe_s=rpe_s, gyro=opt.gyro, print_fn=print_fn)
     if out_bag is not None:
         name = "ekf" if "ekf" in result.pose_covs else next(iter(result.pose_covs), None)
         if name is None:
             raise BagError("--out-bag writes the EKF's estimates; run the ekf estimator")
-        written = write_estimates_bag(out_bag, _bag_ns(start_ns, src.t_s),
+        written = write_estimates_bag(out_bag, _bag_ns(rec.source.start_ns, src.t_s),
                                       result.poses[name], result.pose_covs[name],
                                       speeds=result.speeds[name], twist_covs=model.R)
         print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance) to {written}")
@@ -399,12 +366,13 @@ class BagRun:
     out_bag: Path | None = None
 
 
-def _frames(log: FrameLog):
-    yaw = log.yaw_rate_rad_s
-    for k in range(len(log)):
-        yield SensorFrame(t_s=float(log.t_s[k]), ticks=log.ticks[k],
-                          light_bump=log.light_bump[k], bumps=log.bumps[k],
-                          cmd_m_s=log.cmd_m_s[k], valid=bool(log.valid[k]),
+def _frames(src: ReplaySource, ticks: np.ndarray,
+            yaw: np.ndarray | None) -> Iterator[SensorFrame]:
+    """The source's frames as a robot's stream gives them (no light bumps, no bumpers)."""
+    no_bumps, no_light = np.zeros(2, bool), np.zeros(6, np.int64)
+    for k in range(len(src)):
+        yield SensorFrame(t_s=float(src.t_s[k]), ticks=ticks[k], light_bump=no_light,
+                          bumps=no_bumps, cmd_m_s=src.cmd_m_s[k], valid=bool(src.valid[k]),
                           yaw_rate_rad_s=None if yaw is None else float(yaw[k]))
 
 
@@ -416,7 +384,8 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     Each alarm is printed as the live monitor prints it
     (:func:`~lti_motion.app.monitor.format_alarm`, times from the first frame),
     followed by its bag time. With ``out_bag`` the estimates and the alarms go
-    into a new bag.
+    into a new bag. The wheels' travel goes in as the encoder's counts (a twist's as the
+    counts of the model's scale, :func:`~lti_motion.app.replay.twist_counts`).
 
     Parameters
     ----------
@@ -437,8 +406,17 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    log = _twist_log(path, model, options) or _model_log(path, model, options)
-    n = len(log)
+    rec, _, src = _model_source(path, model, options)
+    if src.ticks is not None:
+        ticks, yaw = src.ticks, src.yaw_rate_rad_s
+    else:                                        # a twist: the counts it stands for
+        if model.encoder_intrinsics is None:
+            raise MissingEncoderScaleError(
+                f"{Path(path).name} has an odometry twist and no wheel angles; monitoring it "
+                "needs a model with an encoder scale to count the twist's travel in, and "
+                "this one has none: calibrate with the rotation in place or from wheel angles")
+        ticks, yaw = twist_counts(src, model.encoder_intrinsics), src.yaw_rate_rad_s
+    n = len(src)
     poses, covs, speeds = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 2))
     step = iter(range(n))
 
@@ -446,32 +424,29 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
         k = next(step)
         poses[k], covs[k], speeds[k] = result.pose, cov, result.speeds
 
-    t0 = float(log.t_s[0])
-
-    def line(text: str) -> None:
-        print_fn(text)
+    t0 = float(src.t_s[0])
+    start_ns = rec.source.start_ns
 
     def on_alarm(event: AlarmEvent) -> None:
-        ns = int(_bag_ns(log.meta["bag_start_ns"], t0 + event.t_s))
+        ns = int(_bag_ns(start_ns, t0 + event.t_s))
         print_fn(f"      bag time {ns // 10**9}.{ns % 10**9:09d}")
 
-    print_fn(f"monitoring {Path(path).name}: {n} frames ({n * log.dt_s:.1f} s, "
-             f"{log.meta['lost_frames']} lost), topics {log.meta['topics']}")
+    lost = int(np.count_nonzero(~src.valid))
+    print_fn(f"monitoring {Path(path).name}: {n} frames ({n * src.dt_s:.1f} s, {lost} lost), "
+             f"topics {dict(rec.source.topics)}")
     gyro = None
-    if log.yaw_rate_rad_s is not None:
-        noise = log.meta["imu_noise"]
-        density = noise["density_rad_s_sqrt_hz"]
+    if yaw is not None:
+        density = rec.gyro_density_rad_s_sqrt_hz
         gyro = GyroNoise() if density is None else GyroNoise(noise_density_rad_s_sqrt_hz=density)
-        print_fn(f"the EKF fuses the yaw rate of {log.meta['topics']['imu']} as a gyro: "
-                 f"{noise['summary']}")
-    run = monitor_frames(model, _frames(log), nominal=nominal, on_alarm_line=line,
-                         on_alarm=on_alarm, on_step=keep, counter_bits=log.counter_bits,
-                         gyro=gyro)
+        print_fn(f"the EKF fuses the yaw rate of {rec.source.topics['yaw_rate']} as a gyro: "
+                 f"{rec.meta['imu_noise']['summary']}")
+    run = monitor_frames(model, _frames(src, ticks, yaw), nominal=nominal,
+                         on_alarm_line=print_fn, on_alarm=on_alarm, on_step=keep,
+                         counter_bits=64, gyro=gyro)
     for text in run.summary():
         print_fn(text)
-    start_ns = log.meta["bag_start_ns"]
     alarm_ns = np.array([int(_bag_ns(start_ns, t0 + e.t_s)) for e in run.events], np.int64)
-    t_ns = _bag_ns(start_ns, log.t_s)
+    t_ns = _bag_ns(start_ns, src.t_s)
     written = None
     if out_bag is not None:
         alarms = [BagAlarm(int(ns), f"lti_motion/{e.kind}", format_alarm(e),

@@ -19,7 +19,8 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
     group = parser.add_argument_group(
         "ROS bag (--bag)", "topics are found by message type when the bag has one of each")
     for kind, what in (("cmd", "Twist or TwistStamped commands"),
-                       ("wheels", "JointState wheel angles"), ("odom", "Odometry"),
+                       ("wheels", "JointState wheel angles"),
+                       ("odom", "Odometry (its twist, where the bag has no wheel angles)"),
                        ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
         group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
     group.add_argument("--truth-parent", metavar="FRAME",
@@ -33,7 +34,8 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
     group.add_argument("--right-joint", default="right", metavar="PATTERN",
                        help="right wheel joint: its name or a pattern (default 'right')")
     group.add_argument("--ticks-per-rad", type=float, default=None,
-                       help="encoder counts per wheel radian (default: calibrate --robot's "
+                       help="encoder counts per wheel radian: with the wheel radius, the "
+                            "encoder scale the model keeps (default: calibrate --robot's "
                             "description, else the Create 2's, 80.98)")
     if not shared_with_log:
         group.add_argument("--wheel-radius", type=float, default=None,

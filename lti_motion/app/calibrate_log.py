@@ -96,7 +96,7 @@ def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Pat
                             floor: str | None = None
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
-    odometry, :func:`lti_motion.app.bag_commands.odometry_recording`)."""
+    odometry twist, :func:`drivers.bags.read_bag`)."""
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,

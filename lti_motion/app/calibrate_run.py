@@ -128,6 +128,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
                                    progress=print_progress, after_stage=after_stage,
                                    recorded=recorded)
     from drivers.roomba import Roomba
+    from lti_motion.app.prompts import wait_until_placed
 
     def before_stage(stage: str) -> None:
         where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
@@ -135,7 +136,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
                  "excitation": "on open floor, 2 m clear all round"}[stage]
         print(f"next: {stage}. Put the robot {where}.")
         if not args.yes:
-            input("press Enter when it is there (Ctrl-C stops the robot) ")
+            wait_until_placed()
 
     options = {"wheel_base_m": nominal_wheel_base_m(args, described),
                "plan": plan, "floor": args.floor or "hard", "progress": print_progress,
@@ -173,6 +174,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from lti_motion.recordings import save_log
 
     out = Path(args.out)
+    created = not out.exists()
     check_writable_folder(out)
     recorded = _recorded(out, resume=args.resume)
     if recorded:
@@ -188,9 +190,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"\nlti-motion calibrate: stopped by Ctrl-C; the wheels were commanded to "
               f"stop; {_kept_text(out)}", file=sys.stderr)
+        _remove_if_empty(out, created=created)
         return EXIT_INTERRUPTED
     except (OSError, ValueError, PassiveModeError) as exc:
+        _remove_if_empty(out, created=created)
         raise OSError(f"{exc}; {_kept_text(out)}") from exc
+
+
+def _remove_if_empty(out: Path, *, created: bool) -> None:
+    """A run that failed before keeping anything leaves no empty ``--out`` it created."""
+    if created and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
 
 
 def _save(cal: Calibration, out: Path, *, accept_unhealthy: bool) -> int:

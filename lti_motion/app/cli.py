@@ -44,6 +44,7 @@ import argparse
 import logging
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -125,37 +126,40 @@ def _bag_options(args: argparse.Namespace):
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, odometry_recording, plot_bag_fit
+    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.app.plots import plot_order_selection
 
     out = Path(args.out)
     described = load_robot(args.sim) if args.sim else None
-    options = _bag_options(args)
-    odometry = odometry_recording(args.bag, options=options)
-    if odometry is not None:             # no wheel angles: the robot's own odometry
-        from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_recording
-
+    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
+                                  options=_bag_options(args), floor=args.floor)
+    model, grid = cal.model, cal.grid
+    if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
-              f"nav_msgs/Odometry twist on {odometry.meta['topics']['odom']} as body speeds")
-        robot = RobotDescription(wheel_base_m=nominal_wheel_base_m(args, described),
-                                 m_per_tick=None, wheel_radius_m=None,
-                                 source="the robot's odometry (body speeds)")
-        for line in run_calibrate_recording(odometry, robot, out=out, floor=args.floor)[1]:
-            print(line)
-        return 0
-    model, log = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                    options=options, floor=args.floor)
+              f"nav_msgs/Odometry twist on {rec.source.topics['wheel']} as body speeds")
+    lost = int((~grid.closed).sum())              # periods no wheel message closed
+    print(f"calibrated from {args.bag}: {len(grid.closed)} frames of {model.dt_s * 1e3:g} ms "
+          f"({lost} lost), topics {dict(rec.source.topics)}")
+    from lti_motion.persistence import atomic_write
+
+    scale = ("none needed (body speeds)" if cal.m_per_tick is None else
+             f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    lines = [*cal.report.lines(),
+             f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
+             f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
+             f"w {cal.fit_percent[1]:.1f} %"]
+    for line in lines:
+        print(line)
     out.mkdir(parents=True, exist_ok=True)
     path = model.save(out / "model_arx.json")
-    print(f"calibrated from {args.bag}: {len(log)} frames of {log.dt_s * 1e3:g} ms "
-          f"({log.meta['lost_frames']} lost), topics {log.meta['topics']}")
-    print(f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
-          f"{model.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
+    with atomic_write(out / "excitation.txt", text=True) as fh:
+        fh.write("\n".join(lines) + "\n")
     plot_order_selection(model, out / "order_selection.png")
-    fit = plot_bag_fit(model, log, out / "bag_fit.png", encoders=args.encoders)
+    fit = plot_bag_fit(model, grid, out / "bag_fit.png")
     print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
-    print(f"wrote {path}, {out / 'order_selection.png'} and {out / 'bag_fit.png'}")
+    print(f"wrote {path}, {out / 'order_selection.png'}, {out / 'bag_fit.png'} and "
+          f"{out / 'excitation.txt'}")
     return 0
 
 
@@ -392,6 +396,24 @@ _SUB_COMMANDS = (
 )
 
 
+#: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version, looked up only when asked."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help=kwargs.get("help"))
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: object) -> None:
+        from importlib.metadata import version
+
+        print(f"lti-motion {version('lti-motion')}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lti-motion``: one sub-parser per sub-command, whose options
     its own light module adds (``SUB_cli.add_arguments``), and the handler it dispatches to."""
@@ -400,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Self-calibrating LTI motion models for differential-drive robots.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--version", action=_Version, help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
     for name, options, handler in _SUB_COMMANDS:
         command = sub.add_parser(name, help=options.HELP, description=options.DESCRIPTION)
@@ -425,10 +448,13 @@ def _check_args(args: argparse.Namespace) -> None:
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ValueError(f"{option} must be a positive number, got {value:g}")
 
+    _check_link_and_joints(args)
     excitation_s = getattr(args, "excitation_s", None)
-    if excitation_s is not None and not excitation_s >= MIN_EXCITATION_S:
-        raise ValueError(f"--excitation-s must be at least {MIN_EXCITATION_S:g} s (the model's "
-                         f"order is chosen on its last 30%), got {excitation_s:g}")
+    if excitation_s is not None and not (math.isfinite(excitation_s)
+                                         and excitation_s >= MIN_EXCITATION_S):
+        raise ValueError(f"--excitation-s must be a finite number of seconds, at least "
+                         f"{MIN_EXCITATION_S:g} (the model's order is chosen on its last 30%), "
+                         f"got {excitation_s:g}")
     if args.command == "calibrate":
         _check_calibrate_args(args, positive)
     elif args.command == "monitor":
@@ -457,6 +483,26 @@ def _check_args(args: argparse.Namespace) -> None:
         positive("--duration", args.duration)
 
 
+def _check_link_and_joints(args: argparse.Namespace) -> None:
+    """A serial rate the robot speaks; wheel-joint patterns that are regular expressions."""
+    if getattr(args, "port", None) and getattr(args, "baud", None) is not None:
+        from drivers.roomba import BAUD_RATES
+
+        if args.baud not in BAUD_RATES:
+            raise ValueError(f"--baud {args.baud} is not a rate the Open Interface speaks: "
+                             f"give one of {', '.join(map(str, BAUD_RATES))} (a Create 2 "
+                             "talks at 115200 unless it was told otherwise)")
+    for option in ("left_joint", "right_joint"):
+        pattern = getattr(args, option, None)
+        if pattern is not None:
+            try:
+                re.compile(pattern)
+            except re.error as exc:
+                raise ValueError(f"--{option.replace('_', '-')} {pattern!r} is not a valid "
+                                 f"joint name pattern (a regular expression): {exc}; give the "
+                                 "joint's name") from None
+
+
 def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     """``calibrate``: one place to drive; --wheel-base only for a robot or a recording (the
     simulator has its description's)."""
@@ -465,6 +511,9 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
                          "--log FILE or --bag PATH (a recorded drive)")
     if args.reference and not args.log:
         raise ValueError("--reference goes with --log LOG.npz (a recorded drive)")
+    if args.into_model and not (args.reference or args.wall_run):
+        raise ValueError("--into-model writes the intrinsics that --reference or --wall-run "
+                         "calibrates into a copy of a model: give one of them")
     described = load_robot(args.sim) if args.sim else None    # a bad robot file: one line
     recorded = args.log or args.bag
     if described and not (args.port or recorded) and args.wheel_base is not None:
@@ -498,6 +547,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         one_line = " ".join(str(exc).split())             # the README promises one line
         print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        # sub-commands that drive a robot or keep a recording answer Ctrl-C themselves (what
+        # was kept, the wheels stopped); every other one stops here, in one line
+        print(f"\nlti-motion {args.command}: stopped by Ctrl-C", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def _no_encoder_scale(args: argparse.Namespace) -> str:

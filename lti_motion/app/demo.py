@@ -114,13 +114,20 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
     fig.savefig(path, dpi=100)
 
 
+#: One marker shape per estimator in the closure plot.
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
 def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
     fig = Figure(figsize=(12, 6.5))
     axes = fig.subplots(1, 2)
     for ax, zoom_cm in zip(axes, (None, 8.0), strict=True):
         for i, (name, res) in enumerate(results.items()):
             end = res.true_poses[:, -1, :2] - ROUTE_M[0]
-            ax.plot(end[:, 0] * 100, end[:, 1] * 100, "o", color=f"C{i}", ms=4, alpha=0.7,
+            # hollow markers of one shape per estimator: estimators that stop in the same
+            # place (odometry and the EKF without landmarks) stay visible on top of each other
+            ax.plot(end[:, 0] * 100, end[:, 1] * 100, _MARKERS[i % len(_MARKERS)],
+                    color=f"C{i}", mfc="none", ms=5 + 2 * (i % 2), mew=1.0,
                     label=f"{LABELS.get(name, name)}: "
                           f"{res.closure_offset_m.mean() * 100:.1f} cm")
         ax.plot(0, 0, "k+", ms=14)

@@ -51,7 +51,7 @@ def plot_order_selection(arx: MotionModel, path: Path) -> None:
     """Free-run validation NRMSE against order, one line per delay, the choice marked."""
     sel = arx.selection
     viridis = matplotlib.colormaps["viridis"]
-    fig = Figure(figsize=(6.5, 4))
+    fig = Figure(figsize=(8, 4))
     ax = fig.subplots()
     for j, delay in enumerate(sel.delays):
         ax.plot(sel.orders, np.where(sel.stable[:, j], sel.nrmse[:, j], np.nan), lw=0.8,
@@ -63,9 +63,9 @@ def plot_order_selection(arx: MotionModel, path: Path) -> None:
     ax.set(xlabel="ARX order (na = nb)", ylabel="free-run validation NRMSE",
            title="Order and delay selection on held-out data", yscale="log")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))   # beside the curves
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
 
 
 def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> None:

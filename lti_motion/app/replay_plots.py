@@ -19,6 +19,10 @@ if TYPE_CHECKING:
 __all__ = ["plot_errors", "plot_trajectories"]
 
 
+#: Line styles per estimator, so that overlapping lines stay distinguishable.
+_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)), (0, (1, 1)))
+
+
 def plot_trajectories(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]
                       ) -> Path:
     """Every estimate in the plane, with the truth and the landmarks when known; a PNG."""
@@ -27,7 +31,10 @@ def plot_trajectories(path: Path, src: ReplaySource, poses: Mapping[str, np.ndar
     if src.has_truth:
         ax.plot(src.truth[:, 0], src.truth[:, 1], "k-", lw=1.5, label="ground truth")
     for i, (name, p) in enumerate(poses.items()):
-        ax.plot(p[:, 0], p[:, 1], "-", color=f"C{i}", lw=0.9, label=src.label(name))
+        # one dash pattern per estimator: estimators that agree (odometry and an EKF on the
+        # same counts) stay visible on top of each other
+        ax.plot(p[:, 0], p[:, 1], ls=_STYLES[i % len(_STYLES)], color=f"C{i}", lw=1.1,
+                label=src.label(name))
     if src.landmarks is not None and src.sightings:
         xy = np.array([src.landmarks.position(k) for k in src.landmarks.ids])
         ax.plot(xy[:, 0], xy[:, 1], "k^", ms=7, label="landmarks")
@@ -44,7 +51,8 @@ def plot_errors(path: Path, src: ReplaySource, poses: Mapping[str, np.ndarray]) 
     t = src.t_s - src.t_s[0]
     for i, (name, p) in enumerate(poses.items()):
         err = np.hypot(*(p[:, :2] - src.truth[:, :2]).T)        # NaN where no truth
-        ax.plot(t, err, "-", color=f"C{i}", lw=0.9, label=src.label(name))
+        ax.plot(t, err, ls=_STYLES[i % len(_STYLES)], color=f"C{i}", lw=1.1,
+                label=src.label(name))
     ax.set(xlabel="time from the first frame [s]", ylabel="position error [m]",
            title=f"{src.name}: position error against ground truth")
     return _finish(fig, ax, path)

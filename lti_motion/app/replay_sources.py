@@ -1,4 +1,5 @@
-"""Recorded drives for ``lti-motion replay``: NPZ logs and MRCLAM robots as one source type.
+"""Recorded drives for ``lti-motion replay``: NPZ logs, recordings on the model's grid (a
+ROS bag's) and MRCLAM robots as one source type.
 
 See :mod:`lti_motion.app.replay` for what is read from each kind of
 recording, and ``docs/replay.md``.
@@ -22,7 +23,16 @@ from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel
-from lti_motion.recordings import FrameLog, GridSignals, load_log, stream_clock
+from lti_motion.recordings import (
+    FrameLog,
+    GridSignals,
+    Recording,
+    commands_at,
+    frame_stamps,
+    load_log,
+    poses_at,
+    stream_clock,
+)
 
 __all__ = [
     "ESTIMATORS",
@@ -34,6 +44,7 @@ __all__ = [
     "source_from_grid",
     "source_from_log",
     "source_from_mrclam",
+    "source_from_wheel_grid",
 ]
 
 _log = logging.getLogger(__name__)
@@ -296,6 +307,82 @@ def source_from_grid(grid: GridSignals, name: str, *, dt_s: float, start_s: floa
     return ReplaySource(name=name, t_s=grid.t_s[keep], periods=periods,
                         cmd_m_s=grid.cmd_m_s[keep], valid=grid.measured[keep], dt_s=dt_s,
                         truth=truth, yaw_rate_rad_s=yaw, body_speeds=grid.speeds[keep])
+
+
+def source_from_wheel_grid(rec: Recording, grid: GridSignals, name: str, *,
+                           m_per_tick: tuple[float, float], wheel_base_m: float, dt_s: float,
+                           origin_m: tuple[float, float] = (0.0, 0.0), start_s: float = 0.0,
+                           duration_s: float | None = None,
+                           max_gap_s: float | None = None) -> ReplaySource:
+    """A recording of wheel measurements on the model's grid as a :class:`ReplaySource`
+    of encoder counts: one frame per period ``0 .. P``, as the robot's own stream gives them.
+
+    The wheels' travel over each period (the grid's body speeds through ``wheel_base_m``,
+    times the fitted period), summed from frame 0 on from ``origin_m``, is counted in whole
+    ticks of
+    ``m_per_tick``, never wrapping (``counter_bits`` 64): what the EKF's encoder update
+    reads, so a reading the gate rejects keeps its motion. Frame ``k`` closes period
+    ``k``, is stamped on the host's typical arrival line (the clock line plus the
+    frames' median latency) and is valid when a wheel frame closed the period
+    (:attr:`GridSignals.closed <lti_motion.recordings.GridSignals.closed>`); its
+    command is the period's. The reference poses are read at the stamp of the frame
+    that closed each period, else on the arrival line (:func:`lti_motion.recordings.poses_at`);
+    the yaw rate is the period's mean (NaN for frame 0, which closes no period).
+
+    Parameters
+    ----------
+    rec : Recording
+        The recording the grid was made from (for its reference and its stamps).
+    grid : GridSignals
+        ``rec`` on the grid (:func:`lti_motion.recordings.on_grid`), with
+        ``wheel_base_m``.
+    name : str
+        What it is, for people.
+    m_per_tick : tuple of 2 float
+        Each wheel's scale of the counts [m/tick], in the metres of the grid: for wheel
+        angles the radius the grid used over the encoder's ticks per radian, so the
+        counts are the encoder's own and the model's encoder scale reads them.
+    wheel_base_m : float
+        The wheel base the grid was made with [m].
+    dt_s : float
+        The nominal sensor period [s] (the model's).
+    origin_m : tuple of 2 float
+        Each wheel's travel at frame 0 [m] (a wheel angle times the radius), so the
+        counts round as the encoder's own would.
+    start_s, duration_s : float
+        The stretch to replay, from the first frame [s].
+    max_gap_s : float, optional
+        Reference poses blank across gaps in their stamps longer than this [s].
+
+    Raises
+    ------
+    ValueError
+        For an empty stretch.
+    """
+    a, clock = grid.assignment, grid.assignment.clock
+    n = len(grid.t_s) + 1
+    t = clock.times_s(np.arange(n)) + clock.latency_median_s           # arrival line
+    wheel = wheel_from_body(grid.speeds, wheel_base_m=wheel_base_m) * grid.period_s
+    travel = np.vstack([np.zeros((1, 2)), np.cumsum(wheel, axis=0)]) + np.asarray(origin_m)
+    ticks = np.rint(travel / np.asarray(m_per_tick, dtype=float)).astype(np.int64)
+    first = commands_at(rec, a, np.zeros(1, np.int64))
+    if rec.cmd_kind == "cmd_body":
+        first = wheel_from_body(first, wheel_base_m=wheel_base_m)
+    cmd = np.vstack([first, grid.cmd_m_s])
+    truth = None
+    if rec.true_pose is not None:
+        # a pose belongs to its frame's own stamp
+        truth = poses_at(rec.true_pose, frame_stamps(rec, a), max_gap_s=max_gap_s)
+    yaw = (None if grid.yaw_rate_rad_s is None
+           else np.concatenate([[np.nan], grid.yaw_rate_rad_s]))
+    keep = _window(t, start_s, duration_s)
+    periods = np.ones(len(keep), np.int64)
+    periods[0] = 0
+    return ReplaySource(name=name, t_s=t[keep], periods=periods, cmd_m_s=cmd[keep],
+                        valid=grid.closed[keep], dt_s=dt_s, ticks=ticks[keep],
+                        truth=None if truth is None else truth[keep], counter_bits=64,
+                        yaw_rate_rad_s=None if yaw is None else yaw[keep],
+                        gyro_density_rad_s_sqrt_hz=rec.gyro_density_rad_s_sqrt_hz)
 
 
 def _key(value: object) -> Hashable:

@@ -92,14 +92,16 @@ def _drive(args: argparse.Namespace, known: OdometryIntrinsics, described: Robot
         sim = wall_run_simulator(described, seed=args.seed, floor=args.floor)
         return drive_wall_run(sim, known, run_m=args.wall_run_m)
     from drivers.roomba import Roomba
+    from lti_motion.app.prompts import wait_until_placed
 
-    print(f"next: the wall run. Put the robot on hard floor facing a straight, plain wall "
-          f"0.2-1.5 m ahead, with {args.wall_run_m + 0.5:g} m clear along the wall on both "
-          "sides of it.")
-    if not args.yes:
-        input("press Enter when it is there (Ctrl-C stops the robot) ")
-    print(f"driving the wall run on {args.port} at {args.baud} baud")
+    # the port is opened first: a missing robot is said before anyone is asked to place it
     with Roomba(args.port, baud=args.baud, clock_rate=args.clock_rate) as robot:
+        print(f"next: the wall run. Put the robot on hard floor facing a straight, plain wall "
+              f"0.2-1.5 m ahead, with {args.wall_run_m + 0.5:g} m clear along the wall on "
+              "both sides of it.")
+        if not args.yes:
+            wait_until_placed()
+        print(f"driving the wall run on {args.port} at {args.baud} baud")
         return drive_wall_run(robot, known, run_m=args.wall_run_m)
 
 

@@ -235,7 +235,7 @@ class OfflineCalibration:
     Attributes
     ----------
     model : MotionModel
-        The ARX model (``m_per_tick`` as given, ``None`` for other wheel kinds).
+        The ARX model (``m_per_tick`` as given or measured; ``None`` when none was).
     report : ExcitationReport
     fit_percent : ndarray, shape (2,)
         Free-run fit [%] of (v, w) on the held-out tail (also used to choose
@@ -243,7 +243,9 @@ class OfflineCalibration:
     grid : GridSignals
         The signals the model was fitted on.
     m_per_tick : float or None
-        The encoder scale used [m/tick] (counts only).
+        The encoder scale [m/tick]: the one the counts were scaled with, or for
+        other wheel kinds the one given (the counts behind wheel angles:
+        wheel radius over ticks per radian); ``None`` when none was.
     scale_from : str
         Where it came from: the rotation in place found in the recording, or
         the robot description.
@@ -267,6 +269,7 @@ def calibrate_recording(
     scale_from: str = "the robot description", validation: float = 0.3,
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo", floor: str | None = None,
     orders: Sequence[int] = range(1, 13), delays: Sequence[int] = range(0, 9),
+    grid: GridSignals | None = None, dt_s: float | None = None,
 ) -> OfflineCalibration:
     """Fit the ARX motion model on any recording with enough excitation.
 
@@ -280,7 +283,10 @@ def calibrate_recording(
         Encoder scale [m/tick] (counts) or wheel radius [m] (angles, rad/s),
         from the robot description. A recording of counts with light bumps
         that holds a rotation in place measures the scale instead
-        (:func:`rotation_scale`).
+        (:func:`rotation_scale`). For another wheel kind a ``m_per_tick`` given
+        is the scale of the counts behind its readings (wheel angles from
+        encoders: wheel radius over ticks per radian), kept in the model for
+        the EKF's encoder updates.
     encoders : {"quadrature", "commanded"}
         ``"commanded"`` for Roomba / Create 2 counters.
     scale_from : str
@@ -293,6 +299,14 @@ def calibrate_recording(
         Floor name recorded in the model.
     orders, delays : sequence of int
         ARX order and delay grid (:func:`lti_motion.model.fit_arx`).
+    grid : GridSignals, optional
+        ``rec`` already on the model's grid (:func:`lti_motion.recordings.on_grid`
+        with the same scale), when the caller needs the grid's own options (a ROS
+        bag's ``periods_by``) or reuses it; default: ``on_grid`` of ``rec`` here.
+    dt_s : float, optional
+        The model's sample period [s], e.g. the fitted period as the robot is
+        configured (:func:`lti_motion.recordings.snap_period_s`); default the grid's
+        fitted period.
 
     Returns
     -------
@@ -313,20 +327,22 @@ def calibrate_recording(
                       f" ticks, confidence {found[1].confidence:.2f}; paper eq. 13)")
     elif rec.wheel_kind == "counts":
         scale_from = f"{scale_from} ({found})"
-    grid = on_grid(rec, wheel_base_m=wheel_base_m, m_per_tick=m_per_tick,
-                   wheel_radius_m=wheel_radius_m, encoders=encoders)
+    if grid is None:
+        grid = on_grid(rec, wheel_base_m=wheel_base_m, m_per_tick=m_per_tick,
+                       wheel_radius_m=wheel_radius_m, encoders=encoders)
     report = excitation_report(grid, wheel_base_m=wheel_base_m,
                                scale_from=None if measured else scale_from)
     if report.refusals:
         raise NotExcitedError("this recording cannot identify a model: "
                               + "; ".join(report.refusals))
     u, y = grid.cmd_m_s, grid.speeds
-    model = fit_arx([(u, y)], dt_s=grid.period_s, wheel_base_m=wheel_base_m,
+    model = fit_arx([(u, y)], dt_s=grid.period_s if dt_s is None else dt_s,
+                    wheel_base_m=wheel_base_m,
                     validation=validation, dc_gain=dc_gain, orders=orders, delays=delays,
-                    m_per_tick=m_per_tick if rec.wheel_kind == "counts" else None, floor=floor)
+                    m_per_tick=m_per_tick, floor=floor)
     tail = round(len(u) * (1 - validation))
     fit = model.fit_percent([(u[tail:], y[tail:])])
     _log.info("offline ARX fit %.1f%% (v), %.1f%% (w) on the held-out tail", *fit)
     return OfflineCalibration(model=model, report=report, fit_percent=fit, grid=grid,
-                              m_per_tick=m_per_tick if rec.wheel_kind == "counts" else None,
+                              m_per_tick=m_per_tick,
                               scale_from=scale_from, scale_measured=measured)

@@ -30,6 +30,7 @@ __all__ = [
     "MAX_WHEEL_SPEED_M_S",
     "N_LIGHT_BUMPS",
     "RECORDING_VERSION",
+    "STREAMS",
     "TICK_MODULUS",
     "TUM_HEADER",
     "WHEEL_KINDS",
@@ -38,16 +39,19 @@ __all__ = [
     "GridSignals",
     "PeriodAssignment",
     "Recording",
+    "RecordingSource",
     "SensorFrame",
     "Stream",
     "assign_periods",
     "body_speeds_from_ticks",
     "commands_at",
     "fit_clock",
+    "frame_stamps",
     "load_log",
     "load_recording",
     "median_period_s",
     "on_grid",
+    "poses_at",
     "poses_from_tum",
     "read_tum",
     "save_log",
@@ -91,6 +95,8 @@ __getattr__, __dir__ = lazy_exports(
         "lti_motion.recordings.recording": (
             "COMMAND_KINDS",
             "Recording",
+            "RecordingSource",
+            "STREAMS",
             "Stream",
             "WHEEL_KINDS",
         ),
@@ -98,7 +104,9 @@ __getattr__, __dir__ = lazy_exports(
             "GridSignals",
             "MAX_WHEEL_SPEED_M_S",
             "commands_at",
+            "frame_stamps",
             "on_grid",
+            "poses_at",
             "wheel_periods",
         ),
         "lti_motion.recordings.ticks": (
@@ -140,12 +148,21 @@ if TYPE_CHECKING:
         save_log,
         save_recording,
     )
-    from lti_motion.recordings.recording import COMMAND_KINDS, WHEEL_KINDS, Recording, Stream
+    from lti_motion.recordings.recording import (
+        COMMAND_KINDS,
+        STREAMS,
+        WHEEL_KINDS,
+        Recording,
+        RecordingSource,
+        Stream,
+    )
     from lti_motion.recordings.resample import (
         MAX_WHEEL_SPEED_M_S,
         GridSignals,
         commands_at,
+        frame_stamps,
         on_grid,
+        poses_at,
         wheel_periods,
     )
     from lti_motion.recordings.ticks import (

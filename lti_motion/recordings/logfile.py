@@ -32,7 +32,7 @@ import numpy as np
 from lti_motion.exceptions import LogFileError
 from lti_motion.persistence import atomic_write
 from lti_motion.recordings.frames import FrameLog
-from lti_motion.recordings.recording import Recording
+from lti_motion.recordings.recording import Recording, RecordingSource
 
 __all__ = [
     "LOG_FORMAT",
@@ -325,7 +325,9 @@ def save_recording(path: str | os.PathLike, rec: Recording) -> Path:
     header = {"format": LOG_FORMAT, "version": RECORDING_VERSION, "dt_s": rec.dt_s,
               "wheel_kind": rec.wheel_kind, "cmd_kind": rec.cmd_kind,
               "cmd_per_frame": rec.cmd_per_frame, "counter_bits": rec.counter_bits,
-              "sensor_pose": list(rec.sensor_pose), "meta": rec.meta}
+              "sensor_pose": list(rec.sensor_pose), "meta": rec.meta, "rates": rec.rates,
+              "gyro_density_rad_s_sqrt_hz": rec.gyro_density_rad_s_sqrt_hz,
+              "source": None if rec.source is None else _source_json(rec.source)}
     arrays = {"wheel_valid": rec.wheel_valid}
     for name, (t_key, v_key, _) in _V2_STREAMS.items():
         stream = getattr(rec, name)
@@ -340,6 +342,28 @@ def save_recording(path: str | os.PathLike, rec: Recording) -> Path:
     with atomic_write(path) as fh:
         np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
     return path
+
+
+def _source_json(src: RecordingSource) -> dict:
+    return {"path": src.path, "kind": src.kind, "start_ns": src.start_ns,
+            "topics": dict(src.topics), "wheel_names": list(src.wheel_names),
+            "truth_frames": list(src.truth_frames)}
+
+
+def _source_of(doc: object) -> RecordingSource | None:
+    """The header's ``source`` (optional) as a :class:`RecordingSource`; ``ValueError`` when
+    it is not one."""
+    if doc is None:
+        return None
+    if not isinstance(doc, dict) or not isinstance(doc.get("path"), str) \
+            or not isinstance(doc.get("kind"), str) or not isinstance(doc.get("start_ns"), int) \
+            or not isinstance(doc.get("topics", {}), dict) \
+            or not all(isinstance(v, str) for v in doc.get("topics", {}).values()):
+        raise ValueError(f"source: expected path, kind, start_ns and topics, got {doc!r}")
+    return RecordingSource(path=doc["path"], kind=doc["kind"], start_ns=doc["start_ns"],
+                           topics=doc.get("topics", {}),
+                           wheel_names=tuple(doc.get("wheel_names", ())),
+                           truth_frames=tuple(doc.get("truth_frames", ())))
 
 
 def load_recording(path: str | os.PathLike) -> Recording:
@@ -400,7 +424,10 @@ def _read_recording(path: Path, npz: np.lib.npyio.NpzFile, header: dict) -> Reco
     try:
         rec = Recording.from_streams(dt_s=float(header["dt_s"]), counter_bits=bits,
                                      sensor_pose=tuple(header.get("sensor_pose", (0, 0, 0))),
-                                     **kw)
+                                     rates=header.get("rates", "samples"),
+                                     gyro_density_rad_s_sqrt_hz=header.get(
+                                         "gyro_density_rad_s_sqrt_hz"),
+                                     source=_source_of(header.get("source")), **kw)
         n = len(rec)
         extras = {}
         for name, cols in (("light_bump", 6), ("bumps", 2)):

@@ -10,8 +10,12 @@ leaves behind, each signal as a *stream* with its own host timestamps:
   (wrapping or not), wheel angles [rad] (e.g. ``JointState.position``),
   wheel speeds [rad/s] or [m/s], or body speeds (v, w) from the robot's own
   odometry;
-- optional: a yaw rate from an IMU [rad/s], a ground-truth pose, landmark
-  sightings with the sensor's pose on the robot.
+- optional: a yaw rate from an IMU [rad/s] (with the gyro's noise density when the
+  source states it), a ground-truth pose, landmark sightings with the sensor's pose
+  on the robot;
+- where it came from (:class:`RecordingSource`): a ROS bag's path, the clock epoch
+  of its times, the topic of each stream, the wheels' joint names and the frames of
+  a reference taken from tf.
 
 The wheel stream sets the model's grid: its frames are assigned to the robot's
 sensor periods by :func:`lti_motion.recordings.assign_periods`, and
@@ -25,6 +29,8 @@ Units are SI: seconds, metres, radians.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Literal
@@ -34,7 +40,7 @@ import numpy as np
 from lti_motion.exceptions import ShapeError
 from lti_motion.recordings.frames import FrameLog
 
-__all__ = ["COMMAND_KINDS", "WHEEL_KINDS", "Recording", "Stream"]
+__all__ = ["COMMAND_KINDS", "STREAMS", "WHEEL_KINDS", "Recording", "RecordingSource", "Stream"]
 
 #: The kinds of wheel measurement, and the unit of their two columns.
 WHEEL_KINDS = MappingProxyType({
@@ -49,6 +55,9 @@ COMMAND_KINDS = MappingProxyType({
     "cmd_wheel_m_s": "m/s (left, right)",
     "cmd_body": "(v [m/s], w [rad/s])",
 })
+
+#: The streams of a recording, as :attr:`RecordingSource.topics` names them.
+STREAMS = ("wheel", "cmd", "yaw_rate", "true_pose", "sightings")
 
 WheelKind = Literal["counts", "wheel_angles_rad", "wheel_speeds_rad_s", "wheel_speeds_m_s",
                     "body_speeds"]
@@ -69,6 +78,60 @@ class Stream:
 
     t_s: np.ndarray
     values: np.ndarray
+
+
+@dataclass(frozen=True)
+class RecordingSource:
+    """Where a recording came from, for people and for times outside the recording.
+
+    Attributes
+    ----------
+    path : str
+        The file or folder read (a ROS bag).
+    kind : str
+        What it is, e.g. ``"ROS bag"``.
+    start_ns : int
+        Unix time [ns] of the recording's time 0: a time ``t_s`` of any stream is
+        ``start_ns + t_s * 1e9`` on the source's clock (a bag's first stamp).
+    topics : Mapping of str to str
+        The topic (or channel) each stream of :data:`STREAMS` was read from; a
+        stream not listed was not recorded (a ``cmd`` missing: the recording's
+        commands are zeros standing in for none).
+    wheel_names : tuple of str
+        The (left, right) joints of the wheel stream, ``()`` when not named.
+    truth_frames : tuple of str
+        The (parent, child) frames of a reference taken from tf, else ``()``.
+
+    Examples
+    --------
+    >>> src = RecordingSource(path="drive.bag", kind="ROS bag", start_ns=10**18,
+    ...                       topics={"wheel": "/joint_states", "cmd": "/cmd_vel"})
+    >>> src.has("cmd"), src.has("true_pose"), src.topics["wheel"]
+    (True, False, '/joint_states')
+    """
+
+    path: str
+    kind: str
+    start_ns: int = 0
+    topics: Mapping[str, str] = field(default_factory=dict)
+    wheel_names: tuple[str, ...] = ()
+    truth_frames: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = set(self.topics) - set(STREAMS)
+        if unknown:
+            raise ValueError(f"RecordingSource.topics: unknown streams {sorted(unknown)}; "
+                             f"known: {', '.join(STREAMS)}")
+        if len(self.wheel_names) not in (0, 2) or len(self.truth_frames) not in (0, 2):
+            raise ValueError("RecordingSource: wheel_names and truth_frames are pairs (left, "
+                             f"right), (parent, child) or empty, got {self.wheel_names} and "
+                             f"{self.truth_frames}")
+        object.__setattr__(self, "topics", MappingProxyType(dict(self.topics)))
+        object.__setattr__(self, "start_ns", int(self.start_ns))
+
+    def has(self, stream: str) -> bool:
+        """Whether the source recorded ``stream`` (one of :data:`STREAMS`)."""
+        return stream in self.topics
 
 
 def _stream(name: str, t_s: object, values: object, columns: int) -> Stream:
@@ -151,6 +214,12 @@ class Recording:
         stamps (a wheel-speed sensor); ``"since_last"``, each the mean rate over the
         time since the previous frame (an odometry twist, as ``diff_drive_controller``
         publishes it: travel over the update interval divided by it).
+    gyro_density_rad_s_sqrt_hz : float or None
+        The white-noise density of ``yaw_rate`` the source states
+        [rad/s/sqrt(Hz)] (a ROS Imu's ``angular_velocity_covariance``); ``None``:
+        not stated.
+    source : RecordingSource or None
+        Where the recording came from (``None``: not said).
     """
 
     dt_s: float
@@ -169,6 +238,8 @@ class Recording:
     bumps: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     rates: Literal["samples", "since_last"] = "samples"
+    gyro_density_rad_s_sqrt_hz: float | None = None
+    source: RecordingSource | None = None
 
     def __len__(self) -> int:
         """Number of wheel frames."""
@@ -188,6 +259,8 @@ class Recording:
         sightings_t_s: np.ndarray | None = None, sightings: np.ndarray | None = None,
         sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0), meta: dict | None = None,
         rates: Literal["samples", "since_last"] = "samples",
+        gyro_density_rad_s_sqrt_hz: float | None = None,
+        source: RecordingSource | None = None,
     ) -> Recording:
         """A recording from timestamped arrays, one wheel kind and one command kind.
 
@@ -226,6 +299,11 @@ array_like, shape (n, 2)
         rates : {"samples", "since_last"}
             What a speed kind's values are (:attr:`rates`; default readings at their
             stamps).
+        gyro_density_rad_s_sqrt_hz : float, optional
+            The yaw rate's white-noise density [rad/s/sqrt(Hz)], when the source
+            states it (needs ``yaw_rate_rad_s``).
+        source : RecordingSource, optional
+            Where the recording came from.
 
         Returns
         -------
@@ -237,7 +315,8 @@ array_like, shape (n, 2)
             If not exactly one wheel kind or command kind is given, a stamp
             is not finite or goes backwards, or a command is not finite (the
             message names the stream),
-            or ``counter_bits`` is not 1..64.
+            or ``counter_bits`` is not 1..64, or a gyro density is given without a
+            yaw rate or is not a non-negative number.
         ShapeError
             If an array's shape does not match its stamps.
 
@@ -284,11 +363,20 @@ array_like, shape (n, 2)
             if (t_opt is None) != (v_opt is None):
                 raise ValueError(f"{name} needs both its stamps and its values")
             optional[name] = None if v_opt is None else _stream(name, t_opt, v_opt, cols)
+        if gyro_density_rad_s_sqrt_hz is not None:
+            density = float(gyro_density_rad_s_sqrt_hz)
+            if optional["yaw_rate"] is None or not (math.isfinite(density) and density >= 0):
+                raise ValueError("gyro_density_rad_s_sqrt_hz needs a yaw rate and must be a "
+                                 f"number >= 0 [rad/s/sqrt(Hz)], got {density!r}")
+            gyro_density_rad_s_sqrt_hz = density
+        if source is not None and not isinstance(source, RecordingSource):
+            raise TypeError(f"source must be a RecordingSource, got {type(source).__name__}")
         return cls(dt_s=period, wheel=wheel, wheel_kind=kind, wheel_valid=ok, cmd=cmd,
                    cmd_kind=cmd_kind, cmd_per_frame=cmd_t_s is None,
                    counter_bits=counter_bits if kind == "counts" else None,
                    sensor_pose=tuple(float(x) for x in sensor_pose), meta=dict(meta or {}),
-                   rates=rates, **optional)
+                   rates=rates, gyro_density_rad_s_sqrt_hz=gyro_density_rad_s_sqrt_hz,
+                   source=source, **optional)
 
     @classmethod
     def from_frame_log(cls, log: FrameLog) -> Recording:

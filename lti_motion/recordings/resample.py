@@ -41,9 +41,14 @@ by the stamps and the wheels' cumulative travel (``"stamps_and_travel"``,
 counts and wheel angles only): a frame that jitter put on a lost neighbour's
 period moves back into its own where that evens the travel per period
 (:func:`lti_motion.recordings.assign_periods`, ``travel``). ROS bags use the
-latter (:func:`drivers.bags.bag_to_log`).
+latter (:func:`drivers.bags.read_bag`'s recordings, through
+:func:`drivers.bags.bag_grid`).
 A body twist becomes wheel speeds through the wheel base
 (:func:`lti_motion.kinematics.wheel_from_body`).
+
+With ``max_gap_s`` the IMU's mean rate is blank (NaN) over a period reaching across a
+gap between two of its stamps longer than that, and a reference pose (read by
+:func:`poses_at`) is blank outside the reference's span and across such gaps.
 
 The paper: ``docs/architecture.md``, "The paper".
 """
@@ -55,12 +60,14 @@ from typing import Literal
 
 import numpy as np
 
+from lti_motion.exceptions import WheelSpeedError
 from lti_motion.kinematics import body_from_wheel, wheel_from_body
 from lti_motion.recordings.clocks import PeriodAssignment, assign_periods
 from lti_motion.recordings.recording import Recording, Stream
 from lti_motion.recordings.ticks import unfold_commanded_direction
 
-__all__ = ["MAX_WHEEL_SPEED_M_S", "GridSignals", "commands_at", "on_grid", "wheel_periods"]
+__all__ = ["MAX_WHEEL_SPEED_M_S", "GridSignals", "commands_at", "frame_stamps", "on_grid",
+           "poses_at", "wheel_periods"]
 
 #: How wheel frames find their periods (module Notes).
 PeriodsBy = Literal["stamps", "stamps_and_travel"]
@@ -92,6 +99,9 @@ class GridSignals:
         Ground-truth pose at the end of each period.
     assignment : PeriodAssignment
         The frames' periods and the clock counts (lost, late, merged, dropped).
+    closed : ndarray of bool, shape (P + 1,)
+        Whether a used wheel frame closed period ``k``, ``0 .. P`` (its reading
+        arrived; a period not closed is inside a gap).
     """
 
     t_s: np.ndarray
@@ -102,6 +112,7 @@ class GridSignals:
     yaw_rate_rad_s: np.ndarray | None
     true_pose: np.ndarray | None
     assignment: PeriodAssignment
+    closed: np.ndarray
 
 
 def _count_steps(counts: np.ndarray, counter_bits: int | None) -> np.ndarray:
@@ -132,6 +143,9 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
     if kind == "wheel_angles_rad":
         if np.all(np.abs(v) <= np.pi):        # wrapped to (-pi, pi]: unwrap
             v = np.unwrap(v, axis=0)
+        if encoders == "commanded":           # angles counted in the commanded direction
+            steps = unfold_commanded_direction(np.diff(v, axis=0))
+            return np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)]) * wheel_radius_m
         return (v - v[0]) * wheel_radius_m
     rate = v * wheel_radius_m if kind == "wheel_speeds_rad_s" else v
     if rec.rates == "since_last":       # a mean since the previous frame: backward rectangle
@@ -141,16 +155,95 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
     return np.vstack([np.zeros((1, 2)), np.cumsum(inc, axis=0)])
 
 
-def _integrate_at(stream: Stream, t_grid: np.ndarray) -> np.ndarray:
+#: A clock line fitted through a stamp misses it by rounding: 1 us of tolerance [s].
+_STAMP_TOL_S = 1e-6
+
+
+def _integrate_at(stream: Stream, t_grid: np.ndarray, max_gap_s: float | None) -> np.ndarray:
     """Mean rate of a rate stream over each grid interval (trapezoid, then interpolate);
     NaN for an interval reaching outside the stream's first and last stamps (no reading,
-    not a zero rate)."""
+    not a zero rate), or, with ``max_gap_s``, across a gap between two stamps longer than
+    that."""
     t, v = stream.t_s, stream.values[:, 0]
+    # the trapezoid rule's running integral (module Notes, step 1)
     cum = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
     at = np.interp(t_grid, t, cum)
     rate = np.diff(at) / np.diff(t_grid)
-    rate[(t_grid[:-1] < t[0]) | (t_grid[1:] > t[-1])] = np.nan
+    if max_gap_s is None:
+        rate[(t_grid[:-1] < t[0]) | (t_grid[1:] > t[-1])] = np.nan
+        return rate
+    if t.size < 2:
+        return np.full(rate.size, np.nan)
+    big = np.concatenate([[0], np.cumsum(np.diff(t) > max_gap_s)])   # gaps before stamp i
+    first = np.clip(np.searchsorted(t, t_grid[:-1], "right") - 1, 0, t.size - 2)
+    last = np.clip(np.searchsorted(t, t_grid[1:], "left") - 1, 0, t.size - 2)
+    rate[(t_grid[:-1] < t[0] - _STAMP_TOL_S) | (t_grid[1:] > t[-1] + _STAMP_TOL_S)
+         | (big[last + 1] > big[first])] = np.nan
     return rate
+
+
+def frame_stamps(rec: Recording, a: PeriodAssignment) -> np.ndarray:
+    """Host time of the end of each period ``0 .. P`` as the wheel stream stamps it [s]:
+    the stamp of the wheel frame that closed the period, else (a lost frame) the host's
+    typical arrival line (the clock line plus the frames' median latency).
+
+    The time to read another stream of the same host at (a reference pose that belongs
+    to its wheel frame).
+
+    Parameters
+    ----------
+    rec : Recording
+    a : PeriodAssignment
+        From :func:`wheel_periods` of ``rec`` (``GridSignals.assignment``).
+
+    Returns
+    -------
+    ndarray, shape (P + 1,)
+    """
+    c = a.clock
+    at = c.times_s(np.arange(a.n_periods)) + c.latency_median_s
+    kept = a.keep & rec.wheel_valid
+    at[a.period[kept]] = rec.wheel.t_s[kept]
+    return at
+
+
+def poses_at(stream: Stream, t_s: np.ndarray, *, max_gap_s: float | None = None) -> np.ndarray:
+    """Poses of a pose stream interpolated at times ``t_s`` (heading unwrapped first).
+
+    Parameters
+    ----------
+    stream : Stream
+        Poses (x [m], y [m], heading [rad]), shape ``(m, 3)``, e.g.
+        :attr:`Recording.true_pose <lti_motion.recordings.Recording.true_pose>`.
+    t_s : array_like, shape (p,)
+        Times [s] on the stream's clock.
+    max_gap_s : float, optional
+        Blank (NaN) outside the stream's span and across a gap between two of its
+        stamps longer than this [s]; ``None``: held at the ends, interpolated over
+        any gap.
+
+    Returns
+    -------
+    ndarray, shape (p, 3)
+
+    Examples
+    --------
+    >>> ref = Stream(np.array([0.0, 1.0, 3.0]), np.array([[0, 0, 0], [1, 0, 0], [3, 0, 0.]]))
+    >>> poses_at(ref, np.array([0.5, 2.0, 4.0]), max_gap_s=1.5)[:, 0].tolist()
+    [0.5, nan, nan]
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    tr = stream.t_s
+    pose = stream.values.astype(float).copy()
+    pose[:, 2] = np.unwrap(pose[:, 2])
+    out = np.stack([np.interp(t_s, tr, pose[:, j]) for j in range(3)], axis=1)
+    if max_gap_s is not None:
+        blank = (t_s < tr[0]) | (t_s > tr[-1])
+        if tr.size > 1:
+            j = np.clip(np.searchsorted(tr, t_s), 1, tr.size - 1)
+            blank |= tr[j] - tr[j - 1] > max_gap_s
+        out[blank] = np.nan
+    return out
 
 
 def _frame_travel(rec: Recording, encoders: str) -> np.ndarray | None:
@@ -194,6 +287,17 @@ def wheel_periods(rec: Recording, *, periods_by: PeriodsBy = "stamps",
     return assign_periods(t, dt_s=rec.dt_s, duplicate=repeat, travel=travel)
 
 
+def _command_index(rec: Recording, a: PeriodAssignment, periods: np.ndarray) -> np.ndarray:
+    """The index in ``rec.cmd`` of the command :func:`commands_at` holds in each period
+    (0 where none was sent yet)."""
+    if rec.cmd_per_frame:
+        k = a.period[a.keep]
+        return np.flatnonzero(a.keep)[np.minimum(np.searchsorted(k, periods), k.size - 1)]
+    c = a.clock
+    mid = c.times_s(periods) + c.latency_median_s - 0.5 * c.period_s
+    return np.maximum(np.searchsorted(rec.cmd.t_s, mid, side="right") - 1, 0)
+
+
 def commands_at(rec: Recording, a: PeriodAssignment, periods: np.ndarray) -> np.ndarray:
     """The commands in effect in the given periods by the hold rule of the module Notes.
 
@@ -225,26 +329,33 @@ def commands_at(rec: Recording, a: PeriodAssignment, periods: np.ndarray) -> np.
     return out
 
 
-def _check_speed(name: str, wheel_m_s: np.ndarray, t_s: np.ndarray, limit: float) -> None:
+def _check_speed(name: str, wheel_m_s: np.ndarray, t_s: np.ndarray, limit: float,
+                 sample: np.ndarray) -> None:
+    """A :class:`WheelSpeedError` for the first period with a wheel over ``limit``;
+    ``sample[k]`` is the index, in its stream, of the sample behind period ``k``."""
     bad = np.flatnonzero(np.any(np.abs(wheel_m_s) > limit, axis=1))
     if bad.size:
         k = int(bad[0])
-        raise ValueError(f"{name}: a wheel at {np.max(np.abs(wheel_m_s[k])):.3g} m/s at "
-                         f"t = {t_s[k]:.3f} s cannot be right (limit {limit:g} m/s); check "
-                         "the field's unit and scale")
+        side = int(np.argmax(np.abs(wheel_m_s[k])))
+        speed = float(np.abs(wheel_m_s[k, side]))
+        raise WheelSpeedError(
+            f"{name}: a wheel at {speed:.3g} m/s at t = {t_s[k]:.3f} s cannot be right "
+            f"(limit {limit:g} m/s); check the field's unit and scale",
+            field=name, side=side, sample=int(sample[k]), speed_m_s=speed, t_s=float(t_s[k]),
+            limit_m_s=float(limit))
 
 
-def _pose_at(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray) -> np.ndarray | None:
+def _pose_at(rec: Recording, a: PeriodAssignment, t_grid: np.ndarray,
+             max_gap_s: float | None) -> np.ndarray | None:
     if rec.true_pose is None:
         return None
-    pose = rec.true_pose.values.astype(float).copy()
-    pose[:, 2] = np.unwrap(pose[:, 2])
     if np.array_equal(rec.true_pose.t_s, rec.wheel.t_s):      # one pose per wheel frame
+        pose = rec.true_pose.values.astype(float).copy()
+        pose[:, 2] = np.unwrap(pose[:, 2])
         k = a.period[a.keep].astype(float)
         grid = np.arange(1, t_grid.size, dtype=float)
         return np.stack([np.interp(grid, k, pose[a.keep, j]) for j in range(3)], axis=1)
-    return np.stack([np.interp(t_grid[1:], rec.true_pose.t_s, pose[:, j]) for j in range(3)],
-                    axis=1)
+    return poses_at(rec.true_pose, t_grid[1:], max_gap_s=max_gap_s)
 
 
 def on_grid(rec: Recording, *, wheel_base_m: float,
@@ -252,7 +363,7 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
             wheel_radius_m: float | None = None,
             encoders: Literal["quadrature", "commanded"] = "quadrature",
             max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S,
-            periods_by: PeriodsBy = "stamps") -> GridSignals:
+            periods_by: PeriodsBy = "stamps", max_gap_s: float | None = None) -> GridSignals:
     """Per-period wheel commands and body speeds of any recording (module Notes).
 
     Parameters
@@ -268,11 +379,15 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
         Wheel radius [m]; needed for wheel angles and speeds in rad/s.
     encoders : {"quadrature", "commanded"}
         ``"commanded"`` for counters that count in the commanded direction
-        (Roomba / Create 2; :func:`~lti_motion.recordings.unfold_commanded_direction`).
+        (Roomba / Create 2; :func:`~lti_motion.recordings.unfold_commanded_direction`),
+        and wheel angles made from such counts.
     max_wheel_speed_m_s : float
         Fastest wheel speed that can be right [m/s]; faster is bad input.
     periods_by : {"stamps", "stamps_and_travel"}
         How wheel frames find their periods (module Notes, :func:`wheel_periods`).
+    max_gap_s : float, optional
+        The IMU's rate and the reference poses are blank across gaps in their stamps
+        longer than this [s] (module Notes); ``None``: no gap rule.
 
     Returns
     -------
@@ -281,9 +396,12 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
     Raises
     ------
     ValueError
-        If the scale a kind needs is missing, fewer than 2 valid wheel frames
-        remain, or a wheel (measured or commanded) exceeds
-        ``max_wheel_speed_m_s``; the message names the field.
+        If the scale a kind needs is missing, or fewer than 2 valid wheel frames
+        remain; the message names the field.
+    WheelSpeedError
+        A ``ValueError``: a wheel (measured or commanded) exceeds
+        ``max_wheel_speed_m_s``; the message names the field, and the error the
+        wheel and the stream's sample behind it.
 
     Examples
     --------
@@ -314,15 +432,19 @@ def on_grid(rec: Recording, *, wheel_base_m: float,
         wheel = wheel_from_body(rate, wheel_base_m=wheel_base_m)
     else:
         wheel, speeds = rate, body_from_wheel(rate, wheel_base_m=wheel_base_m)
-    _check_speed(rec.wheel_kind, wheel, t_grid[1:], max_wheel_speed_m_s)
+    used_at = np.flatnonzero(used)       # the frame closing each period, or the next one's
+    behind = used_at[np.minimum(np.searchsorted(k_used, grid[1:]), used_at.size - 1)]
+    _check_speed(rec.wheel_kind, wheel, t_grid[1:], max_wheel_speed_m_s, behind)
     cmd = commands_at(rec, a, np.arange(1, n_periods + 1))
     if rec.cmd_kind == "cmd_body":
         cmd = wheel_from_body(cmd, wheel_base_m=wheel_base_m)
-    _check_speed(rec.cmd_kind, cmd, t_grid[1:], max_wheel_speed_m_s)
+    _check_speed(rec.cmd_kind, cmd, t_grid[1:], max_wheel_speed_m_s,
+                 _command_index(rec, a, np.arange(1, n_periods + 1)))
     closed = np.zeros(n_periods + 1, bool)
     closed[a.period[used]] = True
     measured = closed[1:] & closed[:-1]
-    yaw = None if rec.yaw_rate is None else _integrate_at(rec.yaw_rate, t_grid)
+    yaw = None if rec.yaw_rate is None else _integrate_at(rec.yaw_rate, t_grid, max_gap_s)
     return GridSignals(t_s=t_grid[1:], period_s=a.clock.period_s, cmd_m_s=cmd, speeds=speeds,
-                       measured=measured, yaw_rate_rad_s=yaw, true_pose=_pose_at(rec, a, t_grid),
-                       assignment=a)
+                       measured=measured, yaw_rate_rad_s=yaw,
+                       true_pose=_pose_at(rec, a, t_grid, max_gap_s), assignment=a,
+                       closed=closed)

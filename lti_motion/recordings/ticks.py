@@ -254,15 +254,16 @@ def unfold_commanded_direction(deltas: np.ndarray, *, window: int = 12) -> np.nd
 
     Parameters
     ----------
-    deltas : ndarray of int, shape (n,) or (n, k)
-        Tick increments per frame (from :func:`tick_deltas`), one column per wheel.
+    deltas : ndarray of int or float, shape (n,) or (n, k)
+        Tick increments per frame (from :func:`tick_deltas`), or wheel-angle increments
+        [rad] made from such counts, one column per wheel.
     window : int
         Frames after a flip within which the wheel must stop (about 180 ms at
         15 ms; a wheel at 0.5 m/s stops in about 130 ms under the current limit).
 
     Returns
     -------
-    ndarray of int64
+    ndarray of int64 (float for float increments)
         Same shape; increments with the wheel's true direction of rotation.
 
     Examples
@@ -273,7 +274,8 @@ def unfold_commanded_direction(deltas: np.ndarray, *, window: int = 12) -> np.nd
     >>> unfold_commanded_direction(np.array([8, 8, -5, -2, -1, -4, -8])).tolist()
     [8, 8, 5, 2, -1, -4, -8]
     """
-    deltas = np.asarray(deltas, dtype=np.int64)
+    deltas = np.asarray(deltas)
+    deltas = deltas.astype(float if deltas.dtype.kind == "f" else np.int64)
     if deltas.ndim == 1:
         return unfold_commanded_direction(deltas[:, None], window=window)[:, 0]
     out = deltas.copy()
@@ -288,8 +290,10 @@ def unfold_commanded_direction(deltas: np.ndarray, *, window: int = 12) -> np.nd
             end = min(k + window, flips[i + 1] if i + 1 < len(flips) else len(d))
             if end - k < 2:
                 continue
-            # the flip frame itself mixes both directions: look for the stop after it
-            stop = k + 1 + int(np.argmin(np.abs(d[k + 1:end])))
+            # the flip frame itself mixes both directions: look for the stop after it, the
+            # first smallest increment (float increments equal but for rounding tie)
+            mag = np.abs(d[k + 1:end])
+            stop = k + 1 + int(np.flatnonzero(mag <= mag.min() * (1.0 + 1e-9))[0])
             if stop > k + 1:                     # still slowing down: it rolled the old way
                 out[k:stop, col] = -d[k:stop]
     return out

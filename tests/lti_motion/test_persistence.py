@@ -68,3 +68,25 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         f.write("new, half")
         raise RuntimeError("disk full")
     assert path.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["doc.json"]
+
+
+@pytest.mark.parametrize(("first_bytes", "said"), [
+    (b"PK\x03\x04rest of a zip", "is a NumPy .npz archive (a recorded log?)"),
+    (b"#ROSBAG V2.0\n", "is a ROS 1 bag"),
+    (b"\x89MCAP0\r\n", "is an MCAP (ROS 2) bag"),
+    (b"SQLite format 3\x00", "is an SQLite (ROS 2) bag"),
+])
+def test_another_kind_of_file_is_named_for_what_it_is_not_called_damaged(tmp_path, first_bytes,
+                                                                        said):
+    path = tmp_path / "given_as_a_model"
+    path.write_bytes(first_bytes)
+    with pytest.raises(ValueError, match="not a 'demo' file") as info:
+        read_document(path, fmt="demo", versions=(1,))
+    assert said in str(info.value) and "damaged" not in str(info.value)
+
+
+def test_a_real_log_given_as_a_document_is_named_a_log(tmp_path):
+    path = tmp_path / "drive.npz"
+    save_log(path, Simulator("create2", seed=1).run(np.full((20, 2), 0.1)))
+    with pytest.raises(ValueError, match=r"NumPy \.npz archive \(a recorded log\?\)"):
+        read_document(path, fmt="demo", versions=(1,))

@@ -14,14 +14,26 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.typesys import Stores, get_typestore
 
 from benchmarks.bench_bag_gyro import DENSITY, carpet_drive
-from drivers.bags.reader import read_bag
-from drivers.bags.to_log import bag_to_log
+from drivers.bags.reader import CREATE2_WHEEL_RADIUS_M, bag_grid, read_bag
+from drivers.bags.topics import read_topics
 from drivers.bags.writer import UNESTIMATED_VARIANCE, write_drive_bag
 from drivers.exceptions import BagError
 from drivers.sim.simulator import Simulator
 
 FORMATS = [("drive.bag", "mcap"), ("drive_db3", "sqlite3"), ("drive_mcap", "mcap")]
 START_NS = 1_700_000_000 * 1_000_000_000
+
+
+def _frames(path, dt_s=None):
+    """The bag's drive on the grid as frames ``0 .. P`` (frame ``k`` closes period ``k``),
+    stamped on the host's arrival line: (times [s], yaw rate [rad/s] or None, recording)."""
+    rec = read_bag(path, dt_s=dt_s)
+    grid = bag_grid(rec, wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    clock = grid.assignment.clock
+    t = clock.times_s(np.arange(len(grid.closed))) + clock.latency_median_s
+    yaw = (None if grid.yaw_rate_rad_s is None
+           else np.concatenate([[np.nan], grid.yaw_rate_rad_s]))
+    return t, yaw, rec
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +52,7 @@ def test_the_gyro_is_written_as_imu_and_comes_back_on_the_frames(tmp_path, drive
     bias is 6 mrad/s), sd under the reading noise's 0.041 rad/s."""
     path = write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS,
                            gyro_noise_density_rad_s_sqrt_hz=DENSITY)
-    rec = read_bag(path)
+    rec = read_topics(path)
     ok = drive.valid & np.isfinite(drive.yaw_rate_rad_s)
     assert rec.imu.topic == "/imu/data" and rec.imu.msgtype == "sensor_msgs/msg/Imu"
     np.testing.assert_array_equal(rec.imu.values[:, 0], drive.yaw_rate_rad_s[ok])
@@ -53,19 +65,23 @@ def test_the_gyro_is_written_as_imu_and_comes_back_on_the_frames(tmp_path, drive
     np.testing.assert_allclose(msg.angular_velocity_covariance,
                                [UNESTIMATED_VARIANCE, 0, 0, 0, UNESTIMATED_VARIANCE, 0, 0, 0,
                                 DENSITY**2 / drive.dt_s])
-    log = bag_to_log(rec, wheel_base_m=0.235, dt_s=drive.dt_s)
-    assert len(log) == len(drive)
-    got = np.isfinite(log.yaw_rate_rad_s)
+    _, yaw, rec = _frames(path, dt_s=drive.dt_s)
+    assert rec.source.topics["yaw_rate"] == "/imu/data"
+    assert rec.gyro_density_rad_s_sqrt_hz == pytest.approx(DENSITY, rel=0.01)
+    assert len(yaw) == len(drive)
+    got = np.isfinite(yaw)
     assert not got[0] and got[1:-1].all()          # period 0 starts before the first reading
-    diff = log.yaw_rate_rad_s[got & ok] - drive.yaw_rate_rad_s[got & ok]
+    diff = yaw[got & ok] - drive.yaw_rate_rad_s[got & ok]
     assert abs(diff.mean()) < 1e-3 and diff.std() < 0.041, (diff.mean(), diff.std())
 
 
 def test_without_a_gyro_no_imu_is_written(tmp_path):
     log = Simulator("create2", seed=1).run(np.full((40, 2), 0.1))
-    rec = read_bag(write_drive_bag(tmp_path / "plain.bag", log))
+    path = write_drive_bag(tmp_path / "plain.bag", log)
+    rec = read_topics(path)
     assert rec.imu is None and "/imu/data" not in rec.topics
-    assert bag_to_log(rec, wheel_base_m=0.235).yaw_rate_rad_s is None
+    _, yaw, rec = _frames(path)
+    assert yaw is None and rec.yaw_rate is None and not rec.source.has("yaw_rate")
 
 
 def test_a_slower_imu_with_a_gap(tmp_path):
@@ -78,12 +94,11 @@ def test_a_slower_imu_with_a_gap(tmp_path):
     msgs = [("/joint_states", "sensor_msgs/msg/JointState", int(t),
              _joint_state(store, t, 0.01 * i)) for i, t in enumerate(wheels_ns)]
     msgs += [("/imu", "sensor_msgs/msg/Imu", int(t), _imu(store, t, 0.3)) for t in imu_ns]
-    log = bag_to_log(read_bag(_raw_bag(tmp_path / "slow.bag", msgs)), wheel_base_m=0.235)
-    assert log.dt_s == pytest.approx(0.02)
-    y = log.yaw_rate_rad_s
+    t, y, rec = _frames(_raw_bag(tmp_path / "slow.bag", msgs))
+    assert rec.dt_s == pytest.approx(0.02)
     inside = np.isfinite(y)
     np.testing.assert_allclose(y[inside], 0.3, rtol=1e-9)
-    t = log.t_s + log.meta["bag_start_ns"] * 1e-9
+    t = t + rec.source.start_ns * 1e-9
     span = (t - 0.02 > imu_ns[0] * 1e-9) & (t < imu_ns[-1] * 1e-9)
     gap = (t > imu_ns[16] * 1e-9) & (t - 0.02 < imu_ns[17] * 1e-9)
     assert inside.sum() == (span & ~gap).sum() > 50
@@ -102,13 +117,13 @@ def test_a_faster_imu_is_averaged_over_each_period(tmp_path):
              _joint_state(store, t, 0.01 * i)) for i, t in enumerate(wheels_ns)]
     msgs += [("/imu", "sensor_msgs/msg/Imu", int(t),
               _imu(store, t, 0.5 * np.sin(np.pi * (t - 10**9) * 1e-9))) for t in imu_ns]
-    log = bag_to_log(read_bag(_raw_bag(tmp_path / "fast.bag", msgs)), wheel_base_m=0.235)
-    t1 = log.t_s + (log.meta["bag_start_ns"] - 10**9) * 1e-9        # from the first stamp
+    t, yaw, rec = _frames(_raw_bag(tmp_path / "fast.bag", msgs))
+    t1 = t + (rec.source.start_ns - 10**9) * 1e-9        # from the first stamp
     t0 = t1 - 0.02
     expected = 0.5 / np.pi * (np.cos(np.pi * t0) - np.cos(np.pi * t1)) / 0.02
-    got = np.isfinite(log.yaw_rate_rad_s)
+    got = np.isfinite(yaw)
     assert got[1:].all() and not got[0]
-    np.testing.assert_allclose(log.yaw_rate_rad_s[1:], expected[1:], atol=1.03e-5)
+    np.testing.assert_allclose(yaw[1:], expected[1:], atol=1.03e-5)
 
 
 # -- bad input: the reader's one-line errors -----------------------------------------------

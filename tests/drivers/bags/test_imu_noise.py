@@ -12,8 +12,8 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.typesys import Stores, get_typestore
 
 from drivers.bags.imu_noise import imu_rate_noise, with_rate_data
-from drivers.bags.reader import StampedSeries, read_bag
-from drivers.bags.to_log import bag_to_log
+from drivers.bags.reader import CREATE2_WHEEL_RADIUS_M, bag_grid, read_bag
+from drivers.bags.topics import StampedSeries, read_topics
 from drivers.bags.writer import write_drive_bag
 from drivers.exceptions import BagError
 from drivers.sim.config import Room, get_preset
@@ -85,21 +85,19 @@ def test_the_writers_covariance_comes_back_as_the_density(tmp_path, drive, name,
     Imu's stamps (jittered host times, median spacing dt within 1%) it is the density."""
     bag = write_drive_bag(tmp_path / name, drive, storage=storage,
                           gyro_noise_density_rad_s_sqrt_hz=DENSITY)
-    rec = read_bag(bag)
-    np.testing.assert_allclose(rec.imu.values[:, 2], DENSITY ** 2 / drive.dt_s)
-    log = bag_to_log(rec, wheel_base_m=0.235, dt_s=drive.dt_s)
-    noise = log.meta["imu_noise"]
-    assert noise["density_rad_s_sqrt_hz"] == pytest.approx(DENSITY, rel=0.01)
-    assert noise["messages"] == [len(rec.imu), 0, 0]
+    found = read_topics(bag)
+    np.testing.assert_allclose(found.imu.values[:, 2], DENSITY ** 2 / drive.dt_s)
+    rec = read_bag(bag, dt_s=drive.dt_s)
+    assert rec.gyro_density_rad_s_sqrt_hz == pytest.approx(DENSITY, rel=0.01)
+    assert rec.meta["imu_noise"]["messages"] == [len(found.imu), 0, 0]
 
 
 def test_a_bag_without_a_covariance_is_unknown(tmp_path, drive):
     """Written without a density the zz entry is 0: unknown, the default noise is used."""
-    log = bag_to_log(read_bag(write_drive_bag(tmp_path / "u.bag", drive,
-                                              gyro_noise_density_rad_s_sqrt_hz=None)),
-                     wheel_base_m=0.235)
-    assert log.meta["imu_noise"]["variance_rad2_s2"] is None
-    assert log.meta["imu_noise"]["density_rad_s_sqrt_hz"] is None
+    rec = read_bag(write_drive_bag(tmp_path / "u.bag", drive,
+                                   gyro_noise_density_rad_s_sqrt_hz=None))
+    assert rec.meta["imu_noise"]["variance_rad2_s2"] is None
+    assert rec.gyro_density_rad_s_sqrt_hz is None and rec.yaw_rate is not None
 
 
 def _raw_bag(path, store, wheels_ns, imu_ns, cov0):
@@ -141,14 +139,14 @@ def test_messages_without_a_rate_are_left_out_of_the_yaw_rate(tmp_path):
     wheels_ns = 10**9 + np.arange(100) * 20_000_000
     imu_ns = 10**9 + np.arange(200) * 10_000_000
     cov0 = [-1.0 if i % 5 == 2 else 1e6 for i in range(200)]
-    log = bag_to_log(read_bag(_raw_bag(tmp_path / "m.bag", store, wheels_ns, imu_ns, cov0)),
-                     wheel_base_m=0.235)
-    y = log.yaw_rate_rad_s[np.isfinite(log.yaw_rate_rad_s)]
+    rec = read_bag(_raw_bag(tmp_path / "m.bag", store, wheels_ns, imu_ns, cov0))
+    grid = bag_grid(rec, wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    y = grid.yaw_rate_rad_s[np.isfinite(grid.yaw_rate_rad_s)]
     assert y.size > 90
     np.testing.assert_allclose(y, 0.3, rtol=1e-9)
-    noise = log.meta["imu_noise"]
-    assert noise["messages"] == [160, 0, 40]
-    assert noise["density_rad_s_sqrt_hz"] == pytest.approx(math.sqrt(0.0004 * 0.01))
+    assert rec.meta["imu_noise"]["messages"] == [160, 0, 40]
+    assert len(rec.yaw_rate.t_s) == 160
+    assert rec.gyro_density_rad_s_sqrt_hz == pytest.approx(math.sqrt(0.0004 * 0.01))
 
 
 def test_an_imu_without_any_rate_is_refused(tmp_path):
@@ -157,7 +155,7 @@ def test_an_imu_without_any_rate_is_refused(tmp_path):
                     10**9 + np.arange(20) * 20_000_000, [-1.0] * 20)
     with pytest.raises(BagError, match=r"^topic /imu: every message's angular_velocity_"
                                        r"covariance\[0\] is -1"):
-        bag_to_log(read_bag(path), wheel_base_m=0.235)
+        read_bag(path)
 
 
 @pytest.mark.parametrize("command", ["replay", "monitor"])

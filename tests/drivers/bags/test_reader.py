@@ -1,4 +1,4 @@
-"""ROS bags in and out (drivers.bags.reader, drivers.bags.to_log, drivers.bags.writer).
+"""ROS bags in and out (drivers.bags.reader, drivers.bags.topics, drivers.bags.writer).
 
 Every bag here is written in a tmp_path with rosbags from a short simulator
 drive (or from the MRCLAM files), in the three formats: ROS 1 ``.bag``, ROS 2
@@ -16,13 +16,16 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 
 from drivers.bags.fields import decode_fields
-from drivers.bags.reader import bag_topics, read_bag
-from drivers.bags.to_log import CREATE2_TICKS_PER_RAD, bag_to_log
+from drivers.bags.reader import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M, bag_grid, read_bag
+from drivers.bags.topics import bag_topics, read_topics
 from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag
 from drivers.exceptions import BagError
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
+from lti_motion.kinematics import body_from_wheel
 from lti_motion.model.excitation import random_held_normal
+from lti_motion.recordings.clocks import snap_period_s
+from lti_motion.recordings.ticks import tick_deltas
 
 FORMATS = [("drive.bag", "mcap"), ("drive_db3", "sqlite3"), ("drive_mcap", "mcap")]
 START_NS = 1_700_000_000 * 1_000_000_000
@@ -45,24 +48,44 @@ def bag(request, tmp_path, drive):
     return write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS)
 
 
+def _speeds_of(drive, periods):
+    """The body speeds of a drive's counts over the periods between its valid frames
+    (the closing frame's counts span a gap), each period of a gap the gap's mean."""
+    ok = np.flatnonzero(drive.valid)
+    d = tick_deltas(drive.ticks[ok], axis=0) / CREATE2_TICKS_PER_RAD * CREATE2_WHEEL_RADIUS_M
+    span = np.diff(ok)
+    wheel = np.repeat(d / (span[:, None] * periods), span, axis=0)
+    return body_from_wheel(wheel, wheel_base_m=0.235)
+
+
 def test_the_drive_comes_back_frame_for_frame(bag, drive):
-    rec = read_bag(bag)
-    assert {k: getattr(rec, k).topic for k in ("cmd", "wheels", "odom", "truth")} == {
+    found = read_topics(bag)
+    assert {k: getattr(found, k).topic for k in ("cmd", "wheels", "odom", "truth")} == {
         "cmd": "/cmd_vel", "wheels": "/joint_states", "odom": "/odom", "truth": "/ground_truth"}
-    assert rec.imu is None and rec.joints == ("wheel_left_joint", "wheel_right_joint")
-    log = bag_to_log(rec, wheel_base_m=0.235)
-    assert log.dt_s == pytest.approx(0.015)
-    assert len(log) == len(drive)                              # the last frame is valid
-    np.testing.assert_array_equal(log.valid, drive.valid)
-    assert log.meta["lost_frames"] == int(np.count_nonzero(~drive.valid)) > 5
+    assert found.imu is None and found.joints == ("wheel_left_joint", "wheel_right_joint")
+    rec = read_bag(bag)
+    assert rec.wheel_kind == "wheel_angles_rad" and rec.cmd_kind == "cmd_body"
+    assert dict(rec.source.topics) == {"wheel": "/joint_states", "cmd": "/cmd_vel",
+                                       "true_pose": "/ground_truth"}
+    assert rec.source.wheel_names == ("wheel_left_joint", "wheel_right_joint")
+    assert rec.yaw_rate is None and len(rec) == int(np.count_nonzero(drive.valid))
+    # the angles as written, never quantised: the counts over ticks per radian
     ok = drive.valid
-    np.testing.assert_array_equal(log.ticks[ok], drive.ticks[ok])
-    np.testing.assert_allclose(log.cmd_m_s[1:], drive.cmd_m_s[1:], atol=1e-12)
-    np.testing.assert_allclose(log.true_pose[ok], drive.true_pose[ok], atol=1e-9)
-    # lost frames: counts interpolated between their neighbours, within a tick per period
-    assert np.all(np.abs(log.ticks[~ok] - drive.ticks[~ok]) <= 3)
-    # frame 0 on the bag's clock: the grid's phase from all stamps, within their 1 ms jitter
-    first_ns = log.meta["bag_start_ns"] + log.t_s[0] * 1e9
+    np.testing.assert_allclose(rec.wheel.values * CREATE2_TICKS_PER_RAD,
+                               np.unwrap(drive.ticks[ok].astype(float), period=65536, axis=0),
+                               atol=1e-6)
+    grid = bag_grid(rec, wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    assert grid.period_s == pytest.approx(0.015, rel=1e-3)
+    assert len(grid.closed) == len(drive)                      # the last frame is valid
+    np.testing.assert_array_equal(grid.closed, drive.valid)
+    assert np.count_nonzero(~grid.closed) == int(np.count_nonzero(~drive.valid)) > 5
+    # every period's speeds: the counts' travel over the periods between valid frames
+    np.testing.assert_allclose(grid.speeds, _speeds_of(drive, grid.period_s), atol=1e-9)
+    np.testing.assert_allclose(grid.cmd_m_s, drive.cmd_m_s[1:], atol=1e-12)
+    np.testing.assert_allclose(grid.true_pose[ok[1:]], drive.true_pose[1:][ok[1:]], atol=1e-9)
+    # period 0 on the bag's clock: the grid's phase from all stamps, within their 1 ms jitter
+    clock = grid.assignment.clock
+    first_ns = rec.source.start_ns + (clock.times_s(0) + clock.latency_median_s) * 1e9
     assert abs(first_ns - (START_NS + drive.t_s[0] * 1e9)) < 3e6
 
 
@@ -112,7 +135,8 @@ def test_estimates_and_alarms_round_trip(tmp_path, rng):
         assert stamp == alarm.t_ns and msg.status[0].name == "lti_motion/stuck_encoder"
         assert [(v.key, v.value) for v in msg.status[0].values] == list(alarm.values)
         # the estimates read back as a bag: the Odometry topic found by type
-        assert read_bag(path).odom.values[7, 2] == pytest.approx(poses[7, 2])
+        assert read_topics(path).odom.values[7, 2] == pytest.approx(poses[7, 2])
+        assert read_bag(path).wheel_kind == "body_speeds"      # its twist: no wheel angles
 
 
 def test_nothing_is_overwritten_or_half_written(tmp_path, drive):
@@ -134,14 +158,17 @@ def test_reference_poses_from_tf_equal_the_truth_written(tmp_path, drive, name, 
     path = write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS,
                            truth="tf")
     assert "/ground_truth" not in bag_topics(path)
-    rec = read_bag(path)                  # no PoseStamped topic: tf, with its default frames
-    assert rec.truth.topic == "/tf" and rec.truth_frames == ("world", "base_link")
+    found = read_topics(path)             # no PoseStamped topic: tf, with its default frames
+    assert found.truth.topic == "/tf" and found.truth_frames == ("world", "base_link")
     ok = drive.valid
-    np.testing.assert_array_equal(rec.truth.t_ns, START_NS + np.rint(drive.t_s[ok] * 1e9))
-    np.testing.assert_allclose(rec.truth.values, drive.true_pose[ok], atol=1e-9)
-    log = bag_to_log(rec, wheel_base_m=0.235)
-    np.testing.assert_allclose(log.true_pose[ok], drive.true_pose[ok], atol=1e-9)
-    assert log.meta["topics"]["truth"] == "/tf"
+    np.testing.assert_array_equal(found.truth.t_ns, START_NS + np.rint(drive.t_s[ok] * 1e9))
+    np.testing.assert_allclose(found.truth.values, drive.true_pose[ok], atol=1e-9)
+    rec = read_bag(path)
+    assert rec.source.topics["true_pose"] == "/tf"
+    assert rec.source.truth_frames == ("world", "base_link")
+    np.testing.assert_allclose(rec.true_pose.values, drive.true_pose[ok], atol=1e-9)
+    grid = bag_grid(rec, wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    np.testing.assert_allclose(grid.true_pose[ok[1:]], drive.true_pose[1:][ok[1:]], atol=1e-9)
 
 
 def _transform(t, t_ns, parent, child, x, yaw):
@@ -170,20 +197,20 @@ def test_tf_frames_by_default_or_named_and_a_missing_pair(tmp_path):
                 position=t["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
                 orientation=tf.transform.rotation))))
     path, _ = _raw_bag(tmp_path / "tf", msgs, ros1=False)
-    assert read_bag(path).truth.topic == "/mocap"              # PoseStamped first
-    rec = read_bag(path, truth_child="base_link")              # named: tf, world preferred
+    assert read_topics(path).truth.topic == "/mocap"              # PoseStamped first
+    rec = read_topics(path, truth_child="base_link")              # named: tf, world preferred
     assert rec.truth_frames == ("world", "base_link")
     np.testing.assert_allclose(rec.truth.values, np.column_stack(
         [10.0 * np.arange(5), np.zeros(5), -0.1 * np.arange(5)]), atol=1e-12)
-    odom = read_bag(path, truth_parent="odom").truth.values
+    odom = read_topics(path, truth_parent="odom").truth.values
     np.testing.assert_allclose(odom[:, [0, 2]], np.column_stack([np.arange(5), 0.1 * np.arange(5)]),
                                atol=1e-12)
     with pytest.raises(BagError, match=r"no transform map -> base_footprint \(no frame map "
                                        r"nor base_footprint in it\); it has "
                                        r"odom -> base_link, world -> base_link \(choose"):
-        read_bag(path, truth_parent="map", truth_child="base_footprint")
+        read_topics(path, truth_parent="map", truth_child="base_footprint")
     with pytest.raises(BagError, match=r"--truth-topic .* not both"):
-        read_bag(path, truth_topic="/mocap", truth_parent="odom")
+        read_topics(path, truth_topic="/mocap", truth_parent="odom")
 
 
 @pytest.mark.parametrize(("name", "storage"), FORMATS, ids=["ros1", "db3", "mcap"])
@@ -192,7 +219,7 @@ def test_a_tf_chain_is_composed_into_the_truth_written(tmp_path, drive, name, st
     frame), base_footprint -> base_link (static, 5 cm up): composed, the simulator's poses."""
     path = write_drive_bag(tmp_path / name, drive, storage=storage, start_ns=START_NS,
                            truth="tf_chain")
-    rec = read_bag(path)                  # defaults: world absent, map -> base_link chained
+    rec = read_topics(path)               # defaults: world absent, map -> base_link chained
     assert rec.truth_frames == ("map", "base_link")
     assert rec.truth.topic == "/tf, /tf_static"
     ok = drive.valid
@@ -200,12 +227,12 @@ def test_a_tf_chain_is_composed_into_the_truth_written(tmp_path, drive, name, st
     np.testing.assert_allclose(rec.truth.values, drive.true_pose[ok], atol=1e-9)
     # the chain walked up: base_link in base_footprint's parent, odom, at the start
     # (where map and odom coincide) is the truth; later it is off by the drift
-    odom = read_bag(path, truth_parent="odom").truth
-    assert read_bag(path, truth_parent="odom").truth_frames == ("odom", "base_link")
+    odom = read_topics(path, truth_parent="odom").truth
+    assert read_topics(path, truth_parent="odom").truth_frames == ("odom", "base_link")
     np.testing.assert_allclose(odom.values[0], drive.true_pose[ok][0], atol=1e-9)
     assert np.max(np.abs(odom.values[:, 2] - drive.true_pose[ok][:, 2])) > 0.03
     # and down: map in base_link, the inverse of the truth
-    inv = read_bag(path, truth_parent="base_link", truth_child="map").truth.values
+    inv = read_topics(path, truth_parent="base_link", truth_child="map").truth.values
     x, y, th = drive.true_pose[ok].T
     np.testing.assert_allclose(inv[:, 0], -(np.cos(th) * x + np.sin(th) * y), atol=1e-9)
     np.testing.assert_allclose(np.cos(inv[:, 2] + th), 1.0, atol=1e-9)
@@ -213,7 +240,7 @@ def test_a_tf_chain_is_composed_into_the_truth_written(tmp_path, drive, name, st
 
 def test_a_static_mount_composes_and_a_missing_link_is_named(tmp_path, drive):
     path = write_drive_bag(tmp_path / "mount.bag", drive, truth="tf")
-    laser = read_bag(path, truth_parent="world", truth_child="base_laser").truth.values
+    laser = read_bag(path, truth_parent="world", truth_child="base_laser").true_pose.values
     x, y, th = drive.true_pose[drive.valid].T        # the laser 0.1 m ahead of base_link
     np.testing.assert_allclose(laser, np.column_stack(
         [x + 0.1 * np.cos(th), y + 0.1 * np.sin(th), th]), atol=1e-9)
@@ -276,11 +303,25 @@ def _joints_bag(tmp_path, stamps_ns, angles, **kw):
 
 
 def test_a_bag_without_wheels_names_what_it_has(tmp_path):
+    """Odometry alone stands in for the wheels (its twist); without it too, the error
+    names what is missing and lists what the bag has."""
     path = write_estimates_bag(tmp_path / "est.bag", np.arange(3), np.zeros((3, 3)),
                                np.zeros((3, 3, 3)))
-    with pytest.raises(BagError, match=r"no sensor_msgs/JointState.*/lti_motion/odom "
-                                       r"\(nav_msgs/msg/Odometry\)"):
-        bag_to_log(read_bag(path), wheel_base_m=0.235)
+    rec = read_bag(path)
+    assert rec.wheel_kind == "body_speeds" and rec.rates == "since_last"
+    assert dict(rec.source.topics) == {"wheel": "/lti_motion/odom"}     # no commands
+    store = get_typestore(Stores.ROS1_NOETIC)
+    t = store.types
+    twist = t["geometry_msgs/msg/Twist"](linear=t["geometry_msgs/msg/Vector3"](x=0.1, y=0.0,
+                                                                            z=0.0),
+                                         angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0,
+                                                                             z=0.0))
+    cmd_only, _ = _raw_bag(tmp_path / "cmd.bag", [("/cmd_vel", "geometry_msgs/msg/Twist",
+                                                   10**9 + i * 10**8, twist) for i in range(3)])
+    with pytest.raises(BagError, match=r"^cmd.bag has no sensor_msgs/JointState wheel angles "
+                                       r"\(nor a nav_msgs/Odometry twist\); it has /cmd_vel "
+                                       r"\(geometry_msgs/msg/Twist\)$"):
+        read_bag(cmd_only)
 
 
 def test_a_topic_of_the_wrong_type_or_missing(bag):
@@ -300,7 +341,10 @@ def test_several_topics_of_a_kind_need_a_choice(tmp_path):
     with pytest.raises(BagError, match=r"2 sensor_msgs/JointState topics \(/a/joint_states, "
                                        r"/b/joint_states\); choose one with --wheels-topic"):
         read_bag(path)
-    assert read_bag(path, wheels_topic="/b/joint_states").wheels.topic == "/b/joint_states"
+    assert read_topics(path, wheels_topic="/b/joint_states").wheels.topic == "/b/joint_states"
+    with pytest.raises(BagError, match=r"^topic /b/joint_states has 1 message; a drive needs "
+                                       r"at least 2$"):
+        read_bag(path, wheels_topic="/b/joint_states")
 
 
 def test_an_empty_topic(tmp_path):
@@ -323,23 +367,36 @@ def test_a_wheel_at_100_m_s(tmp_path):
     angles = np.zeros((5, 2))
     angles[3:, 1] = 100.0 * 0.02 / 0.036                     # 100 m/s for one period
     path = _joints_bag(tmp_path, stamps, angles)
-    with pytest.raises(BagError, match=r"/joint_states: the wheel_right_joint wheel moves at "
-                                       r"100 m/s at message 3, more than 20 m/s"):
-        bag_to_log(read_bag(path), wheel_base_m=0.235)
+    with pytest.raises(BagError, match=r"^topic /joint_states: the wheel_right_joint wheel "
+                                       r"moves at 100 m/s at message 3, more than 20 m/s"):
+        bag_grid(read_bag(path), wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    # a command as impossible: the topic, the wheel and the message
+    store = get_typestore(Stores.ROS1_NOETIC)
+    t = store.types
+    msgs = [("/joint_states", "sensor_msgs/msg/JointState", int(s),
+             _joint_state(store, int(s), 0.0, 0.0)) for s in stamps]
+    msgs.insert(2, ("/cmd_vel", "geometry_msgs/msg/Twist", int(stamps[1]) + 1,
+                    t["geometry_msgs/msg/Twist"](
+                        linear=t["geometry_msgs/msg/Vector3"](x=30.0, y=0.0, z=0.0),
+                        angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0))))
+    fast, _ = _raw_bag(tmp_path / "fast_cmd.bag", msgs)
+    with pytest.raises(BagError, match=r"^topic /cmd_vel: the left wheel command moves at "
+                                       r"30 m/s at message 1, more than 20 m/s"):
+        bag_grid(read_bag(fast), wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
 
 
 def test_joints_found_by_name_or_named(tmp_path):
     stamps = 10**9 + np.arange(4) * 20_000_000
     angles = np.column_stack([np.arange(4) * 0.1, np.arange(4) * 0.2])
     path = _joints_bag(tmp_path, stamps, angles, names=("right_wheel", "left_wheel"))
-    log = bag_to_log(read_bag(path), wheel_base_m=0.235)
-    ticks = np.rint(angles[:, ::-1] * CREATE2_TICKS_PER_RAD)        # swapped by name
-    np.testing.assert_array_equal(log.ticks, ticks)
+    rec = read_bag(path)
+    np.testing.assert_array_equal(rec.wheel.values, angles[:, ::-1])      # swapped by name
+    assert rec.source.wheel_names == ("left_wheel", "right_wheel")
     other = _joints_bag(tmp_path / "..", stamps, angles, names=("j1", "j2"))
     with pytest.raises(BagError, match=r"0 joints match the left wheel pattern 'left' among "
                                        r"\['j1', 'j2'\]; name the left joint with --left-joint"):
         read_bag(other)
-    assert read_bag(other, left_joint="j2", right_joint="j1").joints == ("j2", "j1")
+    assert read_bag(other, left_joint="j2", right_joint="j1").source.wheel_names == ("j2", "j1")
 
 
 def test_not_a_bag(tmp_path):
@@ -379,14 +436,14 @@ def test_a_bag_from_mrclam(tmp_path, mrclam_path):
              for s, x, y, th in gt]
     msgs.sort(key=lambda m: m[2])
     path, _ = _raw_bag(tmp_path / "mrclam", msgs, ros1=False)
-    rec = read_bag(path)
+    rec = read_topics(path)
     assert rec.wheels is None and rec.truth.topic == "/vicon/pose"
     np.testing.assert_allclose(rec.cmd.values, cmd[:, 1:])
     np.testing.assert_allclose(rec.cmd.t_ns, np.round(cmd[:, 0] * 1e9))
     np.testing.assert_allclose(rec.truth.values[:, :2], gt[:, 1:3], atol=1e-12)
     np.testing.assert_allclose(rec.truth.values[:, 2], np.unwrap(gt[:, 3]), atol=1e-9)
     with pytest.raises(BagError, match="no sensor_msgs/JointState wheel angles"):
-        bag_to_log(rec, wheel_base_m=0.258)
+        read_bag(path)
 
 
 def test_4_ms_of_host_jitter_at_50_hz(tmp_path):
@@ -402,10 +459,11 @@ def test_4_ms_of_host_jitter_at_50_hz(tmp_path):
                                                     probability=0.02)]).run(cmd)
     t = drive.t_s[drive.valid]
     assert np.any(np.diff(np.rint((t - t[0]) / 0.02)) < 1)       # two nearest the same period
-    log = bag_to_log(read_bag(write_drive_bag(tmp_path / "j.bag", drive)), wheel_base_m=0.235)
-    assert log.dt_s == 0.02 and len(log) == len(drive)
-    np.testing.assert_array_equal(log.valid, drive.valid)
-    np.testing.assert_array_equal(log.ticks[drive.valid], drive.ticks[drive.valid])
+    grid = bag_grid(read_bag(write_drive_bag(tmp_path / "j.bag", drive)), wheel_base_m=0.235,
+                    wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    assert snap_period_s(grid.period_s) == 0.02 and len(grid.closed) == len(drive)
+    np.testing.assert_array_equal(grid.closed, drive.valid)
+    np.testing.assert_allclose(grid.speeds, _speeds_of(drive, grid.period_s), atol=1e-9)
 
 
 def test_a_message_jittered_onto_a_lost_neighbours_period_goes_back(tmp_path):
@@ -415,8 +473,13 @@ def test_a_message_jittered_onto_a_lost_neighbours_period_goes_back(tmp_path):
     stamps = 10**9 + periods * 20_000_000
     stamps[5] -= 12_000_000                                    # period 6, stamped early
     angles = np.column_stack([periods * 0.05, periods * 0.06])   # steady: 2.5, 3 rad/s
-    log = bag_to_log(read_bag(_joints_bag(tmp_path, stamps, angles)), wheel_base_m=0.235)
-    assert len(log) == 200 and log.dt_s == 0.02
-    np.testing.assert_array_equal(np.flatnonzero(~log.valid), [5])
-    np.testing.assert_array_equal(log.ticks[periods],
-                                  np.rint(angles * CREATE2_TICKS_PER_RAD).astype(np.int64))
+    grid = bag_grid(read_bag(_joints_bag(tmp_path, stamps, angles)), wheel_base_m=0.235,
+                    wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
+    assert len(grid.closed) == 200 and snap_period_s(grid.period_s) == 0.02
+    np.testing.assert_array_equal(np.flatnonzero(~grid.closed), [5])
+    np.testing.assert_array_equal(grid.assignment.period, periods)
+    # steady: every period's wheel travel the same, the gap's two periods included
+    wheel = np.column_stack([grid.speeds[:, 0] - grid.speeds[:, 1] * 0.235 / 2,
+                             grid.speeds[:, 0] + grid.speeds[:, 1] * 0.235 / 2])
+    np.testing.assert_allclose(wheel * grid.period_s, np.tile(
+        [0.05 * CREATE2_WHEEL_RADIUS_M, 0.06 * CREATE2_WHEEL_RADIUS_M], (199, 1)), rtol=1e-6)

@@ -231,9 +231,9 @@ def test_a_bag_with_odometry_and_no_wheel_angles_calibrates_on_the_odometry_twis
 def test_a_bag_with_odometry_but_no_commands_is_refused(bags, tmp_path, capsys):
     bag = write_drive_bag(tmp_path / "no_cmd", bags["cal_log"], start_ns=START_NS,
                           joint_states=False)
-    from drivers.bags.reader import read_bag  # a copy without /cmd_vel
+    from drivers.bags.topics import read_topics  # a copy without /cmd_vel
     from drivers.bags.writer import write_estimates_bag
-    rec = read_bag(bag, kinds=("odom",))
+    rec = read_topics(bag, kinds=("odom",))
     poses = rec.odom.values[:, :3]
     odom_only = write_estimates_bag(tmp_path / "est_only", rec.odom.t_ns, poses,
                                     np.tile(np.eye(3) * 1e-4, (len(poses), 1, 1)))
@@ -288,3 +288,42 @@ def test_twist_counts_are_the_counts_the_twist_was_made_of():
                        cmd_m_s=np.zeros((500, 2)), valid=np.ones(500, bool), dt_s=dt,
                        body_speeds=twist)
     np.testing.assert_array_equal(twist_counts(src, k), counts)
+
+
+def test_each_command_opens_the_bag_once_and_makes_the_grid_once(bags, model_file, tmp_path,
+                                                                   monkeypatch):
+    """calibrate, replay and monitor --bag: one ``open_bag``, one ``on_grid``; the fit and
+    its plot share the grid, and the encoder scale is a typed field, not a log's meta."""
+    import drivers.bags.reader as reader
+    import drivers.bags.topics as topics
+    from drivers.bags.reader import CREATE2_TICKS_PER_RAD
+    from lti_motion.app.bag_commands import plot_bag_fit, replay_bag
+
+    calls = {"open_bag": 0, "on_grid": 0}
+
+    def counted(name, module):
+        real = getattr(module, name)
+
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return real(*args, **kwargs)
+        monkeypatch.setattr(module, name, wrapper)
+
+    counted("open_bag", topics)
+    counted("on_grid", reader)
+    cal, rec = calibrate_from_bag(bags["cal"], wheel_base_m=0.235)
+    assert calls == {"open_bag": 1, "on_grid": 1}
+    assert rec.wheel_kind == "wheel_angles_rad" and "m_per_tick" not in rec.meta
+    assert cal.m_per_tick == pytest.approx(0.036 / CREATE2_TICKS_PER_RAD)
+    assert cal.model.m_per_tick == cal.m_per_tick and cal.model.dt_s == 0.015
+    fit = plot_bag_fit(cal.model, cal.grid, tmp_path / "fit.png")
+    np.testing.assert_allclose(fit, fit_percent(cal.grid.speeds,
+                                                cal.model.simulate(cal.grid.cmd_m_s), axis=0))
+    assert calls == {"open_bag": 1, "on_grid": 1}                 # the plot reused the grid
+    model = MotionModel.load(model_file)
+    for run in (lambda: replay_bag(bags["spikes"], model, tmp_path / "r", estimators=["ekf"],
+                                   print_fn=lambda _line: None),
+                lambda: monitor_bag(bags["spikes"], model, print_fn=lambda _line: None)):
+        calls.update(open_bag=0, on_grid=0)
+        run()
+        assert calls == {"open_bag": 1, "on_grid": 1}

@@ -321,3 +321,25 @@ def test_sub_command_help(command, capsys):
         main([command, "--help"])
     assert exc.value.code == 0
     assert "docs/" in capsys.readouterr().out
+
+
+def test_ctrl_c_in_a_command_without_its_own_answer_is_one_line_and_exit_130(
+        tmp_path, monkeypatch, capsys):
+    import lti_motion.app.demo as demo
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(demo, "run_demo", interrupted)
+    assert main(["demo", "--out", str(tmp_path)]) == 130
+    err = capsys.readouterr().err.strip()
+    assert err == "lti-motion demo: stopped by Ctrl-C"
+
+
+def test_version_prints_the_installed_distributions_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0
+    assert capsys.readouterr().out == f"lti-motion {version('lti-motion')}\n"

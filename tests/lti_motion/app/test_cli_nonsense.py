@@ -27,11 +27,24 @@ CASES = [
     (["calibrate", "--sim", "create2", "--wheel-base", "0.235"], "--wheel-base is for --port"),
     (["calibrate", "--port", "/dev/nonexistent-roomba", "--wheel-base", "-0.2"],
      "--wheel-base must be a positive number, got -0.2"),
+    (["calibrate", "--port", "/dev/nonexistent-roomba", "--baud", "12345"],
+     "--baud 12345 is not a rate the Open Interface speaks: give one of"),
+    (["monitor", "--port", "/dev/nonexistent-roomba", "--model", "{model}", "--baud", "7"],
+     "--baud 7 is not a rate the Open Interface speaks"),
+    (["calibrate", "--bag", "{log}", "--left-joint", "(["],
+     "--left-joint '([' is not a valid joint name pattern (a regular expression)"),
+    (["replay", "--bag", "{log}", "--model", "{model}", "--right-joint", "*"],
+     "--right-joint '*' is not a valid joint name pattern"),
     (["calibrate", "--port", "/dev/nonexistent-roomba", "--clock-rate", "0"],
      "--clock-rate must be a positive number, got 0"),
     (["calibrate", "--sim", "create2", "--excitation-s", "1"],
-     "--excitation-s must be at least 20 s"),
-    (["demo", "--excitation-s", "1"], "--excitation-s must be at least 20 s"),
+     "--excitation-s must be a finite number of seconds, at least 20"),
+    (["demo", "--excitation-s", "1"], "--excitation-s must be a finite number of seconds, at "
+     "least 20"),
+    (["calibrate", "--sim", "create2", "--excitation-s", "inf"],
+     "30%), got inf"),
+    (["calibrate", "--sim", "create2", "--into-model", "{model}"],
+     "--into-model writes the intrinsics that --reference or --wall-run calibrates"),
     (["demo", "--runs", "0"], "--runs must be 1 or more, got 0"),
     (["monitor", "--sim", "create2", "--model", "{model}", "--duration", "-3"],
      "--duration must be a positive number, got -3"),
@@ -67,3 +80,17 @@ def test_nonsense_is_one_line_and_exit_2(argv, message, files, tmp_path, capsys)
     assert message in err, err
     assert "Traceback" not in err and "Error" not in err
     assert not out.exists()                              # refused before any work
+
+
+def test_a_failed_port_leaves_no_empty_out_folder_behind(tmp_path, capsys):
+    out = tmp_path / "never-written"
+    assert main(["calibrate", "--port", str(tmp_path / "no-such-tty"), "--out", str(out)]) == 2
+    assert "nothing kept" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_a_failed_port_leaves_an_existing_out_folder_alone(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    assert main(["calibrate", "--port", str(tmp_path / "no-such-tty"), "--out", str(out)]) == 2
+    assert out.is_dir()

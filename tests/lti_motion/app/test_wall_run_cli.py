@@ -147,3 +147,29 @@ def test_port_drives_the_wall_run_on_a_virtual_roomba(lefty, tmp_path, capsys):
     assert "intrinsics in use: the nominal ones of" in text
     ratio = json.loads((tmp_path / "wall_run.json").read_text())["diameter_ratio"]
     assert 1.005 < ratio < 1.015                      # the 1% larger left wheel shows
+
+
+def _no_one_answers(prompt=""):
+    raise EOFError                                   # standard input closed (a script, CI)
+
+
+def test_a_missing_port_is_said_before_anyone_is_asked_to_place_the_robot(
+        lefty, tmp_path, capsys, monkeypatch):
+    asked = []
+    monkeypatch.setattr("builtins.input", lambda prompt="": asked.append(prompt))
+    _refused(capsys, ["--port", str(tmp_path / "no-such-tty"), "--robot", str(lefty),
+                      "--out", str(tmp_path / "o")], "no-such-tty")
+    assert asked == []
+    assert "Put the robot" not in capsys.readouterr().out
+
+
+def test_closed_standard_input_at_the_prompt_is_one_line_saying_give_yes(
+        lefty, tmp_path, capsys, monkeypatch):
+    from drivers.roomba.virtual import VirtualRoomba
+
+    monkeypatch.setattr("builtins.input", _no_one_answers)
+    with VirtualRoomba(load_robot(str(lefty)), seed=2, speed=10.0, room=Room.single_wall(),
+                       initial_pose=(0.0, 0.5, -np.pi / 2)) as vr:
+        _refused(capsys, ["--port", vr.device_path, "--clock-rate", "10", "--robot",
+                          str(lefty), "--out", str(tmp_path)],
+                 "standard input is closed.*give --yes")

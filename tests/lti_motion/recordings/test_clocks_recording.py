@@ -13,7 +13,7 @@ from lti_motion.exceptions import LogFileError
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.recordings.clocks import assign_periods
 from lti_motion.recordings.logfile import load_log, load_recording, save_log, save_recording
-from lti_motion.recordings.recording import Recording
+from lti_motion.recordings.recording import Recording, RecordingSource
 from lti_motion.recordings.resample import commands_at, on_grid, wheel_periods
 from lti_motion.recordings.ticks import body_speeds_from_ticks, stream_clock
 
@@ -191,6 +191,37 @@ def test_version_2_files_round_trip_and_version_1_reads_as_a_recording(tmp_path)
     again = load_log(v2)
     np.testing.assert_array_equal(again.ticks, log.ticks)
     np.testing.assert_array_equal(again.light_bump, log.light_bump)
+
+
+def test_where_a_recording_came_from_survives_a_version_2_file(tmp_path):
+    """A ROS bag's recording (odometry twist, means since the last message; an Imu with
+    a stated density) keeps its source, density and rates through save and load; a
+    damaged source is one LogFileError naming the field."""
+    t = np.arange(50) * DT_S
+    src = RecordingSource(path="drive.bag", kind="ROS bag", start_ns=1_700_000_000 * 10**9,
+                          topics={"wheel": "/odom", "cmd": "/cmd_vel", "yaw_rate": "/imu"},
+                          wheel_names=("wheel_left_joint", "wheel_right_joint"),
+                          truth_frames=("map", "base_link"))
+    rec = Recording.from_streams(wheel_t_s=t, body_speeds=np.tile([0.2, 0.1], (50, 1)),
+                                 rates="since_last", cmd_t_s=t[::5],
+                                 cmd_body=np.tile([0.2, 0.1], (10, 1)), yaw_rate_t_s=t,
+                                 yaw_rate_rad_s=np.full(50, 0.1),
+                                 gyro_density_rad_s_sqrt_hz=0.005, source=src)
+    back = load_recording(save_recording(tmp_path / "bag.npz", rec))
+    assert back.source == src and back.rates == "since_last"
+    assert back.gyro_density_rad_s_sqrt_hz == 0.005
+    assert dict(back.source.topics) == {"wheel": "/odom", "cmd": "/cmd_vel", "yaw_rate": "/imu"}
+    with np.load(tmp_path / "bag.npz") as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(str(arrays.pop("header")))
+    header["source"]["topics"] = {"wheels": "/odom"}
+    np.savez(tmp_path / "bad.npz", header=np.array(json.dumps(header)), **arrays)
+    with pytest.raises(LogFileError, match=r"bad.npz is damaged: RecordingSource.topics: "
+                                           r"unknown streams \['wheels'\]"):
+        load_recording(tmp_path / "bad.npz")
+    with pytest.raises(ValueError, match="gyro_density_rad_s_sqrt_hz needs a yaw rate"):
+        Recording.from_streams(wheel_t_s=t, body_speeds=np.zeros((50, 2)),
+                               cmd_body=np.zeros((50, 2)), gyro_density_rad_s_sqrt_hz=0.005)
 
 
 def test_a_version_2_file_with_stamps_going_backwards_is_refused_naming_the_field(tmp_path):
