@@ -28,7 +28,8 @@ differentially or not at all). What a planar model does not estimate gets
 
 **robot_localization** (:func:`robot_localization_parameters`): ``process_noise_covariance``
 (15 x 15, state order ``x, y, z, roll, pitch, yaw, vx, vy, vz, vroll, vpitch, vyaw, ax, ay,
-az``). Its EKF adds ``delta * Q`` per prediction (``ekf.cpp``, predict step 3), so ``Q`` is
+az``, ``filter_common.hpp``). Its EKF adds ``delta * Q`` per prediction (``ekf.cpp``,
+predict; robot_localization 3.6.0 on ROS 2, 3.5.2 on Humble, 2.7.5 on Noetic), so ``Q`` is
 per second: with the filter period ``T_f`` and the model's speed error ``S`` over one
 period from a known state (:func:`lti_motion.odometry_noise.speed_error_over`), the
 velocities get ``S / T_f`` (``(vx, vyaw)`` with their cross term) and the pose what that
@@ -38,7 +39,8 @@ accelerations: :data:`NO_COUNTERPART_VARIANCE` (``two_d_mode`` then drops the 3-
 
 **fuse** (:func:`fuse_parameters`): ``Unicycle2D``'s ``process_noise_diagonal`` (order ``x,
 y, yaw, x_vel, y_vel, yaw_vel, x_acc, y_acc``), multiplied by the time between states in
-``unicycle_2d.cpp``, so per second like robot_localization's, the same numbers.
+``unicycle_2d.cpp`` (fuse_models 0.10.0 for ROS 1, 1.2.1 for ROS 2), so per second like
+robot_localization's, the same numbers.
 """
 
 from __future__ import annotations
@@ -113,7 +115,7 @@ DDC_ROS1_TYPES: dict[str, str] = {
 }
 #: ``publish_rate``'s default in both definitions [Hz].
 DDC_DEFAULT_PUBLISH_RATE_HZ = 50.0
-#: robot_localization's default ``frequency`` [Hz].
+#: robot_localization's default ``frequency`` [Hz] (``ros_filter.cpp``, 3.6.0).
 RL_DEFAULT_FREQUENCY_HZ = 30.0
 #: The Create 2's encoder counts per wheel revolution (Open Interface spec), the default of
 #: ``calibrate --bag`` (``drivers.bags.CREATE2_TICKS_PER_RAD`` times 2 pi).
@@ -389,7 +391,7 @@ def render_yaml(parameters: Sequence[Parameter], *, path: Sequence[str],
     return "\n".join(lines) + "\n"
 
 
-def export_text(model: MotionModel, target: str, *, nominal: Nominal | None = None,
+def export_text(model: MotionModel, target: Target, *, nominal: Nominal | None = None,
                 publish_rate_hz: float = DDC_DEFAULT_PUBLISH_RATE_HZ,
                 frequency_hz: float = RL_DEFAULT_FREQUENCY_HZ, model_name: str = "",
                 node: str | None = None) -> str:

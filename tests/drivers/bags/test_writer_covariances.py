@@ -33,14 +33,14 @@ def _diagonals(msgs) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory):
-    """A 30 s excitation of the create2 simulator, as a ROS 2 bag, and a model of it."""
+    """A 45 s excitation of the create2 simulator, as a ROS 2 bag, and a model of it."""
     folder = tmp_path_factory.mktemp("cov")
-    cmd = random_held_normal(n=2000, dt_s=0.015, rng=np.random.default_rng(5), std_m_s=0.2,
+    cmd = random_held_normal(n=3000, dt_s=0.015, rng=np.random.default_rng(5), std_m_s=0.2,
                              mean_m_s=0.05, hold_s=(0.5, 2.0), correlation=0.85)
     log = Simulator("create2", seed=21).run(cmd)
     bag = write_drive_bag(folder / "drive", log, start_ns=START_NS)
     out = folder / "cal"
-    assert main(["calibrate", "--bag", str(bag), "--out", str(out), "--excitation-s", "20"]) == 0
+    assert main(["calibrate", "--bag", str(bag), "--out", str(out)]) == 0
     return {"folder": folder, "log": log, "bag": bag, "model": out / "model_arx.json"}
 
 
