@@ -21,7 +21,8 @@ carry
 
 .. math::  R_q = J \\,\\mathrm{diag}(1/6, 1/6)\\, J^T / dt^2                  (2)
 
-On a Create 2 (0.44 mm/tick, 15 ms) that is most of a model's ``R`` (85-90%). It does not
+On a Create 2 (0.44 mm/tick, 15 ms) that is most of a model's ``R`` (84-88% of its
+variances on the simulated robot of ``benchmarks/bench_ros_config.py``). It does not
 accumulate: the rounding errors of a path's increments cancel but for the last one, so a
 dead-reckoned pose carries it once, not once per period.
 
