@@ -293,9 +293,32 @@ def robot_localization_parameters(model: MotionModel, *,
     """robot_localization's ``frequency``, ``two_d_mode``, ``process_noise_covariance`` and
     the odometry input ``odom0_config`` (module docstring).
 
-    ``publish_rate_hz`` is the odometry's rate: the covariances it should carry (the
-    ``diff_drive_controller`` export's) are given in a comment, since robot_localization
-    reads them from each message.
+    Parameters
+    ----------
+    model : MotionModel
+        Any calibrated model (its ``A, C, Q, R`` and period).
+    frequency_hz : float
+        The filter's ``frequency`` [Hz]; the process noise is for its period.
+    publish_rate_hz : float
+        The odometry's rate [Hz]: the covariances its twist should carry (the
+        ``diff_drive_controller`` export's) are given in a comment, since
+        robot_localization reads them from each message.
+
+    Returns
+    -------
+    list of Parameter
+        ``process_noise_covariance`` 15 x 15 row-major, per second [m^2/s, rad^2/s,
+        (m/s)^2/s, (rad/s)^2/s], in :data:`RL_STATE` order.
+
+    Raises
+    ------
+    ValueError
+        A non-positive rate.
+
+    References
+    ----------
+    robot_localization 3.6.0 (ROS 2), ``src/ekf.cpp`` (predict: ``P += delta Q``) and
+    ``include/robot_localization/filter_common.hpp`` (the state order).
     """
     q = _process_noise(model, frequency_hz)
     index = {name: i for i, name in enumerate(RL_STATE)}
@@ -323,7 +346,25 @@ def robot_localization_parameters(model: MotionModel, *,
 
 def fuse_parameters(model: MotionModel, *, frequency_hz: float = RL_DEFAULT_FREQUENCY_HZ
                     ) -> list[Parameter]:
-    """fuse ``Unicycle2D``'s ``process_noise_diagonal`` (module docstring)."""
+    """fuse ``Unicycle2D``'s ``process_noise_diagonal`` (module docstring).
+
+    Parameters
+    ----------
+    model : MotionModel
+        Any calibrated model.
+    frequency_hz : float
+        One over the time between two states [Hz].
+
+    Returns
+    -------
+    list of Parameter
+        The 8 per-second variances in :data:`FUSE_STATE` order.
+
+    References
+    ----------
+    fuse_models 1.2.1 (ROS 2) / 0.10.0 (ROS 1), ``src/unicycle_2d.cpp`` (the process noise
+    times the time between states) and ``unicycle_2d.h`` (the order).
+    """
     q = _process_noise(model, frequency_hz)
     values = tuple(q.get(name, NO_COUNTERPART_VARIANCE) for name in
                    ("x", "y", "yaw", "vx", "vy", "vyaw", "ax", "ay"))
