@@ -83,7 +83,8 @@ except SystemExit:
 
 @pytest.mark.parametrize("argv", [["--help"], ["demo", "--help"], ["calibrate", "--help"],
                                   ["replay", "--help"], ["monitor", "--help"],
-                                  ["virtual-roomba", "--help"], ["no-such-command"]],
+                                  ["virtual-roomba", "--help"], ["export", "--help"],
+                                  ["no-such-command"]],
                          ids=" ".join)
 def test_cli_help_loads_no_numerical_machinery(argv):
     assert loaded_after(HELP.format(argv=argv), ("scipy", "tomllib", *HEAVY)) == []

@@ -24,6 +24,12 @@ renamed into place when complete; an existing path is refused.
   drive has a yaw-rate gyro (``log.yaw_rate_rad_s``), ``/imu/data``
   (``sensor_msgs/Imu``: the yaw rate and its variance, orientation and acceleration
   marked absent, REP 145).
+
+No ``Odometry`` written here holds a zero variance (robot_localization replaces one with
+a warning): the estimates' twist carries the model's output noise, or "unknown"
+(:data:`UNESTIMATED_VARIANCE`) when none is given; the drive's ``/odom`` its
+:class:`~lti_motion.odometry_noise.OdometryNoise` (the twist's, and the pose's grown along
+the path); every variance is at least :data:`~lti_motion.odometry_noise.VARIANCE_FLOOR`.
 """
 
 from __future__ import annotations
@@ -48,7 +54,9 @@ from rosbags.typesys.store import Typestore
 
 from drivers.bags.reader import CREATE2_TICKS_PER_RAD, CREATE2_WHEEL_RADIUS_M
 from drivers.exceptions import BagError
+from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, integrate_poses
+from lti_motion.odometry_noise import VARIANCE_FLOOR, OdometryNoise
 from lti_motion.recordings.frames import FrameLog
 from lti_motion.recordings.ticks import tick_deltas, unwrap_ticks
 
@@ -161,16 +169,21 @@ def _open_bag(path: str | os.PathLike, storage: Storage) -> Iterator[_Bag]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _covariance6(pose_cov: np.ndarray) -> np.ndarray:
-    """A planar (x, y, theta) covariance in ROS's 6x6 (x, y, z, roll, pitch, yaw), row-major."""
+def _covariance6(cov: np.ndarray, keep: tuple[int, ...] = (0, 1, 5)) -> np.ndarray:
+    """A planar covariance in ROS's 6x6, row-major: the pose's ``(x, y, theta)`` into
+    ``(x, y, z, roll, pitch, yaw)``, or with ``keep=(0, 5)`` a twist's ``(v, w)`` into
+    ``(vx, vy, vz, wx, wy, wz)``; the rest :data:`UNESTIMATED_VARIANCE`, no variance below
+    :data:`~lti_motion.odometry_noise.VARIANCE_FLOOR`."""
     out = np.diag(np.full(6, UNESTIMATED_VARIANCE))
-    keep = [0, 1, 5]
-    out[np.ix_(keep, keep)] = 0.5 * (pose_cov + pose_cov.T)
+    idx = list(keep)
+    out[np.ix_(idx, idx)] = 0.5 * (cov + cov.T)
+    out[idx, idx] = np.maximum(out[idx, idx], VARIANCE_FLOOR)
     return out.ravel()
 
 
 def write_estimates_bag(path: str | os.PathLike, t_ns: np.ndarray, poses: np.ndarray,
                         pose_covs: np.ndarray, *, speeds: np.ndarray | None = None,
+                        twist_covs: np.ndarray | None = None,
                         alarms: Sequence[BagAlarm] = (), odom_topic: str = "/lti_motion/odom",
                         alarm_topic: str = "/diagnostics", frame_id: str = "odom",
                         child_frame_id: str = "base_link", storage: Storage = "mcap") -> Path:
@@ -189,6 +202,9 @@ def write_estimates_bag(path: str | os.PathLike, t_ns: np.ndarray, poses: np.nda
         entries of the 6x6 get :data:`UNESTIMATED_VARIANCE`.
     speeds : ndarray, shape (n, 2), optional
         Body speeds ``(v [m/s], w [rad/s])`` for the twist (zeros without).
+    twist_covs : ndarray, shape (2, 2) or (n, 2, 2), optional
+        Their covariance [(m/s)^2, (rad/s)^2], e.g. the model's output noise ``R``;
+        without, the twist's variances are :data:`UNESTIMATED_VARIANCE` ("unknown").
     alarms : sequence of BagAlarm
         One ``DiagnosticArray`` (level ERROR) each, at its own time.
     odom_topic, alarm_topic, frame_id, child_frame_id : str
@@ -212,11 +228,17 @@ def write_estimates_bag(path: str | os.PathLike, t_ns: np.ndarray, poses: np.nda
     poses, pose_covs = np.asarray(poses, float), np.asarray(pose_covs, float)
     n = len(t_ns)
     speeds = np.zeros((n, 2)) if speeds is None else np.asarray(speeds, float)
-    if poses.shape != (n, 3) or pose_covs.shape != (n, 3, 3) or speeds.shape != (n, 2):
-        raise BagError(f"estimates need poses (n, 3), covariances (n, 3, 3) and speeds (n, 2) "
-                       f"for n = {n} stamps; got {poses.shape}, {pose_covs.shape}, "
-                       f"{speeds.shape}")
-    for name, value in (("poses", poses), ("covariances", pose_covs), ("speeds", speeds)):
+    twist_covs = (np.diag([UNESTIMATED_VARIANCE] * 2) if twist_covs is None
+                  else np.asarray(twist_covs, float))
+    twist_covs = np.broadcast_to(twist_covs, (n, 2, 2)) if twist_covs.shape == (2, 2) \
+        else twist_covs
+    if poses.shape != (n, 3) or pose_covs.shape != (n, 3, 3) or speeds.shape != (n, 2) \
+            or twist_covs.shape != (n, 2, 2):
+        raise BagError(f"estimates need poses (n, 3), covariances (n, 3, 3), speeds (n, 2) and "
+                       f"twist covariances (2, 2) or (n, 2, 2) for n = {n} stamps; got "
+                       f"{poses.shape}, {pose_covs.shape}, {speeds.shape}, {twist_covs.shape}")
+    for name, value in (("poses", poses), ("covariances", pose_covs), ("speeds", speeds),
+                        ("twist covariances", twist_covs)):
         if not np.all(np.isfinite(value)):
             raise BagError(f"the estimates' {name} hold a NaN or infinite value; nothing written")
     with _open_bag(path, storage) as bag:
@@ -224,8 +246,6 @@ def write_estimates_bag(path: str | os.PathLike, t_ns: np.ndarray, poses: np.nda
         bag.topic(odom_topic, "nav_msgs/msg/Odometry")
         if alarms:
             bag.topic(alarm_topic, "diagnostic_msgs/msg/DiagnosticArray")
-        twist_cov = np.diag([0.0, UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE,
-                             UNESTIMATED_VARIANCE, UNESTIMATED_VARIANCE, 0.0]).ravel()
         pending = sorted(alarms, key=lambda a: a.t_ns)
         for i in range(n):
             while pending and pending[0].t_ns <= t_ns[i]:
@@ -235,7 +255,7 @@ def write_estimates_bag(path: str | os.PathLike, t_ns: np.ndarray, poses: np.nda
                 pose=t["geometry_msgs/msg/PoseWithCovariance"](
                     pose=bag.pose(*poses[i]), covariance=_covariance6(pose_covs[i])),
                 twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=bag.twist(*speeds[i]), covariance=twist_cov))
+                    twist=bag.twist(*speeds[i]), covariance=_covariance6(twist_covs[i], (0, 5))))
             bag.write(odom_topic, t_ns[i], msg)
         for alarm in pending:
             _write_alarm(bag, alarm_topic, alarm, frame_id)
@@ -284,7 +304,8 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     storage: Storage = "mcap",
                     truth: Literal["pose", "tf", "tf_chain"] = "pose",
                     gyro_noise_density_rad_s_sqrt_hz: float | None = None,
-                    imu_topic: str = "/imu/data", joint_states: bool = True) -> Path:
+                    imu_topic: str = "/imu/data", joint_states: bool = True,
+                    odom_noise: OdometryNoise | None = None) -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
@@ -293,7 +314,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     counts over ``ticks_per_rad``, stamped with the frame times. ``/odom`` holds
     the encoder odometry, as ``diff_drive_controller`` publishes it: the pose
     integrated from the wheel travel and the twist, the body speeds over the
-    period since the last received frame. A gyro's
+    period since the last received frame, with the covariances of ``odom_noise``: the
+    twist's its speed covariance over those periods, the pose's grown along the path
+    (:meth:`~lti_motion.odometry_noise.OdometryNoise.pose_covariances`). A gyro's
     reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
     ``imu_topic`` stamped mid-period, ``t_s[k] - dt_s / 2``, as
     :meth:`lti_motion.recordings.Recording.from_frame_log` stamps it; a
@@ -326,6 +349,10 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     joint_states : bool
         Write the wheel angles on ``/joint_states``; ``False`` leaves them out, as
         from a robot that publishes only its odometry.
+    odom_noise : OdometryNoise, optional
+        The odometry's noise, e.g. ``OdometryNoise.from_model(model)``; default
+        :meth:`~lti_motion.odometry_noise.OdometryNoise.from_encoders` of the nominal
+        encoders (the counts' rounding, grown as if it accumulated: an upper bound).
 
     Returns
     -------
@@ -362,7 +389,15 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     body_m = body_from_wheel(travel, wheel_base_m=wheel_base_m)
     odom = integrate_poses(body_m, 1.0)
     twist = np.zeros((len(rows), 2))            # (v [m/s], w [rad/s]) since the last frame
-    twist[1:] = body_m / (np.diff(rows) * log.dt_s)[:, None]
+    spans = np.diff(rows)                        # periods since the last received frame
+    twist[1:] = body_m / (spans * log.dt_s)[:, None]
+    if odom_noise is None:
+        k = wheel_radius_m / ticks_per_rad
+        odom_noise = OdometryNoise.from_encoders(
+            OdometryIntrinsics.symmetric(m_per_tick=k, wheel_base_m=wheel_base_m), log.dt_s)
+    odom_pose_covs = odom_noise.pose_covariances(odom, twist[1:], spans)
+    odom_twist_covs = np.concatenate([odom_noise.speed_cov[None],
+                                      odom_noise.speed_cov[None] / spans[:, None, None]])
     with _open_bag(path, storage) as bag:
         t, out = bag.types, []
         for topic, msgtype in (("/cmd_vel", "geometry_msgs/msg/Twist"),
@@ -386,9 +421,10 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
             out.append((t_ns[k], "/odom", t["nav_msgs/msg/Odometry"](
                 header=bag.header(t_ns[k], "odom"), child_frame_id="base_link",
                 pose=t["geometry_msgs/msg/PoseWithCovariance"](
-                    pose=bag.pose(*odom[j]), covariance=np.zeros(36)),
+                    pose=bag.pose(*odom[j]), covariance=_covariance6(odom_pose_covs[j])),
                 twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=bag.twist(*twist[j]), covariance=np.zeros(36)))))
+                    twist=bag.twist(*twist[j]),
+                    covariance=_covariance6(odom_twist_covs[j], (0, 5))))))
             if log.true_pose is not None and truth == "pose":
                 out.append((t_ns[k], "/ground_truth", t["geometry_msgs/msg/PoseStamped"](
                     header=bag.header(t_ns[k], "world"), pose=bag.pose(*log.true_pose[k]))))

@@ -334,7 +334,8 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         if name is None:
             raise BagError("--out-bag writes the EKF's estimates; run the ekf estimator")
         written = write_estimates_bag(out_bag, _bag_ns(rec.source.start_ns, src.t_s),
-                                      result.poses[name], result.pose_covs[name])
+                                      result.poses[name], result.pose_covs[name],
+                                      speeds=result.speeds[name], twist_covs=model.R)
         print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance) to {written}")
     return result
 
@@ -416,12 +417,12 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
                 "this one has none: calibrate with the rotation in place or from wheel angles")
         ticks, yaw = twist_counts(src, model.encoder_intrinsics), src.yaw_rate_rad_s
     n = len(src)
-    poses, covs = np.zeros((n, 3)), np.zeros((n, 3, 3))
+    poses, covs, speeds = np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 2))
     step = iter(range(n))
 
     def keep(result: FrameResult, cov: np.ndarray) -> None:
         k = next(step)
-        poses[k], covs[k] = result.pose, cov
+        poses[k], covs[k], speeds[k] = result.pose, cov, result.speeds
 
     t0 = float(src.t_s[0])
     start_ns = rec.source.start_ns
@@ -452,6 +453,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
                            (("test", e.test), ("statistic", f"{e.statistic:.6g}"),
                             ("threshold", f"{e.threshold:.6g}"), ("onset_s", f"{e.onset_s:.3f}")))
                   for e, ns in zip(run.events, alarm_ns, strict=True)]
-        written = write_estimates_bag(out_bag, t_ns, poses, covs, alarms=alarms)
+        written = write_estimates_bag(out_bag, t_ns, poses, covs, speeds=speeds,
+                                      twist_covs=model.R, alarms=alarms)
         print_fn(f"wrote the estimates and {len(alarms)} alarms to {written}")
     return BagRun(tuple(run.events), alarm_ns, t_ns, poses, covs, written)

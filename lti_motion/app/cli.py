@@ -20,6 +20,10 @@ monitor
     monitor, print alarms as they happen and a summary.
 virtual-roomba
     A simulated Roomba behind the Open Interface on a pseudo-terminal.
+export
+    Write a calibrated model as ROS parameters: ``diff_drive_controller``'s multipliers
+    and covariances, robot_localization's and fuse's process noise
+    (``docs/guide_ros_config.md``).
 
 This module and the experiment runners are the only part of ``lti_motion``
 allowed to import ``drivers`` and ``fusion`` (docs/architecture.md, Layout and layers).
@@ -56,6 +60,7 @@ from drivers.sim import load_robot
 from lti_motion.app import (
     calibrate_cli,
     demo_cli,
+    export_cli,
     monitor_cli,
     replay_cli,
     virtual_roomba_cli,
@@ -322,6 +327,67 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_export(args: argparse.Namespace) -> int:
+    from lti_motion.app.ros_config import export_text
+
+    if args.to not in export_cli.TARGET_NAMES:       # before reading anything: one line
+        raise ValueError(f"unknown --to {args.to!r}; give one of "
+                         f"{', '.join(export_cli.TARGET_NAMES)}")
+    model = _load_model(args.model)
+    text = export_text(model, args.to, nominal=_nominal(args), model_name=args.model,
+                       publish_rate_hz=args.publish_rate, frequency_hz=args.frequency,
+                       node=args.node)
+    if args.out:
+        from lti_motion.persistence import atomic_write
+
+        out = Path(args.out)
+        if out.parent and not out.parent.is_dir():
+            raise FileNotFoundError(f"--out {out}: no folder {out.parent}")
+        with atomic_write(out, text=True) as f:
+            f.write(text)
+        print(f"wrote {args.to} parameters to {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
+def _nominal(args: argparse.Namespace):
+    """``export``: the nominal geometry from the flags, over a URDF, over a robot file."""
+    from lti_motion.app.ros_config import CREATE2_TICKS_PER_REV, Nominal
+
+    radius = separation = left = right = None
+    sources, ticks, ticks_source = [], CREATE2_TICKS_PER_REV, (
+        f"{CREATE2_TICKS_PER_REV:g}, the Create 2's (default; --ticks-per-rev)")
+    if (args.left_joint or args.right_joint) and not args.urdf:
+        raise ValueError("--left-joint and --right-joint name the wheel joints of --urdf; "
+                         "give --urdf FILE")
+    if args.robot:
+        robot = load_robot(args.robot)
+        radius, separation = robot.wheel_diameter_m / 2, robot.wheel_base_m
+        ticks, ticks_source = robot.ticks_per_rev, f"{robot.ticks_per_rev:g}, {robot.name}'s"
+        sources.append(f"the robot file {args.robot}")
+    if args.urdf:
+        from lti_motion.app.urdf import read_urdf_wheels
+
+        wheels = read_urdf_wheels(args.urdf, left_joint=args.left_joint,
+                                  right_joint=args.right_joint)
+        radius, separation = wheels.wheel_radius_m, wheels.wheel_separation_m
+        left, right = wheels.left_joint, wheels.right_joint
+        sources.append(f"the URDF {args.urdf} (joints {left}, {right})")
+    if args.wheel_radius is not None:
+        radius = args.wheel_radius
+        sources.append("--wheel-radius")
+    if args.wheel_separation is not None:
+        separation = args.wheel_separation
+        sources.append("--wheel-separation")
+    if args.ticks_per_rev is not None:
+        ticks, ticks_source = args.ticks_per_rev, f"{args.ticks_per_rev:g} (--ticks-per-rev)"
+    return Nominal(wheel_radius_m=radius, wheel_separation_m=separation, ticks_per_rev=ticks,
+                   left_joint=left, right_joint=right,
+                   source=", ".join(sources) or "none given (absolute values)",
+                   ticks_source=ticks_source)
+
+
 #: The sub-commands, in the order ``lti-motion --help`` lists them: the name, the light
 #: module that adds its options (``HELP``, ``DESCRIPTION``, ``add_arguments``), the handler.
 _SUB_COMMANDS = (
@@ -330,6 +396,7 @@ _SUB_COMMANDS = (
     ("replay", replay_cli, _cmd_replay),
     ("monitor", monitor_cli, _cmd_monitor),
     ("virtual-roomba", virtual_roomba_cli, _cmd_virtual_roomba),
+    ("export", export_cli, _cmd_export),
 )
 
 

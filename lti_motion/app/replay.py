@@ -124,7 +124,9 @@ def twist_counts(src: ReplaySource, intrinsics: OdometryIntrinsics) -> np.ndarra
 
 
 def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
-         landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray]:
+         landmarks: bool) -> tuple[np.ndarray, dict, np.ndarray, np.ndarray]:
+    """The model EKF over the source: poses (n, 3), counts, pose covariances (n, 3, 3) and
+    the filter's body speeds of each frame's last period (n, 2; zeros at the first)."""
     ticks, bits, twist = src.ticks, src.counter_bits, None
     if ticks is None and src.body_speeds is not None:   # the robot's own odometry twist
         if model.encoder_intrinsics is not None:        # as the counts it stands for
@@ -142,6 +144,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
                                       gyro=None if gyro is None else gyro_noise(src)))
     poses = np.empty((len(src), 3))
     covs = np.empty((len(src), 3, 3))
+    speeds = np.zeros((len(src), 2))
     poses[0], covs[0] = ekf.pose, ekf.P[:3, :3]
     sightings = src.sightings.by_index() if landmarks else {}
     none = RangeBearing.empty()
@@ -155,7 +158,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
         if gyro is not None:
             ekf.update_gyro(gyro[k])    # NaN (a lost frame) starts a new window
         ekf.update_landmarks(sightings.get(k, none))
-        poses[k], covs[k] = ekf.x[:3], ekf.P[:3, :3]
+        poses[k], covs[k], speeds[k] = ekf.x[:3], ekf.P[:3, :3], ekf.speeds
     stats = ekf.stats
     causes = [r.cause for r in ekf.resets]
     counts = {"encoders_gated": stats.count("encoders", "gated"),
@@ -167,7 +170,7 @@ def _ekf(src: ReplaySource, model: MotionModel, pose0: np.ndarray, *,
     if gyro is not None:
         counts.update(gyro_windows_fused=stats.count("gyro", "fused"),
                       gyro_windows_gated=stats.count("gyro", "gated"))
-    return poses, counts, covs
+    return poses, counts, covs, speeds
 
 
 def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
@@ -201,14 +204,16 @@ def estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
     ValueError
         For an unknown estimator or one the source cannot feed.
     """
-    poses, extra, _ = _estimate(src, model, names, initial_pose=initial_pose)
+    poses, extra, _, _ = _estimate(src, model, names, initial_pose=initial_pose)
     return poses, extra
 
 
 def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
               initial_pose: Sequence[float] | None = None
-              ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict[str, np.ndarray]]:
-    """:func:`estimate`, and each EKF estimator's pose covariances (n, 3, 3)."""
+              ) -> tuple[dict[str, np.ndarray], dict[str, dict], dict[str, np.ndarray],
+                         dict[str, np.ndarray]]:
+    """:func:`estimate`, and each EKF estimator's pose covariances (n, 3, 3) and body speeds
+    (n, 2)."""
     if not math.isclose(model.dt_s, src.dt_s, rel_tol=1e-6):
         raise ValueError(f"the model was calibrated at {model.dt_s:g} s but {src.name} has a "
                          f"{src.dt_s:g} s sensor period; use a model of this robot")
@@ -229,6 +234,7 @@ def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
     out: dict[str, np.ndarray] = {}
     extra: dict[str, dict] = {}
     covs: dict[str, np.ndarray] = {}
+    speeds: dict[str, np.ndarray] = {}
     for name in names:
         if name == "odometry":
             out[name] = _odometry(src, model, pose0)
@@ -237,9 +243,9 @@ def _estimate(src: ReplaySource, model: MotionModel, names: Sequence[str], *,
         elif name == "sensorless":
             out[name] = _sensorless(src, model, pose0)
         else:
-            out[name], extra[name], covs[name] = _ekf(src, model, pose0,
-                                                      landmarks=name == "ekf_landmarks")
-    return out, extra, covs
+            out[name], extra[name], covs[name], speeds[name] = _ekf(
+                src, model, pose0, landmarks=name == "ekf_landmarks")
+    return out, extra, covs, speeds
 
 
 # -- metrics --------------------------------------------------------------------------------
@@ -310,6 +316,8 @@ class ReplayResult:
         TUM trajectories, ``metrics.json`` and plots, in the order written.
     pose_covs : dict of str to ndarray, shape (n, 3, 3)
         Each EKF estimator's pose covariance at every frame [m^2, m rad, rad^2].
+    speeds : dict of str to ndarray, shape (n, 2)
+        Each EKF estimator's body speeds ``(v [m/s], w [rad/s])`` at every frame.
     """
 
     source: ReplaySource
@@ -317,6 +325,7 @@ class ReplayResult:
     metrics: dict[str, dict]
     files: list[Path]
     pose_covs: dict[str, np.ndarray] = field(default_factory=dict)
+    speeds: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _table(src: ReplaySource, metrics: dict[str, dict]) -> list[str]:
@@ -397,7 +406,7 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
                and np.all(np.isfinite(src.truth[0])) else "the given pose" if initial_pose
                is not None else "the origin")
     print_fn(f"estimators start at {started}; they never read the truth after that")
-    poses, extra, covs = _estimate(src, model, names, initial_pose=initial_pose)
+    poses, extra, covs, speeds = _estimate(src, model, names, initial_pose=initial_pose)
     metrics = {name: {**evaluate(src, p, rpe_s=rpe_s), **extra.get(name, {})}
                for name, p in poses.items()}
     for line in _table(src, metrics):
@@ -437,7 +446,8 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
     if files and src.has_truth:
         print_fn(f"compare with evo: evo_ape tum {out / 'groundtruth.tum'} "
                  f"{out / names[-1]}.tum --plot")
-    return ReplayResult(source=src, poses=poses, metrics=metrics, files=files, pose_covs=covs)
+    return ReplayResult(source=src, poses=poses, metrics=metrics, files=files, pose_covs=covs,
+                        speeds=speeds)
 
 
 def _plain(value: object) -> object:

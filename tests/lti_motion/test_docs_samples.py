@@ -13,7 +13,8 @@ import pytest
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 PAGES = ["log_format.md", "guide_calibrate_real_robot.md", "guide_filterpy.md",
-         "guide_gtsam.md", "guide_alarms.md", "replay.md", "guide_ros_bags.md"]
+         "guide_gtsam.md", "guide_alarms.md", "replay.md", "guide_ros_bags.md",
+         "guide_ros_config.md"]
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.MULTILINE | re.DOTALL)
 
 

@@ -59,7 +59,7 @@ def test_robot_option_takes_a_name_or_file_and_the_old_spellings_still_parse():
             assert list(action.choices) == list(FLOORS), (command, flag)
         elif flag == "--floor":                                  # a robot's floor: any name
             assert all(f in action.help for f in FLOORS), (command, flag)
-    assert seen == {"demo", "calibrate", "monitor", "virtual-roomba"}
+    assert seen == {"demo", "calibrate", "monitor", "virtual-roomba", "export"}
     parse = build_parser().parse_args
     for old, new in ((["demo", "--preset", "paper"], ["demo", "--robot", "paper"]),
                      (["calibrate", "--sim", "paper"], ["calibrate", "--robot", "paper"]),
