@@ -185,6 +185,18 @@ def _model_intrinsics(model: MotionModel, model_name: str):
     return model.intrinsics
 
 
+def _odometry_error_line(model: MotionModel) -> str:
+    """Where the odometry's pose error comes from: measured, or said not to be."""
+    e = model.odometry_errors
+    if e is None:
+        return ("odometry pose error: NOT MEASURED (the model carries no odometry error "
+                "model; calibrate its intrinsics against a pose reference to measure it): the "
+                "pose covariances stand on the model's output noise R, an upper bound")
+    return (f"odometry pose error: measured, a random walk of {_g(e.wheel_variance_per_m)} "
+            f"m^2 per metre each wheel rolls (+- {_g(e.wheel_variance_std)}) and the "
+            f"intrinsics' covariance, by the {e.source}")
+
+
 def _check_rate(value: float, option: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{option} must be a positive number [Hz], got {value:g}")
@@ -447,7 +459,7 @@ def export_text(model: MotionModel, target: Target, *, nominal: Nominal | None =
         raise ValueError(f"unknown --to {target!r}; give one of {', '.join(TARGETS)}")
     header = [f"lti-motion export --to {target}, from the model {model_name or '(in memory)'}",
               f"calibrated {model.calibrated_at}, period {model.dt_s * 1e3:g} ms, "
-              f"floor {model.floor or 'not recorded'}"]
+              f"floor {model.floor or 'not recorded'}", _odometry_error_line(model)]
     if target.startswith("diff_drive_controller"):
         ros1 = target.endswith("_ros1")
         nominal = nominal or Nominal()
