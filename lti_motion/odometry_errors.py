@@ -166,7 +166,7 @@ def wheel_walk_step_covariances(speeds: np.ndarray, dt_s: np.ndarray | float, *,
 
     >>> c = wheel_walk_step_covariances(np.array([[1.0, 0.0]]), 1.0, wheel_base_m=0.2,
     ...                                 wheel_variance_per_m=1e-4)
-    >>> c[0].round(8).tolist()
+    >>> (c[0].round(8) + 0.0).tolist()
     [[5e-05, 0.0], [0.0, 0.005]]
     """
     speeds = np.asarray(speeds, dtype=float)
@@ -217,7 +217,7 @@ def intrinsics_sensitivities(poses: np.ndarray, speeds: np.ndarray, dt_s: np.nda
     >>> k = OdometryIntrinsics.symmetric(m_per_tick=1e-3, wheel_base_m=0.2)
     >>> poses = np.column_stack([np.linspace(0, 2, 3), np.zeros(3), np.zeros(3)])
     >>> s = intrinsics_sensitivities(poses, np.tile([1.0, 0.0], (2, 1)), 1.0, k)
-    >>> s[-1, 0].round(6).tolist()
+    >>> (s[-1, 0].round(6) + 0.0).tolist()
     [1000.0, 1000.0, 0.0]
     """
     poses = np.asarray(poses, dtype=float)
