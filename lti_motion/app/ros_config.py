@@ -47,8 +47,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -86,7 +87,7 @@ TARGETS: tuple[str, ...] = ("diff_drive_controller", "diff_drive_controller_ros1
 #: definition spells them: ros2_controllers, diff_drive_controller
 #: ``src/diff_drive_controller_parameter.yaml``, branch ``jazzy`` (package 4.42.1; branch
 #: ``humble``, 2.54.0, defines these the same). Type words are generate_parameter_library's.
-DDC_ROS2_TYPES: dict[str, str] = {
+DDC_ROS2_TYPES: Mapping[str, str] = MappingProxyType({
     "left_wheel_names": "string_array",
     "right_wheel_names": "string_array",
     "wheel_separation": "double",
@@ -97,11 +98,11 @@ DDC_ROS2_TYPES: dict[str, str] = {
     "pose_covariance_diagonal": "double_array",
     "twist_covariance_diagonal": "double_array",
     "publish_rate": "double",
-}
+})
 #: The same for ROS 1: ros_controllers 0.21.2 (Noetic), ``diff_drive_controller.cpp``
 #: (``controller_nh.param<double>`` / ``getParam``; the covariance lists are asserted to
 #: hold six ``TypeDouble`` values; a wheel is a string or a list of strings).
-DDC_ROS1_TYPES: dict[str, str] = {
+DDC_ROS1_TYPES: Mapping[str, str] = MappingProxyType({
     "left_wheel": "string_array",
     "right_wheel": "string_array",
     "wheel_separation": "double",
@@ -112,7 +113,7 @@ DDC_ROS1_TYPES: dict[str, str] = {
     "pose_covariance_diagonal": "double_array",
     "twist_covariance_diagonal": "double_array",
     "publish_rate": "double",
-}
+})
 #: ``publish_rate``'s default in both definitions [Hz].
 DDC_DEFAULT_PUBLISH_RATE_HZ = 50.0
 #: robot_localization's default ``frequency`` [Hz] (``ros_filter.cpp``, 3.6.0).

@@ -102,6 +102,7 @@ _MAX_TRANSLATION_RESIDUAL = 0.5
 _MOUNT_GAIN = 0.5
 #: Floor of the noise estimated from the residuals [m, m, rad] (a perfect reference).
 _NOISE_FLOOR = np.array([1e-7, 1e-7, 1e-8])
+_NOISE_FLOOR.flags.writeable = False
 
 _Encoders = Literal["quadrature", "commanded"]
 
