@@ -47,6 +47,7 @@ import os
 import re
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 # The command's numpy runs OpenBLAS on one thread unless the user set OPENBLAS_NUM_THREADS
@@ -107,12 +108,18 @@ def _bag_options(args: argparse.Namespace):
         if value is not None and not value > 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value:g}")
     ticks_per_rad, wheel_radius_m = args.ticks_per_rad, args.wheel_radius
-    if getattr(args, "sim", None):                  # calibrate --robot: its description
-        described = load_robot(args.sim)
+    sources = {k: f"--{flag}" for k, flag, v in (
+        ("ticks_per_rad", "ticks-per-rad", ticks_per_rad),
+        ("wheel_radius_m", "wheel-radius", wheel_radius_m)) if v is not None}
+    described = _robot_file(args)
+    if described is not None:                       # a robot file: its description
+        from drivers.sim import robot_geometry
+
+        g = robot_geometry(described)
         if ticks_per_rad is None:
-            ticks_per_rad = described.ticks_per_rev / (2 * math.pi)
+            ticks_per_rad, sources["ticks_per_rad"] = g.ticks_per_rad, f"the {g.source}"
         if wheel_radius_m is None:
-            wheel_radius_m = described.wheel_diameter_m / 2
+            wheel_radius_m, sources["wheel_radius_m"] = g.wheel_radius_m, f"the {g.source}"
     extra = {k: v for k, v in (("ticks_per_rad", ticks_per_rad),
                                ("wheel_radius_m", wheel_radius_m), ("dt_s", args.dt),
                                ("max_wheel_m_s", args.max_wheel_speed))
@@ -122,18 +129,41 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders or "commanded", gyro=gyro, **extra)
+                      encoders=args.encoders, gyro=gyro, sources=sources, **extra)
+
+
+def _robot_file(args: argparse.Namespace) -> str | None:
+    """The robot file (or preset) a command names: calibrate's --robot, replay's --robot
+    NAME_OR_FILE (a number there is an MRCLAM robot or a batch log's index)."""
+    if getattr(args, "sim", None):
+        return args.sim
+    robot = getattr(args, "robot", None)
+    return robot if isinstance(robot, str) else None
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
-    from lti_motion.app.calibrate_run import nominal_wheel_base_m
+    from lti_motion.app.bag_commands import (
+        calibrate_from_bag,
+        check_commands,
+        load_bag_recording,
+        plot_bag_fit,
+    )
+    from lti_motion.app.bag_robot import bag_geometry
     from lti_motion.app.plots import plot_order_selection
 
     out = Path(args.out)
-    described = load_robot(args.sim) if args.sim else None
-    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                  options=_bag_options(args), floor=args.floor)
+    options = _bag_options(args)
+    rec = load_bag_recording(args.bag, options=options, imu=False, truth=False)
+    check_commands(args.bag, rec)
+    angles = rec.wheel_kind == "wheel_angles_rad"
+    geometry = bag_geometry(args, angles=angles)
+    for line in geometry.lines(angles=angles):
+        print(line)
+    options = replace(options, wheel_radius_m=geometry.wheel_radius_m,
+                      ticks_per_rad=geometry.ticks_per_rad, encoders=geometry.encoders)
+    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=geometry.wheel_base_m,
+                                  options=options, floor=args.floor, recording=rec,
+                                  robot_name=geometry.robot, sources=geometry.sources)
     model, grid = cal.model, cal.grid
     if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
@@ -148,7 +178,8 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
     lines = [*cal.report.lines(),
              f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
              f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
-             f"w {cal.fit_percent[1]:.1f} %"]
+             f"w {cal.fit_percent[1]:.1f} %",
+             f"robot description kept in the model: {model.robot.describe()}"]
     for line in lines:
         print(line)
     out.mkdir(parents=True, exist_ok=True)
@@ -367,7 +398,7 @@ def _nominal(args: argparse.Namespace):
         ticks, ticks_source = robot.ticks_per_rev, f"{robot.ticks_per_rev:g}, {robot.name}'s"
         sources.append(f"the robot file {args.robot}")
     if args.urdf:
-        from lti_motion.app.urdf import read_urdf_wheels
+        from drivers.bags import read_urdf_wheels
 
         wheels = read_urdf_wheels(args.urdf, left_joint=args.left_joint,
                                   right_joint=args.right_joint)
@@ -478,7 +509,11 @@ def _check_args(args: argparse.Namespace) -> None:
         positive("--duration-s", args.duration_s)
         if not (math.isfinite(args.start_s) and args.start_s >= 0):
             raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
-        if args.robot is not None and args.robot < 0:
+        if isinstance(args.robot, str) and not args.bag:
+            raise ValueError(f"--robot {args.robot} describes the robot of a --bag's wheel "
+                             "angles; a log's counts are read with the model's encoder scale "
+                             "(give a robot number for an MRCLAM run or a batch log)")
+        if isinstance(args.robot, int) and args.robot < 0:
             raise ValueError(f"--robot must be 0 or more, got {args.robot}")
     elif args.command == "demo" and args.runs < 1:
         raise ValueError(f"--runs must be 1 or more, got {args.runs}")

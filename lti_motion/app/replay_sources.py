@@ -95,12 +95,16 @@ class ReplaySource:
         The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
         bag Imu's ``angular_velocity_covariance``, :mod:`drivers.bags.imu_noise`);
         ``None``: not stated.
+    truth_label : str
+        What the reference poses are, for people: ``"ground truth"`` (a simulator's, a
+        data set's motion capture), or a bag's topic or tf frames and what they are
+        (``"the robot's odometry (/odom, nav_msgs/Odometry, frame odom)"``).
     body_speeds : ndarray, shape (n, 2), or None
         Measured body speeds (v [m/s], w [rad/s]) of the period each frame closes, for a
         robot that records its own odometry's twist and no wheel readings
         (:func:`source_from_grid`); ``None`` otherwise.
     truth : ndarray, shape (n, 3), or None
-        Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
+        Reference poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
         Landmark observations, ``index`` = frame index (none: empty).
     landmarks : LandmarkMap or None
@@ -124,6 +128,7 @@ class ReplaySource:
     yaw_rate_rad_s: np.ndarray | None = None
     gyro_density_rad_s_sqrt_hz: float | None = None
     body_speeds: np.ndarray | None = None
+    truth_label: str = "ground truth"
 
     def __len__(self) -> int:
         return len(self.t_s)
