@@ -27,7 +27,14 @@ from typing import Any, Literal
 
 from lti_motion.exceptions import RobotMismatchError
 
-__all__ = ["GEOMETRY_TOLERANCE", "PERIOD_TOLERANCE", "WHEEL_DATA", "RobotDescription"]
+__all__ = ["ANGLE_COUNTS_PER_RAD", "GEOMETRY_TOLERANCE", "PERIOD_TOLERANCE", "WHEEL_DATA",
+           "RobotDescription"]
+
+#: Counts per radian that wheel angles are counted in when no encoder resolution is given
+#: (``--ticks-per-rad``): 1e-4 rad a count, finer than any wheel encoder (a 4096-count
+#: encoder's is 1.5e-3 rad), so the count adds no rounding to the angles a recording holds;
+#: the model's encoder scale is then ``wheel_radius_m / ANGLE_COUNTS_PER_RAD``.
+ANGLE_COUNTS_PER_RAD = 1e4
 
 #: Relative tolerance between two sensor periods (a recording's and a model's): 5 %,
 #: wider than a real clock's drift (a Roomba's 15 ms runs 1 % off nominal) and far below

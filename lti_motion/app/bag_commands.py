@@ -71,17 +71,15 @@ from lti_motion.calibration import OfflineCalibration, calibrate_recording
 from lti_motion.exceptions import MissingEncoderScaleError, RobotMismatchError
 from lti_motion.model import MotionModel
 from lti_motion.recordings import GridSignals, Recording, SensorFrame, snap_period_s
-from lti_motion.robot_description import PERIOD_TOLERANCE, RobotDescription
+from lti_motion.robot_description import (
+    ANGLE_COUNTS_PER_RAD,
+    PERIOD_TOLERANCE,
+    RobotDescription,
+)
 
-__all__ = ["ANGLE_COUNTS_PER_RAD", "BagOptions", "BagRun", "calibrate_from_bag", "check_commands",
+__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "check_commands",
            "load_bag_recording", "monitor_bag", "plot_bag_fit", "reference_label", "replay_bag",
            "replay_source"]
-
-
-#: Counts per radian that wheel angles are counted in when no encoder resolution is given
-#: (``--ticks-per-rad``): 1e-4 rad a count, finer than any wheel encoder (a 4096-count
-#: encoder's is 1.5e-3 rad), so the count adds no rounding to the angles a bag holds.
-ANGLE_COUNTS_PER_RAD = 1e4
 
 
 @dataclass(frozen=True)
@@ -102,7 +100,7 @@ class BagOptions:
     ticks_per_rad : float or None
         Encoder counts per wheel radian. ``None``: replay and monitor take the model's
         robot's (:attr:`MotionModel.robot <lti_motion.model.MotionModel.robot>`);
-        calibration counts the angles in :data:`ANGLE_COUNTS_PER_RAD`.
+        calibration counts the angles in :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`.
     wheel_radius_m : float or None
         Nominal wheel radius [m]. ``None``: replay and monitor take the model's robot's;
         calibration on wheel angles refuses to guess one.
@@ -141,8 +139,9 @@ class BagOptions:
     @property
     def m_per_tick(self) -> float | None:
         """The nominal encoder scale of the wheel angles, ``wheel_radius_m / ticks_per_rad``
-        [m/tick] (``ticks_per_rad`` defaulting to :data:`ANGLE_COUNTS_PER_RAD`), or ``None``
-        without a radius."""
+        [m/tick] (``ticks_per_rad`` defaulting to
+        :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`), or ``None`` without a
+        radius."""
         if self.wheel_radius_m is None:
             return None
         return self.wheel_radius_m / (self.ticks_per_rad or ANGLE_COUNTS_PER_RAD)
@@ -211,7 +210,8 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     options : BagOptions, optional
         Topics, joints, encoders and wheel radius: wheel angles need
         ``options.wheel_radius_m`` (counted in ``ticks_per_rad``, default
-        :data:`ANGLE_COUNTS_PER_RAD`; encoders default ``"quadrature"``).
+        :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`; encoders default
+        ``"quadrature"``).
     floor : str, optional
         Floor name recorded in the model.
     validation : float

@@ -34,7 +34,7 @@ class BagGeometry:
         ``None`` only for a bag without wheel angles (the robot's odometry twist).
     ticks_per_rad : float or None
         ``None``: the angles are counted in
-        :data:`~lti_motion.app.bag_commands.ANGLE_COUNTS_PER_RAD`.
+        :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`.
     encoders : {"commanded", "quadrature"} or None
         ``None``: quadrature (the default for sensor_msgs/JointState angles).
     robot : str or None
@@ -52,7 +52,7 @@ class BagGeometry:
 
     def lines(self, *, angles: bool) -> list[str]:
         """What ``calibrate`` prints: each number with its source."""
-        from lti_motion.app.bag_commands import ANGLE_COUNTS_PER_RAD
+        from lti_motion.robot_description import ANGLE_COUNTS_PER_RAD
 
         out = [f"wheel base {self.wheel_base_m:g} m from {self.sources['wheel_base_m']}"]
         if angles:

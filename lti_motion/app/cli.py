@@ -74,7 +74,7 @@ __all__ = ["main"]
 
 def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
-    from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
+    from lti_motion.app.calibrate_log import LogRobot, run_calibrate_log
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
 
     described = load_robot(args.sim) if args.sim else None
@@ -84,7 +84,8 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
         source = f"the nominal {described.name} description (--robot)"
     else:
         source = "the robot description (none given)"
-    robot = RobotDescription(
+    robot = LogRobot(
+        name=described.name if described is not None else None,
         wheel_base_m=nominal_wheel_base_m(args, described),
         m_per_tick=args.m_per_tick if args.m_per_tick is not None
         else (described.m_per_tick if described else None),
@@ -329,6 +330,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     else:
         from drivers.exceptions import PassiveModeError
 
+        _check_port_robot(model, args.port)
         try:
             live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
                                      clock_rate=args.clock_rate, listen=args.listen,
@@ -337,6 +339,20 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
     return 0
+
+
+def _check_port_robot(model, port: str) -> None:
+    """``monitor --port``: a Roomba streams raw 16-bit counts, counted in the commanded
+    direction, every 15 ms; a model of another robot is refused in one line."""
+    if model.robot is None:                 # a model file before version 3: nothing to check
+        return
+    from drivers.roomba import STREAM_PERIOD_S
+    from lti_motion.robot_description import RobotDescription
+
+    roomba = RobotDescription(wheel_data="counts", wheel_base_m=model.robot.wheel_base_m,
+                              dt_s=STREAM_PERIOD_S, encoders="commanded", counter_bits=16)
+    model.robot.check(roomba, mine=f"the model's robot ({model.robot.robot})",
+                      theirs=f"the Roomba on {port}")
 
 
 def _cmd_virtual_roomba(args: argparse.Namespace) -> int:

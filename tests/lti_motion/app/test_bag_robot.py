@@ -237,3 +237,16 @@ def test_turtlebot3_calibrates_only_with_its_geometry_and_replays_as_its_wheels_
     independent_ate = float(np.sqrt(np.mean(np.sum((poses[:, :2] - truth[:, :2]) ** 2, 1))))
     assert metrics["ate_rmse_m"] == pytest.approx(independent_ate, rel=0.01)
     assert metrics["path_m"] == pytest.approx(path_m, rel=0.01)
+
+
+def test_monitor_port_refuses_a_model_of_another_robot_before_opening_it(tmp_path, capsys,
+                                                                         short_arx_model):
+    from lti_motion.robot_description import RobotDescription
+
+    model = short_arx_model(4)
+    waffle = RobotDescription(wheel_data="wheel_angles_rad", wheel_base_m=0.287,
+                              dt_s=model.dt_s, wheel_radius_m=0.033, robot="waffle")
+    path = model.updated(robot=waffle).save(tmp_path / "waffle.json")
+    _one_line_exit_2(["monitor", "--port", "/dev/does-not-exist", "--model", str(path)], capsys,
+                     "the Roomba on /dev/does-not-exist has raw encoder counts, the model's "
+                     "robot (waffle) wheel angles [rad]")
