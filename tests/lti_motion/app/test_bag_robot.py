@@ -250,3 +250,66 @@ def test_monitor_port_refuses_a_model_of_another_robot_before_opening_it(tmp_pat
     _one_line_exit_2(["monitor", "--port", "/dev/does-not-exist", "--model", str(path)], capsys,
                      "the Roomba on /dev/does-not-exist has raw encoder counts, the model's "
                      "robot (waffle) wheel angles [rad]")
+
+
+def _as_amcl(src: Path, out: Path, *, late_s: float) -> Path:
+    """A copy of the ROS 1 bag ``src`` whose /ground_truth (PoseStamped, frame world) is
+    /amcl_pose (PoseWithCovarianceStamped, frame map), starting ``late_s`` after the rest."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    pwcs = "geometry_msgs/msg/PoseWithCovarianceStamped"
+    with AnyReader([src]) as reader, Writer(out) as writer:
+        conns = {c.topic: writer.add_connection(c.topic, c.msgtype, typestore=reader.typestore)
+                 for c in reader.connections if c.topic != "/ground_truth"}
+        amcl = writer.add_connection("/amcl_pose", pwcs, typestore=store)
+        start = None
+        for c, t, raw in reader.messages():
+            start = t if start is None else start
+            if c.topic != "/ground_truth":
+                writer.write(conns[c.topic], t, raw)
+            elif t >= start + late_s * 1e9:
+                pose = reader.deserialize(raw, c.msgtype)
+                header = store.types["std_msgs/msg/Header"](seq=0, stamp=pose.header.stamp,
+                                                            frame_id="map")
+                msg = store.types[pwcs](header=header, pose=store.types[
+                    "geometry_msgs/msg/PoseWithCovariance"](pose=pose.pose,
+                                                            covariance=np.zeros(36)))
+                writer.write(amcl, t, store.serialize_ros1(msg, pwcs))
+    return out
+
+
+def test_any_reference_is_named_started_from_and_the_estimates_written_in_its_frame(
+        sim_bag, tmp_path, capsys):
+    """``PoseWithCovarianceStamped`` on /amcl_pose (frame map), starting 0.5 s after the
+    wheels: named for what it is, the replay starts at its first pose (said so), the metrics
+    match the PoseStamped reference replayed from the same time, and ``--out-bag`` writes
+    the estimates in frame map."""
+    out = tmp_path / "cal"
+    assert main(["calibrate", "--bag", str(sim_bag), "--robot", "create2", "--out",
+                 str(out)]) == 0
+    model = str(out / "model_arx.json")
+    amcl = _as_amcl(sim_bag, tmp_path / "amcl.bag", late_s=0.5)
+    capsys.readouterr()
+    assert main(["replay", "--bag", str(amcl), "--model", model, "--truth-topic", "/amcl_pose",
+                 "--estimators", "odometry", "ekf", "--out", str(tmp_path / "a"),
+                 "--out-bag", str(tmp_path / "est.bag")]) == 0
+    said = capsys.readouterr().out
+    label = "the pose estimate (/amcl_pose, geometry_msgs/PoseWithCovarianceStamped, map)"
+    assert f"reference: {label}" in said and "ground truth" not in said
+    assert f"{label} starts 0.5" in said and "replaying from its first pose" in said
+    assert f"estimators start at the first pose of {label}" in said
+    assert "frame map, the reference's" in said
+    with AnyReader([tmp_path / "est.bag"]) as reader:
+        conn = next(c for c in reader.connections if c.msgtype == "nav_msgs/msg/Odometry")
+        first = reader.deserialize(next(reader.messages(connections=[conn]))[2], conn.msgtype)
+    assert first.header.frame_id == "map"
+    late = json.loads((tmp_path / "a" / "metrics.json").read_text())["metrics"]
+    # the same drive against its PoseStamped truth, replayed from 0.5 s on
+    assert main(["replay", "--bag", str(sim_bag), "--model", model, "--estimators", "odometry",
+                 "ekf", "--start-s", "0.5", "--out", str(tmp_path / "p")]) == 0
+    said = capsys.readouterr().out
+    assert "reference: the reference poses (/ground_truth, geometry_msgs/PoseStamped, world)" \
+        in said
+    pose = json.loads((tmp_path / "p" / "metrics.json").read_text())["metrics"]
+    for name in ("odometry", "ekf"):
+        assert late[name]["ate_rmse_m"] == pytest.approx(pose[name]["ate_rmse_m"], rel=0.1,
+                                                         abs=0.005), (name, late, pose)
