@@ -35,7 +35,7 @@ from lti_motion.recordings import (
     poses_at,
     stream_clock,
 )
-from lti_motion.robot_description import PERIOD_TOLERANCE, WHEEL_DATA
+from lti_motion.robot_description import PERIOD_TOLERANCE, WHEEL_DATA, RobotDescription
 
 __all__ = [
     "ESTIMATORS",
@@ -529,7 +529,14 @@ def load_source(path: str | os.PathLike, model: MotionModel, *, robot: int | Non
                              f"{robot} (leave out --robot)")
         return source_from_recording(rec, model, path.name, start_s=start_s,
                                      duration_s=duration_s)
-    return source_from_log(path, robot=robot, start_s=start_s, duration_s=duration_s)
+    src = source_from_log(path, robot=robot, start_s=start_s, duration_s=duration_s)
+    if model.robot is not None:             # Roomba / simulator frames: 16-bit-like counts
+        model.robot.check(RobotDescription(
+            wheel_data="counts", wheel_base_m=model.robot.wheel_base_m, dt_s=src.dt_s,
+            encoders=model.robot.encoders,
+            counter_bits=None if src.counter_bits >= 63 else src.counter_bits),
+            mine=f"the model's robot ({model.robot.robot})", theirs=path.name)
+    return src
 
 
 def _frames(rec: Recording) -> bool:

@@ -313,3 +313,44 @@ def test_any_reference_is_named_started_from_and_the_estimates_written_in_its_fr
     for name in ("odometry", "ekf"):
         assert late[name]["ate_rmse_m"] == pytest.approx(pose[name]["ate_rmse_m"], rel=0.1,
                                                          abs=0.005), (name, late, pose)
+
+
+def test_replay_refuses_a_roomba_log_with_a_model_of_wheel_angles(tmp_path, capsys,
+                                                                   short_arx_model):
+    from lti_motion.recordings.logfile import save_log
+    from lti_motion.robot_description import RobotDescription
+
+    model = short_arx_model(4)
+    log = Simulator("create2", seed=5).run(np.full((200, 2), 0.2))
+    path = save_log(tmp_path / "roomba.npz", log)
+    waffle = RobotDescription(wheel_data="wheel_angles_rad", wheel_base_m=model.wheel_base_m,
+                              dt_s=model.dt_s, wheel_radius_m=0.033, robot="waffle")
+    other = model.updated(robot=waffle).save(tmp_path / "waffle.json")
+    _one_line_exit_2(["replay", str(path), "--model", str(other), "--out", str(tmp_path / "r")],
+                     capsys, "roomba.npz has raw encoder counts, the model's robot (waffle) "
+                             "wheel angles [rad]")
+    create2 = RobotDescription(wheel_data="counts", wheel_base_m=model.wheel_base_m,
+                               dt_s=model.dt_s, encoders="commanded", counter_bits=16,
+                               robot="create2")
+    same = model.updated(robot=create2).save(tmp_path / "create2.json")
+    assert main(["replay", str(path), "--model", str(same), "--estimators", "odometry",
+                 "--out", str(tmp_path / "ok")]) == 0
+
+
+def test_a_tf_reference_in_frame_odom_is_the_robots_odometry():
+    from lti_motion.app.bag_commands import reference_label
+    from lti_motion.recordings import Recording
+
+    def label(ref):
+        return reference_label(Recording.from_streams(
+            wheel_t_s=[0.0, 0.1], wheel_angles_rad=[[0, 0], [1, 1]], cmd_body=[[0, 0], [0, 0]],
+            meta={"reference": ref}))
+
+    tf = "tf2_msgs/msg/TFMessage"
+    assert label({"topic": "/tf", "type": tf, "frames": ["odom", "base_footprint"]}) == \
+        "the robot's odometry (tf odom -> base_footprint)"
+    assert label({"topic": "/tf", "type": tf, "frames": ["world", "base_link"]}) == \
+        "the reference poses (tf world -> base_link)"
+    assert label({"topic": "/vicon", "type": "geometry_msgs/msg/PoseStamped",
+                  "frames": ["world"]}) == \
+        "the reference poses (/vicon, geometry_msgs/PoseStamped, world)"
