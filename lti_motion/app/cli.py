@@ -381,7 +381,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ValueError(f"unknown --to {args.to!r}; give one of "
                          f"{', '.join(export_cli.TARGET_NAMES)}")
     model = _load_model(args.model)
-    text = export_text(model, args.to, nominal=_nominal(args), model_name=args.model,
+    text = export_text(model, args.to, nominal=_nominal(args, model.robot),
+                       model_name=args.model,
                        publish_rate_hz=args.publish_rate, frequency_hz=args.frequency,
                        node=args.node)
     if args.out:
@@ -398,21 +399,29 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _nominal(args: argparse.Namespace):
-    """``export``: the nominal geometry from the flags, over a URDF, over a robot file."""
+def _nominal(args: argparse.Namespace, robot=None):
+    """``export``: the nominal geometry from the flags, over a URDF, over a robot file, over
+    the model's robot (``robot``, :attr:`MotionModel.robot`)."""
     from lti_motion.app.ros_config import CREATE2_TICKS_PER_REV, Nominal
 
     radius = separation = left = right = None
     sources, ticks, ticks_source = [], CREATE2_TICKS_PER_REV, (
         f"{CREATE2_TICKS_PER_REV:g}, the Create 2's (default; --ticks-per-rev)")
+    if robot is not None and robot.wheel_radius_m is not None:   # the model's own robot
+        radius, separation = sum(robot.wheel_radius_m) / 2, robot.wheel_base_m
+        sources.append(f"the model's robot ({robot.robot})")
+        if robot.ticks_per_rev is not None:
+            ticks = robot.ticks_per_rev
+            ticks_source = f"{ticks:g}, the model's robot's"
     if (args.left_joint or args.right_joint) and not args.urdf:
         raise ValueError("--left-joint and --right-joint name the wheel joints of --urdf; "
                          "give --urdf FILE")
     if args.robot:
-        robot = load_robot(args.robot)
-        radius, separation = robot.wheel_diameter_m / 2, robot.wheel_base_m
-        ticks, ticks_source = robot.ticks_per_rev, f"{robot.ticks_per_rev:g}, {robot.name}'s"
-        sources.append(f"the robot file {args.robot}")
+        described = load_robot(args.robot)
+        radius, separation = described.wheel_diameter_m / 2, described.wheel_base_m
+        ticks, ticks_source = (described.ticks_per_rev,
+                               f"{described.ticks_per_rev:g}, {described.name}'s")
+        sources = [f"the robot file {args.robot}"]          # over the model's robot
     if args.urdf:
         from drivers.bags import read_urdf_wheels
 
@@ -420,7 +429,8 @@ def _nominal(args: argparse.Namespace):
                                   right_joint=args.right_joint)
         radius, separation = wheels.wheel_radius_m, wheels.wheel_separation_m
         left, right = wheels.left_joint, wheels.right_joint
-        sources.append(f"the URDF {args.urdf} (joints {left}, {right})")
+        sources = [*(s for s in sources if not s.startswith("the model's robot")),
+                   f"the URDF {args.urdf} (joints {left}, {right})"]
     if args.wheel_radius is not None:
         radius = args.wheel_radius
         sources.append("--wheel-radius")
