@@ -22,6 +22,7 @@ __all__ = [
     "CalibrationPlan",
     "FrameLog",
     "MotionModel",
+    "RobotDescription",
     "SensorFrame",
     "ate",
     "calibrate",
@@ -41,6 +42,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "lti_motion.kinematics": ("integrate_poses", "pose_step", "wrap_angle"),
     "lti_motion.metrics": ("ate", "fit_percent", "rpe"),
     "lti_motion.model.motion_model": ("MotionModel", "fit_arx", "fit_fir_from_steps"),
+    "lti_motion.robot_description": ("RobotDescription",),
 }, __all__)
 
 if TYPE_CHECKING:
@@ -49,3 +51,4 @@ if TYPE_CHECKING:
     from lti_motion.metrics import ate, fit_percent, rpe
     from lti_motion.model.motion_model import MotionModel, fit_arx, fit_fir_from_steps
     from lti_motion.recordings.frames import FrameLog, SensorFrame
+    from lti_motion.robot_description import RobotDescription

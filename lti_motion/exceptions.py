@@ -21,6 +21,7 @@ __all__ = [
     "NotExcitedError",
     "NotPeriodicError",
     "PoseReferenceError",
+    "RobotMismatchError",
     "SaturatedSignalError",
     "ShapeError",
     "UnidentifiableError",
@@ -119,6 +120,13 @@ class CurvedIntoWallError(WallRunError):
 class PoseReferenceError(CalibrationError):
     """A pose reference does not fit the encoder record (no time overlap, non-finite poses,
     another robot's trajectory)."""
+
+
+class RobotMismatchError(ValueError):
+    """A recording (or the flags) describe another robot than the model's: another sensor
+    period, geometry or encoder kind beyond the stated tolerances
+    (:meth:`lti_motion.robot_description.RobotDescription.disagreement`); the message names
+    both values."""
 
 
 class LogFileError(ModelFileError):

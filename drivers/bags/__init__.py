@@ -8,6 +8,8 @@
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
 - :mod:`drivers.bags.imu_noise`: the gyro's noise measured from the bag;
+- :mod:`drivers.bags.urdf`: a robot's wheels from its URDF (a file, or the bag's own
+  ``/robot_description``);
 - :mod:`drivers.bags.writer`: estimates and simulated drives written as bags.
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
@@ -27,6 +29,7 @@ __all__ = [
     "MAX_GAP_S",
     "MAX_WHEEL_M_S",
     "RIGHT_JOINT",
+    "ROBOT_DESCRIPTION_TOPIC",
     "TF_TYPE",
     "TOPIC_OPTIONS",
     "TOPIC_TYPES",
@@ -37,6 +40,7 @@ __all__ = [
     "ImuRateNoise",
     "StampedSeries",
     "TfTruth",
+    "UrdfWheels",
     "bag_grid",
     "bag_paths",
     "bag_topics",
@@ -47,8 +51,11 @@ __all__ = [
     "open_bag",
     "raw_messages",
     "read_bag",
+    "read_bag_urdf",
     "read_topics",
+    "read_urdf_wheels",
     "tf_truth",
+    "urdf_wheels",
     "with_rate_data",
     "write_drive_bag",
     "write_estimates_bag",
@@ -97,6 +104,13 @@ __getattr__, __dir__ = lazy_exports(
             "bag_topics",
             "read_topics",
         ),
+        "drivers.bags.urdf": (
+            "ROBOT_DESCRIPTION_TOPIC",
+            "UrdfWheels",
+            "read_bag_urdf",
+            "read_urdf_wheels",
+            "urdf_wheels",
+        ),
         "drivers.bags.writer": (
             "BagAlarm",
             "write_drive_bag",
@@ -128,5 +142,12 @@ if TYPE_CHECKING:
         StampedSeries,
         bag_topics,
         read_topics,
+    )
+    from drivers.bags.urdf import (
+        ROBOT_DESCRIPTION_TOPIC,
+        UrdfWheels,
+        read_bag_urdf,
+        read_urdf_wheels,
+        urdf_wheels,
     )
     from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag

@@ -164,6 +164,7 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         raise BagError(f"topic {wheels.topic}: no sensor period in its stamps (all equal); "
                        "give the period with --dt")
     streams: dict = {"wheel": wheels.topic}
+    extra, meta = {}, {}
     if found.wheels is not None:
         wheel = {"wheel_angles_rad": wheels.values}
     else:                                   # the robot's own odometry: its twist
@@ -173,10 +174,11 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         streams["cmd"] = found.cmd.topic
     else:                                   # none recorded: zero, per frame
         cmd = {"cmd_body": np.zeros((len(t), 2))}
-    extra, meta = {}, {}
     if found.truth is not None:
         extra.update(true_pose_t_s=seconds(found.truth), true_pose=found.truth.values)
         streams["true_pose"] = found.truth.topic
+        meta["reference"] = {"topic": found.truth.topic, "type": found.truth.msgtype,
+                             "frames": list(found.truth_frames or found.truth.frames)}
     if found.imu is not None:
         noise = imu_rate_noise(found.imu)
         rated = with_rate_data(found.imu)

@@ -20,10 +20,12 @@ bag holds one topic of that kind, or named by the caller when it holds several:
 - ``odom``: ``nav_msgs/Odometry`` (pose x, y, yaw; twist v, w);
 - ``imu``: ``sensor_msgs/Imu`` (yaw rate, and element 0 and ``zz`` of its
   ``angular_velocity_covariance``: :mod:`drivers.bags.imu_noise`);
-- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture), or,
-  when the bag has no such topic or a tf frame pair is named, the transform of the
-  robot's frame in ``tf2_msgs/TFMessage`` topics (``/tf``, ``/tf_static``;
-  :mod:`drivers.bags.tf`).
+- ``truth``: ``geometry_msgs/PoseStamped`` reference poses (motion capture), found by
+  type; named with ``truth_topic``, also ``PoseWithCovarianceStamped`` (``/amcl_pose``)
+  and ``nav_msgs/Odometry`` (its pose; a simulator's true pose, or the robot's own
+  odometry); or, when the bag has no such topic or a tf frame pair is named, the
+  transform of the robot's frame in ``tf2_msgs/TFMessage`` topics (``/tf``,
+  ``/tf_static``; :mod:`drivers.bags.tf`).
 
 Each message is stamped with its header stamp when it has one, else with the time
 the bag received it.
@@ -77,8 +79,12 @@ TOPIC_TYPES: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "wheels": ("sensor_msgs/msg/JointState",),
     "odom": ("nav_msgs/msg/Odometry",),
     "imu": ("sensor_msgs/msg/Imu",),
-    "truth": ("geometry_msgs/msg/PoseStamped",),
+    "truth": ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
+              "nav_msgs/msg/Odometry"),
 })
+#: The reference types found by type alone (the others only when named: a bag's
+#: ``/odom`` is the robot's odometry, not a reference, unless the user says so).
+_TRUTH_BY_TYPE = ("geometry_msgs/msg/PoseStamped",)
 #: The command-line option that names each kind's topic (for the messages).
 TOPIC_OPTIONS: Mapping[str, str] = MappingProxyType({
     "cmd": "--cmd-topic", "wheels": "--wheels-topic", "odom": "--odom-topic",
@@ -99,6 +105,7 @@ _FIELDS: Mapping[str, tuple[str, ...]] = MappingProxyType({
     "sensor_msgs/msg/Imu": ("angular_velocity.z", "angular_velocity_covariance[0]",
                             "angular_velocity_covariance[8]"),
     "geometry_msgs/msg/PoseStamped": tuple(f"pose.{p}" for p in _POSE),
+    "geometry_msgs/msg/PoseWithCovarianceStamped": tuple(f"pose.pose.{p}" for p in _POSE),
 })
 #: What each kind's ``values`` columns hold, for people.
 COLUMNS: Mapping[str, tuple[str, ...]] = MappingProxyType({
@@ -122,12 +129,16 @@ class StampedSeries:
         Stamps [ns] (header stamp, else receive time), non-decreasing.
     values : ndarray, shape (n, k)
         The kind's columns (:data:`COLUMNS`), SI units; headings unwrapped.
+    frames : tuple of str
+        The first message's ``header.frame_id`` (and an Odometry's ``child_frame_id``)
+        for reference poses, else ``()``.
     """
 
     topic: str
     msgtype: str
     t_ns: np.ndarray
     values: np.ndarray
+    frames: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -196,6 +207,8 @@ def _choose(kind: str, topics: Mapping[str, str], counts: Mapping[str, int],
             raise BagError(f"topic {chosen} holds {topics[chosen]}, but {TOPIC_OPTIONS[kind]} "
                            f"needs {what}")
         return chosen
+    if kind == "truth":
+        types = _TRUTH_BY_TYPE
     found = sorted(t for t, m in topics.items() if m in types and counts.get(t, 0))
     if len(found) > 1:
         raise BagError(f"the bag has {len(found)} {what} topics ({', '.join(found)}); choose "
@@ -275,9 +288,15 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
             t_ns = recv_ns
     else:
         t_ns = recv_ns
+    frames: tuple[str, ...] = ()
     if kind in ("odom", "truth"):
         data = _planar(data)
-    return StampedSeries(topic, msgtype, t_ns, data), names
+    if kind == "truth":
+        data = data[:, :3]                    # an Odometry's pose only
+        first = deserialize(raws[0])
+        frames = (str(first.header.frame_id),
+                  *((str(first.child_frame_id),) if hasattr(first, "child_frame_id") else ()))
+    return StampedSeries(topic, msgtype, t_ns, data, frames), names
 
 
 def read_topics(path: str | os.PathLike, *, cmd_topic: str | None = None,

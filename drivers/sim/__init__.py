@@ -32,6 +32,7 @@ __all__ = [
     "Field",
     "Floor",
     "FloorMap",
+    "RobotGeometry",
     "RobotParams",
     "RobotSpec",
     "Room",
@@ -46,6 +47,7 @@ __all__ = [
     "preset_names",
     "print_progress",
     "read_robot_file",
+    "robot_geometry",
     "robot_source",
     "run_periods",
     "summarize",
@@ -87,10 +89,12 @@ __getattr__, __dir__ = lazy_exports(
         "drivers.sim.robot_file": (
             "FAULT_FIELDS",
             "Field",
+            "RobotGeometry",
             "RobotSpec",
             "SCHEMA",
             "preset_names",
             "read_robot_file",
+            "robot_geometry",
             "robot_source",
         ),
         "drivers.sim.simulator": (
@@ -135,9 +139,11 @@ if TYPE_CHECKING:
         FAULT_FIELDS,
         SCHEMA,
         Field,
+        RobotGeometry,
         RobotSpec,
         preset_names,
         read_robot_file,
+        robot_geometry,
         robot_source,
     )
     from drivers.sim.simulator import Simulator, ground_m_per_tick

@@ -32,8 +32,8 @@ import numpy as np
 
 from drivers.exceptions import RobotFileError
 
-__all__ = ["FAULT_FIELDS", "SCHEMA", "Field", "RobotSpec", "preset_names", "read_robot_file",
-           "robot_source"]
+__all__ = ["FAULT_FIELDS", "SCHEMA", "Field", "RobotGeometry", "RobotSpec", "preset_names",
+           "read_robot_file", "robot_geometry", "robot_source"]
 
 
 class Field(NamedTuple):
@@ -48,11 +48,14 @@ class Field(NamedTuple):
         ``"positive"``, ``"nonnegative"``, ``"real"``, ``"fraction"`` (0 < x <= 1),
         ``"error"`` (|x| <= 0.2), ``"delay"`` (0 .. 30), ``"weakening"`` (0 <= x < 1),
         ``"probability"`` (0 .. 1), ``"pair_error"`` (two errors), ``"six_angles"``,
-        ``"counter_bits"`` (8 .. 64), ``"wheel"``, ``"text"``.
+        ``"counter_bits"`` (8 .. 64), ``"wheel"``, ``"text"``, ``"encoder_kind"``
+        (``"commanded"`` or ``"quadrature"``).
     unit : str
         Unit as the messages and the schema page state it.
     required : bool
-        Whether a file must give it (the others default to the ``create2`` value).
+        Whether a file must give it: what a real robot has (name, period, geometry,
+        encoders). The others default to the ``create2`` value when the simulator runs
+        the robot; a real robot's file may leave every simulator field out.
     """
 
     key: str
@@ -73,12 +76,13 @@ SCHEMA: Mapping[str, tuple[Field, ...]] = MappingProxyType({
                  Field("robot_radius_m", "positive", _M),
                  Field("caster_offset_m", "nonnegative", _M)),
     "encoders": (Field("ticks_per_rev", "positive", "ticks per wheel revolution", True),
-                 Field("counter_bits", "counter_bits", "bits")),
-    "delay": (Field("delay_periods", "delay", "sensor periods", True),
+                 Field("counter_bits", "counter_bits", "bits"),
+                 Field("kind", "encoder_kind", "")),
+    "delay": (Field("delay_periods", "delay", "sensor periods"),
               Field("delay_jitter_periods", "delay", "sensor periods"),
               Field("latency_s", "nonnegative", _S),
               Field("latency_jitter_s", "nonnegative", _S)),
-    "mass": (Field("mass_kg", "positive", _KG, True),
+    "mass": (Field("mass_kg", "positive", _KG),
              Field("payload_kg", "nonnegative", _KG),
              Field("yaw_inertia_kg_m2", "positive", "kg m^2"),
              Field("payload_radius_m", "nonnegative", _M),
@@ -160,6 +164,8 @@ class RobotSpec:
         Floor-map rectangles; empty for one floor everywhere.
     faults : tuple of dict
         :class:`~drivers.sim.Fault` keyword arguments, in file order.
+    encoders : {"commanded", "quadrature"} or None
+        ``[encoders] kind``: how the wheel counts count (``None``: the file does not say).
     """
 
     source: str
@@ -167,6 +173,45 @@ class RobotSpec:
     floor_default: str = "hard"
     floor_regions: tuple[tuple[float, float, float, float, str], ...] = ()
     faults: tuple[dict, ...] = ()
+    encoders: str | None = None
+
+
+@dataclass(frozen=True)
+class RobotGeometry:
+    """What a robot file says about a real robot: geometry, encoders and rate [m, s].
+
+    Attributes
+    ----------
+    name : str
+    source : str
+        ``robot file PATH`` or ``preset NAME``.
+    period_s : float
+        Sensor period [s].
+    wheel_base_m : float
+        Nominal wheel base [m].
+    wheel_radius_m : float
+        Nominal wheel radius, half ``wheel_diameter_m`` [m].
+    ticks_per_rev : float
+        Encoder counts per wheel revolution.
+    counter_bits : int or None
+        Counter width, when the file gives it.
+    encoders : {"commanded", "quadrature"} or None
+        How the counts count, when the file says.
+    """
+
+    name: str
+    source: str
+    period_s: float
+    wheel_base_m: float
+    wheel_radius_m: float
+    ticks_per_rev: float
+    counter_bits: int | None = None
+    encoders: str | None = None
+
+    @property
+    def ticks_per_rad(self) -> float:
+        """Encoder counts per wheel radian, ``ticks_per_rev / (2 pi)``."""
+        return self.ticks_per_rev / (2 * math.pi)
 
 
 def _robots_dir():
@@ -233,6 +278,11 @@ def _value(spec: Field, value: object, where: str) -> tuple[str, object]:
         if value not in ("left", "right", "both"):
             raise RobotFileError(f"{where} must be \"left\", \"right\" or \"both\", "
                                  f"got {value!r}")
+        return spec.key, value
+    if spec.check == "encoder_kind":
+        if value not in ("commanded", "quadrature"):
+            raise RobotFileError(f"{where} must be \"commanded\" (the counts follow the "
+                                 f"command's sign, a Roomba) or \"quadrature\", got {value!r}")
         return spec.key, value
     if spec.check == "counter_bits":
         if not isinstance(value, int) or isinstance(value, bool) or not 8 <= value <= 64:
@@ -372,5 +422,35 @@ def read_robot_file(name_or_path: str | os.PathLike[str]) -> RobotSpec:
     for section in SCHEMA:
         params.update(_section(doc, section, label))
     floor_default = params.pop("default", "hard")
+    encoders = params.pop("kind", None)
     return RobotSpec(source=label, params=params, floor_default=floor_default,
-                     floor_regions=_regions(doc, label), faults=_faults(doc, label))
+                     floor_regions=_regions(doc, label), faults=_faults(doc, label),
+                     encoders=encoders)
+
+
+def robot_geometry(name_or_path: str | os.PathLike[str]) -> RobotGeometry:
+    """A robot file's (or preset's) geometry, encoders and period: what a real robot has.
+
+    A real robot's file needs only its name, ``period_s``, ``[geometry] wheel_base_m`` and
+    ``wheel_diameter_m`` and ``[encoders] ticks_per_rev`` (``counter_bits`` and ``kind``
+    when known); the simulator's fields may be left out.
+
+    Raises
+    ------
+    RobotFileError, FileNotFoundError
+        As :func:`read_robot_file`.
+
+    Examples
+    --------
+    >>> g = robot_geometry("create2")
+    >>> g.wheel_radius_m, g.wheel_base_m, g.encoders, g.counter_bits
+    (0.036, 0.235, 'commanded', 16)
+    """
+    spec = read_robot_file(name_or_path)
+    p = spec.params
+    return RobotGeometry(name=str(p["name"]), source=spec.source, period_s=float(p["period_s"]),
+                         wheel_base_m=float(p["wheel_base_m"]),
+                         wheel_radius_m=float(p["wheel_diameter_m"]) / 2,
+                         ticks_per_rev=float(p["ticks_per_rev"]),
+                         counter_bits=int(p["counter_bits"]) if "counter_bits" in p else None,
+                         encoders=spec.encoders)

@@ -505,6 +505,7 @@ class Recalibrator:
         if not (math.isfinite(gain) and gain >= self.options.min_gain_pp):
             return RecalibrationRecord(t_s, event, "kept_old", n, *fits,
                                        reason=f"held-out fit gain {gain:.2f} pp")
+        new = new.updated(robot=self.model.robot)     # the same robot, refitted
         self.model = new
         saved = None if self.save_path is None else str(new.save(self.save_path))
         return RecalibrationRecord(t_s, event, "adopted", n, *fits,

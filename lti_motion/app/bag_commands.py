@@ -38,7 +38,7 @@ The paper: ``docs/architecture.md``, "The paper".
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Literal
@@ -53,6 +53,8 @@ from drivers.bags import (
     BagAlarm,
     bag_grid,
     read_bag,
+    read_bag_urdf,
+    urdf_wheels,
     write_estimates_bag,
 )
 from drivers.exceptions import BagError
@@ -66,12 +68,18 @@ from lti_motion.app.replay_sources import (
     source_from_wheel_grid,
 )
 from lti_motion.calibration import OfflineCalibration, calibrate_recording
-from lti_motion.exceptions import MissingEncoderScaleError
+from lti_motion.exceptions import MissingEncoderScaleError, RobotMismatchError
 from lti_motion.model import MotionModel
 from lti_motion.recordings import GridSignals, Recording, SensorFrame, snap_period_s
+from lti_motion.robot_description import (
+    ANGLE_COUNTS_PER_RAD,
+    PERIOD_TOLERANCE,
+    RobotDescription,
+)
 
-__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording", "monitor_bag",
-           "plot_bag_fit", "replay_bag", "replay_source"]
+__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "check_commands",
+           "load_bag_recording", "monitor_bag", "plot_bag_fit", "reference_label", "replay_bag",
+           "replay_source"]
 
 
 @dataclass(frozen=True)
@@ -89,23 +97,30 @@ class BagOptions:
         Reference poses from tf: the transform of this child frame in this parent
         frame (:func:`drivers.bags.read_bag`); default ``None``: tf only when the
         bag has no ``PoseStamped`` topic, with the default frames.
-    ticks_per_rad : float
-        Encoder counts per wheel radian (default the Create 2's).
-    wheel_radius_m : float
-        Nominal wheel radius [m] (default the Create 2's 0.036).
+    ticks_per_rad : float or None
+        Encoder counts per wheel radian. ``None``: replay and monitor take the model's
+        robot's (:attr:`MotionModel.robot <lti_motion.model.MotionModel.robot>`);
+        calibration counts the angles in :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`.
+    wheel_radius_m : float or None
+        Nominal wheel radius [m]. ``None``: replay and monitor take the model's robot's;
+        calibration on wheel angles refuses to guess one.
     dt_s : float or None
-        Sensor period [s]; default from the stamps (calibrate) or the model's.
-    encoders : {"commanded", "quadrature"}
+        Sensor period [s]; default from the stamps (checked against the model's in replay
+        and monitor).
+    encoders : {"commanded", "quadrature"} or None
         How the wheel angles count, for calibration (:func:`lti_motion.recordings.on_grid`):
-        ``"commanded"`` (default) for a Roomba / Create 2, whose encoders count in
-        the commanded direction; ``"quadrature"`` for encoders that know which way
-        the wheel turns (most ROS robots).
+        ``"commanded"`` for a Roomba / Create 2, whose encoders count in the commanded
+        direction; ``"quadrature"`` (``None``: the default) for encoders that know which
+        way the wheel turns (most ROS robots).
     max_wheel_m_s : float
         Wheel speeds above this are refused as impossible [m/s]
         (:func:`drivers.bags.bag_grid`).
     gyro : bool
         Replay and monitor: read the bag's Imu yaw rate and fuse it (``--gyro``;
         default ``False``: the Imu is not read).
+    sources : dict of str to str
+        Where ``ticks_per_rad``, ``wheel_radius_m`` and ``encoders`` came from, for the
+        output (``{"wheel_radius_m": "--wheel-radius"}``).
     """
 
     topics: dict = field(default_factory=dict)
@@ -113,18 +128,23 @@ class BagOptions:
     right_joint: str = r"right"
     truth_parent: str | None = None
     truth_child: str | None = None
-    ticks_per_rad: float = CREATE2_TICKS_PER_RAD
-    wheel_radius_m: float = CREATE2_WHEEL_RADIUS_M
+    ticks_per_rad: float | None = None
+    wheel_radius_m: float | None = None
     dt_s: float | None = None
-    encoders: Literal["commanded", "quadrature"] = "commanded"
+    encoders: Literal["commanded", "quadrature"] | None = None
     max_wheel_m_s: float = MAX_WHEEL_M_S
     gyro: bool = False
+    sources: dict = field(default_factory=dict)
 
     @property
-    def m_per_tick(self) -> float:
+    def m_per_tick(self) -> float | None:
         """The nominal encoder scale of the wheel angles, ``wheel_radius_m / ticks_per_rad``
-        [m/tick]."""
-        return self.wheel_radius_m / self.ticks_per_rad
+        [m/tick] (``ticks_per_rad`` defaulting to
+        :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`), or ``None`` without a
+        radius."""
+        if self.wheel_radius_m is None:
+            return None
+        return self.wheel_radius_m / (self.ticks_per_rad or ANGLE_COUNTS_PER_RAD)
 
 
 def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
@@ -153,13 +173,33 @@ def _grid(rec: Recording, *, wheel_base_m: float, options: BagOptions,
                     encoders=encoders, max_wheel_m_s=options.max_wheel_m_s)
 
 
+def check_commands(path: str | os.PathLike, rec: Recording) -> None:
+    """Calibration needs what was commanded.
+
+    Raises
+    ------
+    BagError
+        One line, when the bag's drive has no commands.
+    """
+    if not rec.source.has("cmd"):
+        raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
+                       "commands; calibration needs what was commanded (record /cmd_vel)")
+
+
 def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
                        options: BagOptions | None = None, floor: str | None = None,
-                       validation: float = 0.3) -> tuple[OfflineCalibration, Recording]:
+                       validation: float = 0.3, recording: Recording | None = None,
+                       robot_name: str | None = None,
+                       sources: Mapping[str, str] | None = None
+                       ) -> tuple[OfflineCalibration, Recording]:
     """Calibrate an ARX model on the drive recorded in a bag.
 
     The bag is read once, put on the grid once (:func:`drivers.bags.bag_grid`), and
     fitted through :func:`lti_motion.calibration.calibrate_recording`, as any recording.
+    The model carries the robot it was fitted on
+    (:class:`~lti_motion.robot_description.RobotDescription`: the wheel data, the
+    encoders, counts per radian, the wheel radius, the wheel base and the period), which
+    ``replay --bag`` and ``monitor --bag`` then read the bag with.
 
     Parameters
     ----------
@@ -168,46 +208,64 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     wheel_base_m : float
         Nominal wheel base [m].
     options : BagOptions, optional
-        Topics, joints, encoder and wheel (default: found by type, Create 2).
+        Topics, joints, encoders and wheel radius: wheel angles need
+        ``options.wheel_radius_m`` (counted in ``ticks_per_rad``, default
+        :data:`~lti_motion.robot_description.ANGLE_COUNTS_PER_RAD`; encoders default
+        ``"quadrature"``).
     floor : str, optional
         Floor name recorded in the model.
     validation : float
         Held-out tail that chooses order and delay (paper section III.C).
+    recording : Recording, optional
+        The bag's drive already read (:func:`load_bag_recording`), not read again.
+    robot_name : str, optional
+        The robot's name, kept in the model's robot description.
+    sources : mapping of str to str, optional
+        Where each number came from (``{"wheel_radius_m": "--wheel-radius"}``), kept too.
 
     Returns
     -------
     calibration : OfflineCalibration
         The ARX model (wheel-servo DC gain; period the fitted one as the robot is
-        configured, :func:`lti_motion.recordings.snap_period_s`, or ``options.dt_s``),
-        the excitation report, the grid it was fitted on, and the encoder scale
-        ``m_per_tick``: the nominal ``wheel_radius_m / ticks_per_rad`` for wheel
-        angles, ``None`` for an odometry twist.
+        configured, :func:`lti_motion.recordings.snap_period_s`, or ``options.dt_s``;
+        its ``robot`` set), the excitation report, the grid it was fitted on, and the
+        encoder scale ``m_per_tick``: the nominal ``wheel_radius_m / ticks_per_rad`` for
+        wheel angles, ``None`` for an odometry twist.
     recording : Recording
         The drive as read.
 
     Raises
     ------
     BagError
-        For a bag without wheel angles (nor odometry) or without commands (and the
-        reader's errors).
+        For a bag without wheel angles (nor odometry) or without commands, or wheel
+        angles without a wheel radius (and the reader's errors).
     NotExcitedError
         If the drive cannot identify the model (the reasons given).
     """
     opt = options or BagOptions()
-    rec = load_bag_recording(path, options=opt, imu=False, truth=False)
-    if not rec.source.has("cmd"):
-        raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
-                       "commands; calibration needs what was commanded (record /cmd_vel)")
-    grid = _grid(rec, wheel_base_m=wheel_base_m, options=opt, encoders=opt.encoders)
+    rec = recording if recording is not None else load_bag_recording(
+        path, options=opt, imu=False, truth=False)
+    check_commands(path, rec)
     angles = rec.wheel_kind == "wheel_angles_rad"
+    if angles and opt.wheel_radius_m is None:
+        raise BagError(f"{Path(path).name} holds wheel angles and no wheel radius was given: "
+                       "give --wheel-radius M (or BagOptions(wheel_radius_m=...))")
+    encoders = opt.encoders or "quadrature"
+    ticks = opt.ticks_per_rad or ANGLE_COUNTS_PER_RAD
+    grid = _grid(rec, wheel_base_m=wheel_base_m, options=opt, encoders=encoders)
     cal = calibrate_recording(
         rec, wheel_base_m=wheel_base_m, grid=grid, validation=validation, floor=floor,
         m_per_tick=opt.m_per_tick if angles else None,
-        wheel_radius_m=opt.wheel_radius_m if angles else None, encoders=opt.encoders,
+        wheel_radius_m=opt.wheel_radius_m if angles else None, encoders=encoders,
         scale_from=("the nominal wheel radius / ticks per radian" if angles
                     else "the robot's odometry (body speeds)"),
         dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s)
-    return cal, rec
+    robot = RobotDescription(
+        wheel_data=rec.wheel_kind, wheel_base_m=wheel_base_m, dt_s=cal.model.dt_s,
+        encoders=encoders, ticks_per_rad=ticks if angles else None,
+        wheel_radius_m=opt.wheel_radius_m if angles else None,
+        robot=robot_name or Path(path).name, sources=dict(sources or {}))
+    return replace(cal, model=cal.model.updated(robot=robot)), rec
 
 
 def plot_bag_fit(model: MotionModel, grid: GridSignals, path: str | os.PathLike, *,
@@ -255,21 +313,108 @@ def plot_bag_fit(model: MotionModel, grid: GridSignals, path: str | os.PathLike,
     return fit
 
 
+def reference_label(rec: Recording) -> str:
+    """What a bag's reference poses are, named by topic or tf frames: a robot's own odometry
+    (a ``nav_msgs/Odometry`` topic, or frame ``odom``) is "the robot's odometry", never
+    ground truth; a ``PoseWithCovarianceStamped`` a pose estimate (e.g. ``/amcl_pose``).
+
+    Examples
+    --------
+    >>> from lti_motion.recordings import Recording
+    >>> rec = Recording.from_streams(wheel_t_s=[0.0, 0.1], wheel_angles_rad=[[0, 0], [1, 1]],
+    ...     cmd_body=[[0, 0], [0, 0]], meta={"reference": {"topic": "/odom",
+    ...     "type": "nav_msgs/msg/Odometry", "frames": ["odom", "base_footprint"]}})
+    >>> reference_label(rec)
+    "the robot's odometry (/odom, nav_msgs/Odometry, odom -> base_footprint)"
+    """
+    ref = rec.meta.get("reference")
+    if not ref:
+        return "the reference poses"
+    kind, frames = ref["type"].replace("/msg/", "/"), list(ref.get("frames") or ())
+    pair = " -> ".join(f for f in frames if f) or "no frame named"
+    where = (f"tf {pair}" if kind == "tf2_msgs/TFMessage" else f"{ref['topic']}, {kind}, {pair}")
+    if kind == "nav_msgs/Odometry" or (frames and frames[0].lstrip("/") == "odom"):
+        return f"the robot's odometry ({where})"
+    if kind == "geometry_msgs/PoseWithCovarianceStamped":
+        return f"the pose estimate ({where})"
+    return f"the reference poses ({where})"
+
+
 def _bag_ns(start_ns: int, t_s: np.ndarray | float) -> np.ndarray:
     """Bag times [ns] of times [s] from the bag's first stamp ``start_ns`` [ns]."""
     return start_ns + np.rint(np.asarray(t_s) * 1e9).astype(np.int64)
 
 
+def _bag_robot(path: str | os.PathLike, model: MotionModel, opt: BagOptions, rec: Recording,
+               print_fn: Callable[[str], object]) -> tuple[float | None, float | None]:
+    """The wheel radius [m] and counts per radian the bag's wheel angles are read with: the
+    flags' (or a robot file's), else the model's robot's; the bag checked against the
+    model's robot (wheel data, period, and the geometry of its own ``/robot_description``)
+    in one line naming both values, :class:`~lti_motion.exceptions.RobotMismatchError`."""
+    name, robot = Path(path).name, model.robot
+    if _off(rec.dt_s, model.dt_s) > PERIOD_TOLERANCE:
+        raise RobotMismatchError(
+            f"{name} has a sensor period of {rec.dt_s * 1e3:.4g} ms, the model "
+            f"{model.dt_s * 1e3:.4g} ms (more than {PERIOD_TOLERANCE:.0%} apart): a model of "
+            f"another robot? (--dt {model.dt_s:.6g} resamples the bag to the model's period)")
+    angles = rec.wheel_kind == "wheel_angles_rad"
+    given = {k: v for k, v in (("wheel_radius_m", opt.wheel_radius_m),
+                               ("ticks_per_rad", opt.ticks_per_rad)) if v is not None}
+    if robot is None:
+        radius = given.get("wheel_radius_m", CREATE2_WHEEL_RADIUS_M)
+        ticks = given.get("ticks_per_rad", CREATE2_TICKS_PER_RAD)
+        if angles and len(given) < 2:
+            print_fn(f"the model holds no robot description (a model file before version 3): "
+                     f"the wheel angles are read with wheel radius {radius:g} m and "
+                     f"{ticks:g} counts/rad ({'the Create 2s' if not given else 'given'} "
+                     "values; --wheel-radius and --ticks-per-rad for another robot, or "
+                     "recalibrate)")
+        return radius, ticks
+    urdf = read_bag_urdf(path)
+    # the bag's wheel data are read whatever they are (a twist as the counts of the model's
+    # scale): its period and its own geometry are checked
+    bag = RobotDescription(wheel_data=robot.wheel_data, wheel_base_m=robot.wheel_base_m,
+                           dt_s=rec.dt_s, encoders=robot.encoders,
+                           wheel_radius_m=robot.wheel_radius_m)
+    theirs = name
+    if urdf is not None:
+        wheels = urdf_wheels(urdf, source=f"{name}'s /robot_description")
+        bag = replace(bag, wheel_base_m=wheels.wheel_separation_m,
+                      wheel_radius_m=(wheels.wheel_radius_m,) * 2)
+        theirs = f"{name}'s /robot_description"
+    robot.check(bag, mine=f"the model's robot ({robot.robot})", theirs=theirs)
+    radius = (robot.wheel_radius_m[0] + robot.wheel_radius_m[1]) / 2 if robot.wheel_radius_m \
+        else None
+    ticks = robot.ticks_per_rad
+    print_fn(f"robot: {robot.describe()} (the model's)")
+    for key, value in given.items():
+        mine = radius if key == "wheel_radius_m" else ticks
+        what = "wheel radius" if key == "wheel_radius_m" else "counts per radian"
+        print_fn(f"{what} {value:g} from {opt.sources.get(key, 'the options')}, over the "
+                 f"model's robot's {mine:g}" if mine is not None else
+                 f"{what} {value:g} from {opt.sources.get(key, 'the options')}")
+    radius = given.get("wheel_radius_m", radius)
+    ticks = given.get("ticks_per_rad", ticks)
+    return radius, ticks
+
+
+def _off(a: float, b: float) -> float:
+    return abs(a - b) / b
+
+
 def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptions | None,
-                  *, start_s: float = 0.0, duration_s: float | None = None
+                  *, start_s: float = 0.0, duration_s: float | None = None,
+                  print_fn: Callable[[str], object] = print
                   ) -> tuple[Recording, GridSignals, ReplaySource]:
-    """The bag's drive read once, on the model's grid once (on the model's period unless a
-    period is given; with the Imu's yaw rate when ``options.gyro``), as the estimators'
-    source: wheel angles as the encoder's counts (the angles times ticks per radian, which
-    the model's encoder scale turns into metres), a twist as body speeds."""
+    """The bag's drive read once, checked against the model's robot, on the model's grid
+    once (with the Imu's yaw rate when ``options.gyro``), as the estimators' source: wheel
+    angles as the encoder's counts (the angles times counts per radian, which the model's
+    encoder scale turns into metres), a twist as body speeds."""
     opt = options or BagOptions()
-    rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True,
-                             dt_s=opt.dt_s or model.dt_s)
+    rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True, dt_s=opt.dt_s)
+    radius, ticks = _bag_robot(path, model, opt, rec, print_fn)
+    rec = replace(rec, dt_s=model.dt_s)
+    opt = replace(opt, wheel_radius_m=radius, ticks_per_rad=ticks)
     # the counts go to the EKF as the robot's stream gives them: no unfolding
     grid = _grid(rec, wheel_base_m=model.wheel_base_m, options=opt, encoders="quadrature")
     name = Path(path).name
@@ -288,16 +433,24 @@ def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptio
 
 def replay_source(path: str | os.PathLike, model: MotionModel, *,
                   options: BagOptions | None = None, start_s: float = 0.0,
-                  duration_s: float | None = None) -> tuple[Recording, ReplaySource]:
-    """The bag's drive as :func:`replay_bag` replays it: read once, on the model's grid
-    once, the estimators' source (a lost frame's yaw rate NaN: a new gyro window).
+                  duration_s: float | None = None,
+                  print_fn: Callable[[str], object] | None = None
+                  ) -> tuple[Recording, ReplaySource]:
+    """The bag's drive as :func:`replay_bag` replays it: read once, checked against the
+    model's robot, on the model's grid once, the estimators' source (a lost frame's yaw
+    rate NaN: a new gyro window). ``print_fn`` receives the robot used (default: nothing
+    printed).
 
     Raises
     ------
     FileNotFoundError, BagError
         From the reader and the grid.
+    RobotMismatchError
+        A bag of another robot than the model's (its period, wheel data or the geometry
+        of its ``/robot_description``), both values named.
     """
-    rec, _, src = _model_source(path, model, options, start_s=start_s, duration_s=duration_s)
+    rec, _, src = _model_source(path, model, options, start_s=start_s, duration_s=duration_s,
+                                print_fn=print_fn or (lambda _line: None))
     if src.yaw_rate_rad_s is not None:
         src = replace(src, yaw_rate_rad_s=np.where(src.valid, src.yaw_rate_rad_s, np.nan))
     return rec, src
@@ -324,7 +477,16 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
     opt = options or BagOptions()
-    rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s)
+    rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s,
+                             print_fn=print_fn)
+    if src.has_truth and initial_pose is None and not np.all(np.isfinite(src.truth[0])):
+        late = float(src.t_s[np.flatnonzero(np.isfinite(src.truth[:, 0]))[0]] - src.t_s[0])
+        print_fn(f"{reference_label(rec)} starts {late:.3f} s after the first wheel frame: "
+                 "replaying from its first pose")
+        rec, src = replay_source(path, model, options=opt, start_s=start_s + late,
+                                 duration_s=None if duration_s is None else duration_s - late)
+    if src.has_truth:
+        src = replace(src, truth_label=reference_label(rec))
     if "imu_noise" in rec.meta:
         print_fn(rec.meta["imu_noise"]["summary"])
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
@@ -333,10 +495,15 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
         name = "ekf" if "ekf" in result.pose_covs else next(iter(result.pose_covs), None)
         if name is None:
             raise BagError("--out-bag writes the EKF's estimates; run the ekf estimator")
+        frames = list((rec.meta.get("reference") or {}).get("frames") or ())
+        frame_id = frames[0] if src.has_truth and frames and frames[0] else "odom"
         written = write_estimates_bag(out_bag, _bag_ns(rec.source.start_ns, src.t_s),
                                       result.poses[name], result.pose_covs[name],
-                                      speeds=result.speeds[name], twist_covs=model.R)
-        print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance) to {written}")
+                                      speeds=result.speeds[name], twist_covs=model.R,
+                                      frame_id=frame_id)
+        print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance, frame "
+                 f"{frame_id}{', the reference' + chr(39) + 's' if src.has_truth else ''}) to "
+                 f"{written}")
     return result
 
 
@@ -406,7 +573,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    rec, _, src = _model_source(path, model, options)
+    rec, _, src = _model_source(path, model, options, print_fn=print_fn)
     if src.ticks is not None:
         ticks, yaw = src.ticks, src.yaw_rate_rad_s
     else:                                        # a twist: the counts it stands for

@@ -21,7 +21,9 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
     for kind, what in (("cmd", "Twist or TwistStamped commands"),
                        ("wheels", "JointState wheel angles"),
                        ("odom", "Odometry (its twist, where the bag has no wheel angles)"),
-                       ("imu", "Imu"), ("truth", "PoseStamped reference poses")):
+                       ("imu", "Imu"),
+                       ("truth", "reference poses: PoseStamped (found by type), "
+                                 "PoseWithCovarianceStamped or nav_msgs/Odometry (named)")):
         group.add_argument(f"--{kind}-topic", metavar="TOPIC", help=f"the {what} topic")
     group.add_argument("--truth-parent", metavar="FRAME",
                        help="reference poses from tf: the parent frame (default the first "
@@ -36,15 +38,16 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
     group.add_argument("--ticks-per-rad", type=float, default=None,
                        help="encoder counts per wheel radian: with the wheel radius, the "
                             "encoder scale the model keeps (default: calibrate --robot's "
-                            "description, else the Create 2's, 80.98)")
+                            "description, else 10000, the angles' own resolution; replay and "
+                            "monitor: the model's robot's)")
     if not shared_with_log:
         group.add_argument("--wheel-radius", type=float, default=None,
-                           help="nominal wheel radius [m] (default the Create 2's, 0.036)")
+                           help="nominal wheel radius [m] (default the model's robot's)")
         group.add_argument("--encoders", choices=["commanded", "quadrature"],
-                           default="commanded",
+                           default=None,
                            help="commanded: the angles count in the commanded direction "
-                                "(Roomba, Create 2; default); quadrature: they know the way "
-                                "the wheel turns")
+                                "(Roomba, Create 2); quadrature: they know the way the wheel "
+                                "turns (default)")
     group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
                        help="refuse wheel speeds above this as impossible [m/s] (default 20)")
     group.add_argument("--dt", type=float, default=None,

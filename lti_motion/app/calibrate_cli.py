@@ -49,8 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --log: encoder scale [m/tick] from the robot description")
     parser.add_argument("--wheel-radius", type=float, default=None,
                         help="with --log or --bag: wheel radius [m] for wheel angles or speeds "
-                             "in rad/s (default: the --robot description's; --bag without "
-                             "--robot: the Create 2's, 0.036)")
+                             "in rad/s (default: the --robot description's; --bag: else the "
+                             "bag's /robot_description; none assumed)")
     where.add_argument("--bag", help="a recorded ROS bag (ROS 1 .bag, or a ROS 2 folder with a "
                                      ".db3 or .mcap file): fit the ARX model on its drive "
                                      "(docs/guide_ros_bags.md)")
@@ -62,7 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="robot seconds per wall second: 1 for a real robot, the --speed "
                              "of a faster virtual Roomba")
     parser.add_argument("--wheel-base", type=float, default=None,
-                        help="nominal wheel base [m] (default: the --robot description's, else "
+                        help="nominal wheel base [m] (default: the --robot description's; "
+                             "--bag: else the bag's /robot_description, none assumed; else "
                              "0.235, the Create 2)")
     parser.add_argument("--floor", help="floor name recorded in the model (default: hard, or "
                         f"the robot's) and simulated with --robot: {', '.join(FLOOR_NAMES)}")

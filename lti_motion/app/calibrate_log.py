@@ -12,19 +12,21 @@ given on the command line, and the output says so.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from lti_motion.calibration import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
 from lti_motion.recordings import Recording, load_recording
+from lti_motion.robot_description import ANGLE_COUNTS_PER_RAD, RobotDescription
 
-__all__ = ["RobotDescription", "run_calibrate_log", "run_calibrate_recording"]
+__all__ = ["LogRobot", "run_calibrate_log", "run_calibrate_recording"]
 
 
 @dataclass(frozen=True)
-class RobotDescription:
-    """What the command line says about the robot [m, m/tick].
+class LogRobot:
+    """What the command line says about the robot [m, m/tick] (kept in the model as its
+    :class:`~lti_motion.robot_description.RobotDescription`).
 
     Attributes
     ----------
@@ -36,12 +38,15 @@ class RobotDescription:
         ``--wheel-radius``, else the ``--robot`` description's nominal radius.
     source : str
         Where the scale came from, for the output.
+    name : str or None
+        The robot's name (``--robot``'s).
     """
 
     wheel_base_m: float
     m_per_tick: float | None
     wheel_radius_m: float | None
     source: str
+    name: str | None = None
 
     def __post_init__(self) -> None:
         for flag, value in (("--wheel-base", self.wheel_base_m),
@@ -53,7 +58,7 @@ class RobotDescription:
                                  f"got {value}")
 
 
-def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
+def _scale_for(rec: Recording, robot: LogRobot) -> dict:
     """The scale keyword the recording's wheel kind needs, or a command-line error."""
     if rec.wheel_kind == "counts":
         if robot.m_per_tick is None:
@@ -68,11 +73,14 @@ def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
             raise ValueError(f"this log holds {rec.wheel_kind.replace('_', ' ')}: give "
                              "--wheel-radius (metres, from the robot description) or "
                              "--robot NAME_OR_FILE")
+        if rec.wheel_kind == "wheel_angles_rad":   # counted as calibrate --bag counts them
+            return {"wheel_radius_m": robot.wheel_radius_m,
+                    "m_per_tick": robot.wheel_radius_m / ANGLE_COUNTS_PER_RAD}
         return {"wheel_radius_m": robot.wheel_radius_m}
     return {}
 
 
-def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
+def run_calibrate_log(path: str, robot: LogRobot, *, out: Path,
                       floor: str | None = None) -> tuple[OfflineCalibration, list[str]]:
     """Calibrate from a log file; write the model and report only when all went well.
 
@@ -92,16 +100,25 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
     return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor)
 
 
-def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Path,
+def run_calibrate_recording(rec: Recording, robot: LogRobot, *, out: Path,
                             floor: str | None = None
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
     odometry twist, :func:`drivers.bags.read_bag`)."""
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
+    encoders = "commanded" if frames_v1 else "quadrature"
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
-                              encoders="commanded" if frames_v1 else "quadrature",
-                              floor=floor, **scale)
+                              encoders=encoders, floor=floor, **scale)
+    described = RobotDescription(
+        wheel_data=rec.wheel_kind, wheel_base_m=robot.wheel_base_m, dt_s=cal.model.dt_s,
+        encoders=encoders, m_per_tick=scale.get("m_per_tick", cal.m_per_tick),
+        ticks_per_rad=ANGLE_COUNTS_PER_RAD if rec.wheel_kind == "wheel_angles_rad" else None,
+        wheel_radius_m=scale.get("wheel_radius_m"), counter_bits=rec.counter_bits,
+        robot=robot.name or (Path(rec.source.path).name if rec.source is not None else None),
+        sources={"m_per_tick" if rec.wheel_kind == "counts" else "wheel_radius_m":
+                 cal.scale_from, "wheel_base_m": robot.source})
+    cal = replace(cal, model=cal.model.updated(robot=described))
     lines = cal.report.lines()
     if cal.scale_measured:
         lines.append(f"encoder scale: m_per_tick = {cal.m_per_tick:.6g}, measured by "

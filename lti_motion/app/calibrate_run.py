@@ -16,6 +16,7 @@ What the command promises (docs/guide_calibrate_real_robot.md):
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -187,7 +188,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
     try:
         cal = _drive(args, plan, recorded, after_stage)
-        return _save(cal, out, accept_unhealthy=args.accept_unhealthy)
+        return _save(_with_robot(cal, args), out, accept_unhealthy=args.accept_unhealthy)
     except KeyboardInterrupt:
         print(f"\nlti-motion calibrate: stopped by Ctrl-C; the wheels were commanded to "
               f"stop; {_kept_text(out)}", file=sys.stderr)
@@ -196,6 +197,33 @@ def run_calibrate(args: argparse.Namespace) -> int:
     except (OSError, ValueError, PassiveModeError) as exc:
         _remove_if_empty(out, created=created)
         raise OSError(f"{exc}; {_kept_text(out)}") from exc
+
+
+def _with_robot(cal: Calibration, args: argparse.Namespace) -> Calibration:
+    """Both models with the robot they were driven on: raw 16-bit counts counted in the
+    commanded direction (the Open Interface's, the simulator's), the measured encoder scale,
+    the wheel base and the period (:class:`~lti_motion.robot_description.RobotDescription`)."""
+    from dataclasses import replace
+
+    from drivers.sim import load_robot
+    from lti_motion.robot_description import RobotDescription
+
+    described = load_robot(args.sim) if args.sim else None
+    log = next(iter(cal.logs.values()), None)
+    bits = int(log.counter_bits) if log is not None else 16
+    name = described.name if described is not None else f"the robot on {args.port}"
+    where = f"--robot {args.sim}" if args.sim else f"--port {args.port}"
+    radius = described.wheel_diameter_m / 2 if described is not None else None
+    robot = RobotDescription(
+        wheel_data="counts", wheel_base_m=cal.arx.wheel_base_m, dt_s=cal.arx.dt_s,
+        encoders="commanded", m_per_tick=cal.m_per_tick, wheel_radius_m=radius,
+        ticks_per_rad=None if described is None else described.ticks_per_rev / (2 * math.pi),
+        counter_bits=None if bits >= 63 else bits, robot=name,
+        sources={"m_per_tick": "measured by the rotation in place (paper eq. 13)",
+                 "wheel_base_m": ("--wheel-base" if getattr(args, "wheel_base", None)
+                                  else f"the robot description ({where})"),
+                 "dt_s": "the robot's sensor period"})
+    return replace(cal, arx=cal.arx.updated(robot=robot), fir=cal.fir.updated(robot=robot))
 
 
 def _remove_if_empty(out: Path, *, created: bool) -> None:

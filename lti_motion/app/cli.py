@@ -47,6 +47,7 @@ import os
 import re
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 # The command's numpy runs OpenBLAS on one thread unless the user set OPENBLAS_NUM_THREADS
@@ -73,7 +74,7 @@ __all__ = ["main"]
 
 def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
-    from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
+    from lti_motion.app.calibrate_log import LogRobot, run_calibrate_log
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
 
     described = load_robot(args.sim) if args.sim else None
@@ -83,7 +84,8 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
         source = f"the nominal {described.name} description (--robot)"
     else:
         source = "the robot description (none given)"
-    robot = RobotDescription(
+    robot = LogRobot(
+        name=described.name if described is not None else None,
         wheel_base_m=nominal_wheel_base_m(args, described),
         m_per_tick=args.m_per_tick if args.m_per_tick is not None
         else (described.m_per_tick if described else None),
@@ -107,12 +109,18 @@ def _bag_options(args: argparse.Namespace):
         if value is not None and not value > 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value:g}")
     ticks_per_rad, wheel_radius_m = args.ticks_per_rad, args.wheel_radius
-    if getattr(args, "sim", None):                  # calibrate --robot: its description
-        described = load_robot(args.sim)
+    sources = {k: f"--{flag}" for k, flag, v in (
+        ("ticks_per_rad", "ticks-per-rad", ticks_per_rad),
+        ("wheel_radius_m", "wheel-radius", wheel_radius_m)) if v is not None}
+    described = _robot_file(args)
+    if described is not None:                       # a robot file: its description
+        from drivers.sim import robot_geometry
+
+        g = robot_geometry(described)
         if ticks_per_rad is None:
-            ticks_per_rad = described.ticks_per_rev / (2 * math.pi)
+            ticks_per_rad, sources["ticks_per_rad"] = g.ticks_per_rad, f"the {g.source}"
         if wheel_radius_m is None:
-            wheel_radius_m = described.wheel_diameter_m / 2
+            wheel_radius_m, sources["wheel_radius_m"] = g.wheel_radius_m, f"the {g.source}"
     extra = {k: v for k, v in (("ticks_per_rad", ticks_per_rad),
                                ("wheel_radius_m", wheel_radius_m), ("dt_s", args.dt),
                                ("max_wheel_m_s", args.max_wheel_speed))
@@ -122,18 +130,41 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders or "commanded", gyro=gyro, **extra)
+                      encoders=args.encoders, gyro=gyro, sources=sources, **extra)
+
+
+def _robot_file(args: argparse.Namespace) -> str | None:
+    """The robot file (or preset) a command names: calibrate's --robot, replay's --robot
+    NAME_OR_FILE (a number there is an MRCLAM robot or a batch log's index)."""
+    if getattr(args, "sim", None):
+        return args.sim
+    robot = getattr(args, "robot", None)
+    return robot if isinstance(robot, str) else None
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
-    from lti_motion.app.calibrate_run import nominal_wheel_base_m
+    from lti_motion.app.bag_commands import (
+        calibrate_from_bag,
+        check_commands,
+        load_bag_recording,
+        plot_bag_fit,
+    )
+    from lti_motion.app.bag_robot import bag_geometry
     from lti_motion.app.plots import plot_order_selection
 
     out = Path(args.out)
-    described = load_robot(args.sim) if args.sim else None
-    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                  options=_bag_options(args), floor=args.floor)
+    options = _bag_options(args)
+    rec = load_bag_recording(args.bag, options=options, imu=False, truth=False)
+    check_commands(args.bag, rec)
+    angles = rec.wheel_kind == "wheel_angles_rad"
+    geometry = bag_geometry(args, angles=angles)
+    for line in geometry.lines(angles=angles):
+        print(line)
+    options = replace(options, wheel_radius_m=geometry.wheel_radius_m,
+                      ticks_per_rad=geometry.ticks_per_rad, encoders=geometry.encoders)
+    cal, rec = calibrate_from_bag(args.bag, wheel_base_m=geometry.wheel_base_m,
+                                  options=options, floor=args.floor, recording=rec,
+                                  robot_name=geometry.robot, sources=geometry.sources)
     model, grid = cal.model, cal.grid
     if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
@@ -148,7 +179,8 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
     lines = [*cal.report.lines(),
              f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
              f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
-             f"w {cal.fit_percent[1]:.1f} %"]
+             f"w {cal.fit_percent[1]:.1f} %",
+             f"robot description kept in the model: {model.robot.describe()}"]
     for line in lines:
         print(line)
     out.mkdir(parents=True, exist_ok=True)
@@ -298,6 +330,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     else:
         from drivers.exceptions import PassiveModeError
 
+        _check_port_robot(model, args.port)
         try:
             live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
                                      clock_rate=args.clock_rate, listen=args.listen,
@@ -306,6 +339,20 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
     return 0
+
+
+def _check_port_robot(model, port: str) -> None:
+    """``monitor --port``: a Roomba streams raw 16-bit counts, counted in the commanded
+    direction, every 15 ms; a model of another robot is refused in one line."""
+    if model.robot is None:                 # a model file before version 3: nothing to check
+        return
+    from drivers.roomba import STREAM_PERIOD_S
+    from lti_motion.robot_description import RobotDescription
+
+    roomba = RobotDescription(wheel_data="counts", wheel_base_m=model.robot.wheel_base_m,
+                              dt_s=STREAM_PERIOD_S, encoders="commanded", counter_bits=16)
+    model.robot.check(roomba, mine=f"the model's robot ({model.robot.robot})",
+                      theirs=f"the Roomba on {port}")
 
 
 def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
@@ -334,7 +381,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise ValueError(f"unknown --to {args.to!r}; give one of "
                          f"{', '.join(export_cli.TARGET_NAMES)}")
     model = _load_model(args.model)
-    text = export_text(model, args.to, nominal=_nominal(args), model_name=args.model,
+    text = export_text(model, args.to, nominal=_nominal(args, model.robot),
+                       model_name=args.model,
                        publish_rate_hz=args.publish_rate, frequency_hz=args.frequency,
                        node=args.node)
     if model.odometry_errors is None:                # one line, beside the file's comment
@@ -356,29 +404,38 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
-def _nominal(args: argparse.Namespace):
-    """``export``: the nominal geometry from the flags, over a URDF, over a robot file."""
+def _nominal(args: argparse.Namespace, robot=None):
+    """``export``: the nominal geometry from the flags, over a URDF, over a robot file, over
+    the model's robot (``robot``, :attr:`MotionModel.robot`)."""
     from lti_motion.app.ros_config import CREATE2_TICKS_PER_REV, Nominal
 
     radius = separation = left = right = None
     sources, ticks, ticks_source = [], CREATE2_TICKS_PER_REV, (
         f"{CREATE2_TICKS_PER_REV:g}, the Create 2's (default; --ticks-per-rev)")
+    if robot is not None and robot.wheel_radius_m is not None:   # the model's own robot
+        radius, separation = sum(robot.wheel_radius_m) / 2, robot.wheel_base_m
+        sources.append(f"the model's robot ({robot.robot})")
+        if robot.ticks_per_rev is not None:
+            ticks = robot.ticks_per_rev
+            ticks_source = f"{ticks:g}, the model's robot's"
     if (args.left_joint or args.right_joint) and not args.urdf:
         raise ValueError("--left-joint and --right-joint name the wheel joints of --urdf; "
                          "give --urdf FILE")
     if args.robot:
-        robot = load_robot(args.robot)
-        radius, separation = robot.wheel_diameter_m / 2, robot.wheel_base_m
-        ticks, ticks_source = robot.ticks_per_rev, f"{robot.ticks_per_rev:g}, {robot.name}'s"
-        sources.append(f"the robot file {args.robot}")
+        described = load_robot(args.robot)
+        radius, separation = described.wheel_diameter_m / 2, described.wheel_base_m
+        ticks, ticks_source = (described.ticks_per_rev,
+                               f"{described.ticks_per_rev:g}, {described.name}'s")
+        sources = [f"the robot file {args.robot}"]          # over the model's robot
     if args.urdf:
-        from lti_motion.app.urdf import read_urdf_wheels
+        from drivers.bags import read_urdf_wheels
 
         wheels = read_urdf_wheels(args.urdf, left_joint=args.left_joint,
                                   right_joint=args.right_joint)
         radius, separation = wheels.wheel_radius_m, wheels.wheel_separation_m
         left, right = wheels.left_joint, wheels.right_joint
-        sources.append(f"the URDF {args.urdf} (joints {left}, {right})")
+        sources = [*(s for s in sources if not s.startswith("the model's robot")),
+                   f"the URDF {args.urdf} (joints {left}, {right})"]
     if args.wheel_radius is not None:
         radius = args.wheel_radius
         sources.append("--wheel-radius")
@@ -483,7 +540,11 @@ def _check_args(args: argparse.Namespace) -> None:
         positive("--duration-s", args.duration_s)
         if not (math.isfinite(args.start_s) and args.start_s >= 0):
             raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
-        if args.robot is not None and args.robot < 0:
+        if isinstance(args.robot, str) and not args.bag:
+            raise ValueError(f"--robot {args.robot} describes the robot of a --bag's wheel "
+                             "angles; a log's counts are read with the model's encoder scale "
+                             "(give a robot number for an MRCLAM run or a batch log)")
+        if isinstance(args.robot, int) and args.robot < 0:
             raise ValueError(f"--robot must be 0 or more, got {args.robot}")
     elif args.command == "demo" and args.runs < 1:
         raise ValueError(f"--runs must be 1 or more, got {args.runs}")

@@ -1,5 +1,5 @@
 """The options of ``lti-motion export`` (the parameters themselves:
-:mod:`lti_motion.app.ros_config`; a URDF's wheels: :mod:`lti_motion.app.urdf`).
+:mod:`lti_motion.app.ros_config`; a URDF's wheels: :mod:`drivers.bags.urdf`).
 
 Light on purpose: ``lti-motion --help`` builds every sub-command's parser, and this
 module imports no numerical machinery.

@@ -217,6 +217,49 @@ def _calibrate_runs(args: argparse.Namespace, options: dict) -> IntrinsicsCalibr
                                      turns=runs.turns.tolist(), **options)
 
 
+def _wheel_counts(path: str) -> tuple:
+    """A log's wheel record for the intrinsics: a version-1 log's (or version-2 Roomba
+    frames') valid counts; a version-2 recording's counts unwrapped on its counter, or its
+    wheel angles as float counts in radians (the scale then reads metres per radian: each
+    wheel's radius), with a line saying so. Wheel or body speeds are refused in one line.
+
+    Returns
+    -------
+    t_s : ndarray, shape (n,)
+    counts : ndarray, shape (n, 2)
+    note : str or None
+        What the counts are, when not the robot's raw ticks.
+    """
+    import numpy as np
+
+    from lti_motion.exceptions import LogFileError
+    from lti_motion.recordings import load_log, load_recording, unwrap_ticks
+
+    try:
+        log = load_log(path)
+    except LogFileError:
+        rec = load_recording(path)          # a version-2 recording of any drive (or the error)
+    else:
+        if np.ndim(log.t_s) != 1:
+            raise ValueError(f"{path} holds {np.shape(log.t_s)[0]} robots; calibrate one "
+                             "robot's log")
+        return log.t_s[log.valid], log.ticks[log.valid], None
+    ok = rec.wheel_valid
+    if rec.wheel_kind == "counts":
+        counts = np.asarray(rec.wheel.values)[ok]
+        if rec.counter_bits is not None:
+            counts = unwrap_ticks(counts.astype(np.int64), counter_bits=rec.counter_bits)
+        return rec.wheel.t_s[ok], np.asarray(counts, float), (
+            f"{path}: a version-2 recording's counts, unwrapped on its "
+            f"{rec.counter_bits or 64}-bit counters")
+    if rec.wheel_kind == "wheel_angles_rad":
+        return rec.wheel.t_s[ok], np.asarray(rec.wheel.values)[ok], (
+            f"{path} holds wheel angles: the counts below are radians, so each wheel's "
+            "'m/tick' is its radius [m] (metres per radian)")
+    raise ValueError(f"{path} holds {rec.wheel_kind.replace('_', ' ')}; the intrinsics need "
+                     "wheel counts or angles")
+
+
 def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     """Handler of ``lti-motion calibrate --log LOG --reference FILE`` and of
     ``lti-motion calibrate --reference SAMPLES``; returns the exit code.
@@ -234,7 +277,6 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
     from lti_motion.calibration import calibrate_intrinsics, calibrate_intrinsics_intervals
     from lti_motion.recordings import (
         is_end_pose_runs,
-        load_log,
         read_motion_intervals,
         read_tum,
     )
@@ -268,20 +310,19 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
             if not args.log:
                 raise ValueError(f"{args.reference} is a trajectory: it goes with --log LOG.npz "
                                  "(the recorded drive it refers to)")
-            log = load_log(args.log)
-            if np.ndim(log.t_s) != 1:
-                raise ValueError(f"{args.log} holds {np.shape(log.t_s)[0]} robots; calibrate "
-                                 "one robot's log")
+            t_wheel, counts, note = _wheel_counts(args.log)
             try:
                 t_ref, poses = read_tum(args.reference)
             except ValueError as exc:
                 raise ValueError(f"{args.reference} is not a TUM trajectory (t x y z qx qy qz "
                                  f"qw per line): {exc}") from None
+            if note is not None:
+                print(note)
+                options["encoders"] = "quadrature"
             if args.encoders is not None:
                 options["encoders"] = args.encoders
-            keep = log.valid
-            cal = calibrate_intrinsics(log.t_s[keep], log.ticks[keep],
-                                       t_ref + args.reference_offset, poses, **options)
+            cal = calibrate_intrinsics(t_wheel, counts, t_ref + args.reference_offset, poses,
+                                       **options)
             sources = {"log": str(args.log), "reference": str(args.reference)}
     except ValueError as exc:
         raise type(exc)(_option_words(str(exc))) from None

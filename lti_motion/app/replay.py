@@ -396,25 +396,26 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
     print_fn(f"replaying {src.name}: {len(src)} frames, {src.t_s[-1] - src.t_s[0]:.1f} s, "
              f"{src.wheel_readings or 'no encoders'}, "
              f"{n_sight} landmark sightings, "
-             f"{'ground truth' if src.has_truth else 'no ground truth'}")
+             f"{('reference: ' + src.truth_label) if src.has_truth else 'no reference poses'}")
     if src.yaw_rate_rad_s is not None:
         noise = gyro_noise(src).noise_density_rad_s_sqrt_hz
         print_fn(f"gyro noise density {noise:.3g} rad/s/sqrt(Hz), "
                  + ("the recording's" if src.gyro_density_rad_s_sqrt_hz is not None
                     else "the default (the recording states none)"))
-    started = ("the first ground-truth pose" if initial_pose is None and src.has_truth
-               and np.all(np.isfinite(src.truth[0])) else "the given pose" if initial_pose
-               is not None else "the origin")
-    print_fn(f"estimators start at {started}; they never read the truth after that")
+    started = (f"the first pose of {src.truth_label}" if initial_pose is None
+               and src.has_truth and np.all(np.isfinite(src.truth[0])) else "the given pose"
+               if initial_pose is not None else "the origin")
+    print_fn(f"estimators start at {started}; they never read the reference after that")
     poses, extra, covs, speeds = _estimate(src, model, names, initial_pose=initial_pose)
     metrics = {name: {**evaluate(src, p, rpe_s=rpe_s), **extra.get(name, {})}
                for name, p in poses.items()}
     for line in _table(src, metrics):
         print_fn("  " + line)
     if src.has_truth:
-        print_fn(f"  (ATE without alignment; RPE over {rpe_s:g} s; Sturm et al. 2012)")
+        print_fn(f"  (ATE and RPE against {src.truth_label}, without alignment; RPE over "
+                 f"{rpe_s:g} s; Sturm et al. 2012)")
     else:
-        print_fn("  no ground truth in this recording: no ATE or RPE. Start-to-end distance "
+        print_fn("  no reference poses in this recording: no ATE or RPE. Start-to-end distance "
                  "is the closure offset if the drive ended where it began")
     for name, counts in extra.items():
         enc = (f"{counts['encoders_gated']} {'encoder' if src.ticks is not None else 'twist'}"

@@ -36,9 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fit-first-half", action="store_true",
                         help="MRCLAM only, instead of --model: fit an ARX model on the first half "
                              "of the robot's run and replay the second half")
-    parser.add_argument("--robot", type=int, default=None,
+    parser.add_argument("--robot", type=_robot, default=None, metavar="N_OR_FILE",
                         help="MRCLAM robot number 1-5 (default 1), or robot index of a batch log "
-                             "(default 0)")
+                             "(default 0); with --bag, a robot file or preset whose wheel "
+                             "radius and ticks per revolution read the wheel angles, over the "
+                             "model's robot (docs/robot_file.md)")
     parser.add_argument("--out", default="out/replay", help="output folder (default out/replay)")
     parser.add_argument("--estimators", nargs="+", metavar="NAME",
                         choices=["odometry", "commands", "sensorless", "ekf", "ekf_landmarks"],
@@ -57,3 +59,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "estimated; it helps where the wheels slip, and can cost on a hard "
                              "floor: docs/ekf.md)")
     add_bag_options(parser)
+
+
+def _robot(text: str) -> int | str:
+    """``--robot``: a whole number (an MRCLAM robot, a batch log's index), else a robot file
+    or preset name."""
+    try:
+        return int(text)
+    except ValueError:
+        return text

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Hashable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 
@@ -21,6 +21,7 @@ from drivers.exceptions import DatasetError
 from fusion.landmark_map import LandmarkMap
 from fusion.noise import LandmarkNoise
 from fusion.range_bearing import RangeBearing
+from lti_motion.exceptions import LogFileError, MissingEncoderScaleError, RobotMismatchError
 from lti_motion.kinematics import wheel_from_body
 from lti_motion.model import MotionModel
 from lti_motion.recordings import (
@@ -30,9 +31,11 @@ from lti_motion.recordings import (
     commands_at,
     frame_stamps,
     load_log,
+    load_recording,
     poses_at,
     stream_clock,
 )
+from lti_motion.robot_description import PERIOD_TOLERANCE, WHEEL_DATA, RobotDescription
 
 __all__ = [
     "ESTIMATORS",
@@ -44,6 +47,7 @@ __all__ = [
     "source_from_grid",
     "source_from_log",
     "source_from_mrclam",
+    "source_from_recording",
     "source_from_wheel_grid",
 ]
 
@@ -95,12 +99,16 @@ class ReplaySource:
         The gyro's white-noise density the recording states [rad/s/sqrt(Hz)] (a
         bag Imu's ``angular_velocity_covariance``, :mod:`drivers.bags.imu_noise`);
         ``None``: not stated.
+    truth_label : str
+        What the reference poses are, for people: ``"ground truth"`` (a simulator's, a
+        data set's motion capture), or a bag's topic or tf frames and what they are
+        (``"the robot's odometry (/odom, nav_msgs/Odometry, frame odom)"``).
     body_speeds : ndarray, shape (n, 2), or None
         Measured body speeds (v [m/s], w [rad/s]) of the period each frame closes, for a
         robot that records its own odometry's twist and no wheel readings
         (:func:`source_from_grid`); ``None`` otherwise.
     truth : ndarray, shape (n, 3), or None
-        Ground-truth poses (x [m], y [m], theta [rad]); NaN rows where none.
+        Reference poses (x [m], y [m], theta [rad]); NaN rows where none.
     sightings : RangeBearing
         Landmark observations, ``index`` = frame index (none: empty).
     landmarks : LandmarkMap or None
@@ -124,6 +132,7 @@ class ReplaySource:
     yaw_rate_rad_s: np.ndarray | None = None
     gyro_density_rad_s_sqrt_hz: float | None = None
     body_speeds: np.ndarray | None = None
+    truth_label: str = "ground truth"
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -510,6 +519,87 @@ def load_source(path: str | os.PathLike, model: MotionModel, *, robot: int | Non
         return source_from_mrclam(path, robot=1 if robot is None else robot, dt_s=model.dt_s,
                                   wheel_base_m=model.wheel_base_m, start_s=start_s,
                                   duration_s=duration_s)
-    return source_from_log(path, robot=robot, start_s=start_s, duration_s=duration_s)
+    try:
+        rec = load_recording(path)
+    except LogFileError:                    # a batch of robots, or damage: said below
+        rec = None
+    if rec is not None and not _frames(rec):    # not Roomba frames: onto the model's grid
+        if robot not in (None, 0):
+            raise ValueError(f"{path.name} holds one robot's drive; there is no robot "
+                             f"{robot} (leave out --robot)")
+        return source_from_recording(rec, model, path.name, start_s=start_s,
+                                     duration_s=duration_s)
+    src = source_from_log(path, robot=robot, start_s=start_s, duration_s=duration_s)
+    if model.robot is not None:             # Roomba / simulator frames: 16-bit-like counts
+        model.robot.check(RobotDescription(
+            wheel_data="counts", wheel_base_m=model.robot.wheel_base_m, dt_s=src.dt_s,
+            encoders=model.robot.encoders,
+            counter_bits=None if src.counter_bits >= 63 else src.counter_bits),
+            mine=f"the model's robot ({model.robot.robot})", theirs=path.name)
+    return src
+
+
+def _frames(rec: Recording) -> bool:
+    """Whether a recording is Roomba / simulator frames (:meth:`Recording.to_frame_log`)."""
+    try:
+        rec.to_frame_log()
+    except ValueError:
+        return False
+    return True
+
+
+def source_from_recording(rec: Recording, model: MotionModel, name: str, *,
+                          start_s: float = 0.0, duration_s: float | None = None
+                          ) -> ReplaySource:
+    """A version-2 recording of any differential drive (wheel angles, wheel or body speeds,
+    counts with stamped commands) as a :class:`ReplaySource` on the model's grid
+    (:func:`lti_motion.recordings.on_grid`), its wheels counted in the model's encoder scale,
+    as a bag's are (:mod:`lti_motion.app.bag_commands`).
+
+    Raises
+    ------
+    RobotMismatchError
+        A recording of another robot than the model's (period beyond
+        :data:`~lti_motion.robot_description.PERIOD_TOLERANCE`; another kind of wheel data).
+    ValueError
+        Wheel angles or speeds [rad/s] and a model without a robot description giving the
+        wheel radius; counts and a model without an encoder scale.
+    """
+    from lti_motion.recordings import on_grid
+
+    robot = model.robot
+    if abs(rec.dt_s - model.dt_s) > PERIOD_TOLERANCE * model.dt_s:
+        raise RobotMismatchError(
+            f"{name} has a sensor period of {rec.dt_s * 1e3:.4g} ms, the model "
+            f"{model.dt_s * 1e3:.4g} ms (more than {PERIOD_TOLERANCE:.0%} apart): a model of "
+            "another robot?")
+    if robot is not None and robot.wheel_data != rec.wheel_kind and not (
+            rec.wheel_kind == "body_speeds" or robot.wheel_data == "body_speeds"):
+        raise RobotMismatchError(f"{name} has {WHEEL_DATA[rec.wheel_kind]}, the model's robot "
+                                 f"({robot.robot}) {WHEEL_DATA[robot.wheel_data]}")
+    rec = replace(rec, dt_s=model.dt_s)
+    if rec.wheel_kind == "body_speeds":
+        grid = on_grid(rec, wheel_base_m=model.wheel_base_m)
+        return source_from_grid(grid, name, dt_s=model.dt_s, start_s=start_s,
+                                duration_s=duration_s)
+    scale = model.encoder_intrinsics
+    if scale is None:
+        raise MissingEncoderScaleError.needed_by(f"replaying the wheels of {name}")
+    m_per_tick = (scale.m_per_tick_left, scale.m_per_tick_right)
+    radius = None
+    if rec.wheel_kind in ("wheel_angles_rad", "wheel_speeds_rad_s"):
+        if robot is None or robot.wheel_radius_m is None:
+            raise ValueError(f"{name} holds {WHEEL_DATA[rec.wheel_kind]} and the model holds "
+                             "no wheel radius (a model file before version 3): calibrate it "
+                             "on this robot with 'lti-motion calibrate --log --wheel-radius'")
+        radius = sum(robot.wheel_radius_m) / 2
+    grid = on_grid(rec, wheel_base_m=model.wheel_base_m,
+                   m_per_tick=model.m_per_tick if rec.wheel_kind == "counts" else None,
+                   wheel_radius_m=radius,
+                   periods_by="stamps_and_travel" if rec.wheel_kind in (
+                       "counts", "wheel_angles_rad") else "stamps")
+    return source_from_wheel_grid(rec, grid, name, m_per_tick=m_per_tick,
+                                  wheel_base_m=model.wheel_base_m, dt_s=model.dt_s,
+                                  start_s=start_s, duration_s=duration_s)
 
 

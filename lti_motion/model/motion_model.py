@@ -70,6 +70,7 @@ from lti_motion.model.fir_steps import fir_from_steps
 from lti_motion.model.state_space import StateSpace, simulate_state_space
 from lti_motion.odometry_errors import OdometryErrors
 from lti_motion.persistence import decode_array, encode_array, read_document, write_document
+from lti_motion.robot_description import RobotDescription
 
 __all__ = [
     "COVARIANCE_JITTER",
@@ -91,10 +92,12 @@ _log = logging.getLogger(__name__)
 COVARIANCE_JITTER = 1e-12
 #: Format name and version of saved models. Version 2 adds ``"intrinsics"`` (each
 #: wheel's scale and the wheel base, or null) and ``"offset_speeds"`` (the affine term of
-#: the speeds); version 1 files are still read (no intrinsics, a zero offset).
+#: the speeds); version 3 adds ``"robot"`` (the robot description the recording's wheel
+#: data became travel with, :class:`~lti_motion.robot_description.RobotDescription`, or
+#: null); versions 1 and 2 are still read (no intrinsics, a zero offset; no robot).
 FORMAT = "lti-motion/motion-model"
-VERSION = 2
-READ_VERSIONS = (1, 2)
+VERSION = 3
+READ_VERSIONS = (1, 2, 3)
 
 
 def noise_covariances(k: np.ndarray, r: np.ndarray, *, q_scale: float = 1.0
@@ -244,6 +247,11 @@ class MotionModel:
         Encoder odometry's error model measured with :attr:`intrinsics` against a pose
         reference (:mod:`lti_motion.odometry_errors`): what its dead-reckoned pose
         covariance grows with. None when not measured (files without the key).
+    robot : RobotDescription or None
+        The robot the model was calibrated on: how its recording's wheel data became
+        travel (wheel data, encoders, counts per radian, radii, m/count, wheel base,
+        counter width, period) and where each number came from; ``None`` for a model
+        built without one and for files before version 3.
 
     Notes
     -----
@@ -304,6 +312,7 @@ class MotionModel:
     selection: ArxSelection | None = field(default=None, repr=False)
     offset_speeds: np.ndarray = field(default_factory=lambda: np.zeros(2))
     odometry_errors: OdometryErrors | None = None
+    robot: RobotDescription | None = None
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
@@ -340,6 +349,9 @@ class MotionModel:
                                                                OdometryErrors):
             raise ValueError(f"odometry_errors must be an OdometryErrors or None, got "
                              f"{type(self.odometry_errors).__name__}")
+        if self.robot is not None and not isinstance(self.robot, RobotDescription):
+            raise ValueError(f"robot must be a RobotDescription or None, got "
+                             f"{type(self.robot).__name__}")
         setf(self, "offset_speeds", _frozen(self.offset_speeds))
         if self.offset_speeds.shape != (2,) or not np.all(np.isfinite(self.offset_speeds)):
             raise ValueError(f"offset_speeds must be 2 finite numbers (v [m/s], w [rad/s]), "
@@ -653,6 +665,7 @@ class MotionModel:
             "matrices": {n: encode_array(getattr(self, n)) for n in "ABCDKQR"},
             "intrinsics": None if self.intrinsics is None else self.intrinsics.as_dict(),
             "offset_speeds": encode_array(self.offset_speeds),
+            "robot": None if self.robot is None else self.robot.as_dict(),
         }
         if self.odometry_errors is not None:          # optional: older readers ignore it
             payload["odometry_errors"] = self.odometry_errors.as_dict()
@@ -678,6 +691,8 @@ class MotionModel:
         missing += [f"matrices.{n}" for n in "ABCDKQR" if n not in matrices]
         if doc["version"] >= 2:
             missing += [k for k in ("intrinsics", "offset_speeds") if k not in doc]
+        if doc["version"] >= 3 and "robot" not in doc:
+            missing.append("robot")
         if missing:
             raise ModelFileError(f"{path} lacks the keys {missing}; it is not a model file "
                                  "that lti-motion wrote")
@@ -685,8 +700,11 @@ class MotionModel:
             intrinsics = doc.get("intrinsics")
             if intrinsics is not None:
                 intrinsics = OdometryIntrinsics(**intrinsics)
+            robot = doc.get("robot")
+            if robot is not None:
+                robot = RobotDescription.from_dict(robot)
             return cls(
-                intrinsics=intrinsics,
+                intrinsics=intrinsics, robot=robot,
                 kind=doc["kind"], dt_s=doc["dt_s"], wheel_base_m=doc["wheel_base_m"],
                 m_per_tick=doc["m_per_tick"], floor=doc["floor"],
                 calibrated_at=doc["calibrated_at"], q_scale=doc["q_scale"],

@@ -169,7 +169,8 @@ def test_the_cli_refuses_an_imu_without_rate_with_gyro(tmp_path, capsys, ekf_exa
     bag = _raw_bag(tmp_path / "n.bag", store, 10**9 + np.arange(100) * 20_000_000,
                    10**9 + np.arange(100) * 20_000_000, [-1.0] * 100)
     model = ekf_example_model.save(tmp_path / "model_arx.json")
-    argv = [command, "--bag", str(bag), "--model", str(model)]
+    # the bag's 20 ms resampled to the model's 15 ms, as asked (--dt)
+    argv = [command, "--bag", str(bag), "--model", str(model), "--dt", "0.015"]
     if command == "replay":
         argv += ["--out", str(tmp_path / "out")]
     assert main([*argv, "--gyro"]) == 2

@@ -101,6 +101,21 @@ def test_counters_of_any_width_wrap_in_the_simulator_and_unwrap_in_the_odometry(
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_real_robots_file_needs_no_simulator_field(tmp_path):
+    from drivers.sim.robot_file import robot_geometry
+
+    text = _replace(_replace(MINIMAL, "[delay]\ndelay_periods = 3\n", ""),
+                    "[mass]\nmass_kg = 4.5\n", "")
+    text = _replace(text, "ticks_per_rev = 1000", 'ticks_per_rev = 4096\nkind = "quadrature"')
+    g = robot_geometry(_write(tmp_path, text))
+    assert (g.name, g.period_s, g.wheel_base_m, g.wheel_radius_m) == ("mybot", 0.02, 0.3, 0.035)
+    assert (g.ticks_per_rev, g.encoders, g.counter_bits) == (4096, "quadrature", None)
+    # the simulator still runs it, on the create2 values for what the file leaves out
+    params = load_robot(_write(tmp_path, text, "real.toml"))
+    assert (params.mass_kg, params.delay_periods) == (RobotParams().mass_kg,
+                                                      RobotParams().delay_periods)
+
+
 def test_json_and_toml_of_the_same_robot_agree(tmp_path):
     doc = tomllib.loads(MINIMAL)
     doc["floor"] = {"default": "carpet"}
@@ -181,7 +196,7 @@ BAD = [
      "got 'many'"),
     (lambda t: _replace(t, "ticks_per_rev = 1000", "tick_per_rev = 1000"),
      "[encoders] unknown field 'tick_per_rev' (did you mean ticks_per_rev?); known: "
-     "ticks_per_rev, counter_bits"),
+     "ticks_per_rev, counter_bits, kind"),
     (lambda t: _replace(t, "ticks_per_rev = 1000\n", ""),
      "[encoders] ticks_per_rev [ticks per wheel revolution] is missing"),
     (lambda t: t + "[motors]\nmotor_kv = 3.0\n",
@@ -190,7 +205,10 @@ BAD = [
      "[mass] unknown field 'weight_kg'"),
     (lambda t: t + "[wheels]\nsize = 1\n", "unknown field or section 'wheels'"),
     (lambda t: _replace(t, 'name = "mybot"\n', ""), "robot file {path}: name is missing"),
-    (lambda t: _replace(t, "[mass]\nmass_kg = 4.5\n", ""), "[mass] mass_kg [kg] is missing"),
+    (lambda t: _replace(t, "wheel_diameter_m = 0.07\n", ""),
+     "[geometry] wheel_diameter_m [m] is missing"),
+    (lambda t: _replace(t, "ticks_per_rev = 1000", 'ticks_per_rev = 1000\nkind = "hall"'),
+     "[encoders] kind must be \"commanded\""),
     (lambda t: _replace(t, "period_s = 0.02", "period_s = true"),
      "period_s must be a positive number [s], got True"),
     (lambda t: _replace(t, "delay_periods = 3", "delay_periods = 40"),

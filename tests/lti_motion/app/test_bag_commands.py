@@ -12,7 +12,7 @@ from rosbags.highlevel import AnyReader
 from drivers.bags.writer import write_drive_bag
 from drivers.sim.config import Fault
 from drivers.sim.simulator import Simulator
-from lti_motion.app.bag_commands import calibrate_from_bag, monitor_bag
+from lti_motion.app.bag_commands import BagOptions, calibrate_from_bag, monitor_bag
 from lti_motion.app.cli import main
 from lti_motion.calibration.manoeuvres import speeds_from_log
 from lti_motion.metrics import fit_percent
@@ -44,7 +44,8 @@ def bags(tmp_path_factory):
 @pytest.fixture(scope="module")
 def model_file(bags):
     out = bags["folder"] / "calibration"
-    assert main(["calibrate", "--bag", str(bags["cal"]), "--out", str(out)]) == 0
+    assert main(["calibrate", "--bag", str(bags["cal"]), "--robot", "create2",
+                 "--out", str(out)]) == 0
     return out / "model_arx.json"
 
 
@@ -214,7 +215,8 @@ def test_a_bag_with_odometry_and_no_wheel_angles_calibrates_on_the_odometry_twis
     bag = write_drive_bag(bags["folder"] / "odom_only", bags["cal_log"], start_ns=START_NS,
                           joint_states=False)
     out = bags["folder"] / "odom_calibration"
-    assert main(["calibrate", "--bag", str(bag), "--out", str(out)]) == 0
+    assert main(["calibrate", "--bag", str(bag), "--wheel-base", "0.235",
+                 "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert "no sensor_msgs/JointState wheel angles; the nav_msgs/Odometry twist on /odom" in said
     assert "none needed (body speeds)" in said
@@ -258,7 +260,8 @@ def test_replay_of_an_odometry_only_bag_integrates_and_fuses_the_twist(bags, mod
                      "--out", str(out)]) == 0
         metrics[name] = json.loads((out / "metrics.json").read_text())["metrics"]
     said = capsys.readouterr().out
-    assert "odometry twist, 0 landmark sightings, ground truth" in said
+    assert ("odometry twist, 0 landmark sightings, reference: the reference poses "
+            "(/ground_truth, geometry_msgs/PoseStamped, world)") in said
     wheels, twist = metrics["wheels"], metrics["twist"]
     assert {"odometry", "commands", "sensorless", "ekf"} == set(twist)
     for name in ("odometry", "ekf"):
@@ -311,7 +314,9 @@ def test_each_command_opens_the_bag_once_and_makes_the_grid_once(bags, model_fil
 
     counted("open_bag", topics)
     counted("on_grid", reader)
-    cal, rec = calibrate_from_bag(bags["cal"], wheel_base_m=0.235)
+    create2 = BagOptions(wheel_radius_m=0.036, ticks_per_rad=CREATE2_TICKS_PER_RAD,
+                         encoders="commanded")
+    cal, rec = calibrate_from_bag(bags["cal"], wheel_base_m=0.235, options=create2)
     assert calls == {"open_bag": 1, "on_grid": 1}
     assert rec.wheel_kind == "wheel_angles_rad" and "m_per_tick" not in rec.meta
     assert cal.m_per_tick == pytest.approx(0.036 / CREATE2_TICKS_PER_RAD)

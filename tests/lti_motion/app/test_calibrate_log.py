@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -43,15 +45,40 @@ def test_a_roomba_log_and_a_wheel_angle_recording_both_calibrate(drive, tmp_path
     assert "NOT measured" in out and "encoder scale" in out
     model_a = MotionModel.load(tmp_path / "a" / "model_arx.json")
     assert model_a.m_per_tick == pytest.approx(PARAMS.m_per_tick)
+    robot = model_a.robot                       # the robot travels with the model
+    assert (robot.robot, robot.wheel_data, robot.encoders, robot.counter_bits) == (
+        "create2", "counts", "commanded", 16)
+    assert robot.m_per_tick == pytest.approx((PARAMS.m_per_tick,) * 2)
+    assert robot.wheel_base_m == 0.235 and robot.dt_s == model_a.dt_s
 
     v2 = save_recording(tmp_path / "v2.npz", _angles(drive))
     assert main(["calibrate", "--log", str(v2), "--wheel-radius",
                  str(PARAMS.wheel_diameter_m / 2), "--out", str(tmp_path / "b")]) == 0
     model_b = MotionModel.load(tmp_path / "b" / "model_arx.json")
-    assert model_b.m_per_tick is None
+    assert model_b.m_per_tick == pytest.approx(PARAMS.wheel_diameter_m / 2 / 1e4)
+    assert model_b.robot.wheel_data == "wheel_angles_rad"
+    assert model_b.robot.wheel_radius_m == (PARAMS.wheel_diameter_m / 2,) * 2
     fits = [float(line.split("v ")[-1].split("%")[0])
             for line in capsys.readouterr().out.splitlines() if "free-run fit" in line]
     assert fits and fits[0] > 70.0, fits
+
+    # replay reads both versions: the wheel angles with the radius the model carries give
+    # the encoder odometry of the Roomba frames (the same drive; the recording of angles
+    # holds no truth: the path lengths compared)
+    ates = {}
+    for name, log, model in (("v1", v1, "a"), ("v2", v2, "b")):
+        assert main(["replay", str(log), "--model", str(tmp_path / model / "model_arx.json"),
+                     "--estimators", "odometry", "--out", str(tmp_path / f"r{name}")]) == 0
+        ates[name] = json.loads((tmp_path / f"r{name}" / "metrics.json").read_text())[
+            "metrics"]["odometry"]["path_m"]
+    assert ates["v2"] == pytest.approx(ates["v1"], rel=0.01), ates
+    # a model of counts replaying wheel angles: another robot's data, one line
+    capsys.readouterr()
+    assert main(["replay", str(v2), "--model", str(tmp_path / "a" / "model_arx.json"),
+                 "--out", str(tmp_path / "rx")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "v2.npz has wheel angles [rad]" in err
+    assert "the model's robot (create2) raw encoder counts" in err
 
 
 def test_a_straight_drive_is_refused_with_the_reason_and_nothing_written(drive, tmp_path,

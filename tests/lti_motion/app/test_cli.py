@@ -73,7 +73,7 @@ def test_robot_option_takes_a_name_or_file_and_the_old_spellings_still_parse():
 ROBOT_FILE_ERRORS = [
     ("ticks_per_rev = 508.8", "ticks_per_rev = -5",
      "[encoders] ticks_per_rev must be a positive number [ticks per wheel revolution], got -5"),
-    ("mass_kg = 3.6\n", "", "[mass] mass_kg [kg] is missing"),
+    ("wheel_diameter_m = 0.072", "", "[geometry] wheel_diameter_m [m] is missing"),
     ("mass_kg = 3.6", "mass_kg = 3.6\nmass_lb = 8", "[mass] unknown field 'mass_lb'"),
 ]
 

@@ -142,6 +142,10 @@ def test_an_unhealthy_model_is_refused_then_saved_on_request_without_driving(tmp
     assert "kept the" not in printed                           # nothing driven again
     assert "saving an unhealthy model as --accept-unhealthy asks" in printed
     model = MotionModel.load(out / "model_arx.json")
+    assert (model.robot.robot, model.robot.wheel_data, model.robot.encoders) == (
+        "create2", "counts", "commanded")
+    assert model.robot.m_per_tick == (model.m_per_tick,) * 2
+    assert MotionModel.load(out / "model_fir.json").robot == model.robot
     fit_v, fit_w = model.diagnostics["validation_fit_v"], model.diagnostics["validation_fit_w"]
     assert f"held-out free-run fit v {fit_v:.1f}%, w {fit_w:.1f}%" in printed   # the stored fit
     assert min(fit_v, fit_w) < 85.0

@@ -301,3 +301,28 @@ def test_a_model_with_measured_odometry_errors_names_them_and_prints_no_note(
     out, err = capsys.readouterr()
     assert "# odometry pose error: measured, a random walk of 2.3e-06 m^2" in out
     assert "a test calibration" in out and err == ""
+
+
+def test_the_models_robot_is_the_nominal_geometry_without_flags(model, tmp_path, capsys):
+    from lti_motion.robot_description import RobotDescription
+
+    robot = RobotDescription(wheel_data="wheel_angles_rad", wheel_base_m=0.287,
+                             dt_s=model.dt_s, wheel_radius_m=0.033,
+                             ticks_per_rad=4096 / (2 * np.pi), robot="turtlebot3_waffle")
+    path = model.updated(robot=robot).save(tmp_path / "waffle.json")
+    out = tmp_path / "ddc.yaml"
+    assert main(["export", "--model", str(path), "--to", "diff_drive_controller",
+                 "--out", str(out)]) == 0
+    p = read_yaml(out.read_text())["diff_drive_controller"]["ros__parameters"]
+    assert p["wheel_separation"] == ("double", 0.287)
+    assert p["wheel_radius"] == ("double", 0.033)
+    assert "the model's robot (turtlebot3_waffle)" in out.read_text()
+    # a URDF given says otherwise, and wins
+    urdf = tmp_path / "bot.urdf"
+    urdf.write_text(URDF)
+    assert main(["export", "--model", str(path), "--to", "diff_drive_controller",
+                 "--urdf", str(urdf), "--out", str(tmp_path / "u.yaml")]) == 0
+    text = (tmp_path / "u.yaml").read_text()
+    assert "the model's robot (turtlebot3_waffle)" not in text   # its ticks stay
+    assert read_yaml(text)["diff_drive_controller"]["ros__parameters"]["wheel_radius"] == (
+        "double", 0.036)

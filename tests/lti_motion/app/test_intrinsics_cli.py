@@ -164,3 +164,31 @@ def test_a_clock_offset_is_named_and_fixed_by_its_option(drive, capsys):
     assert "--reference-offset S" in capsys.readouterr().err
     assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["late"]),
                  "--reference-offset=-1e4", "--out", str(drive["folder"] / "late")]) == 0
+
+
+def test_a_version_2_recording_of_wheel_angles_gives_each_wheels_radius(drive, capsys):
+    """``calibrate --log V2 --reference TUM`` on the same drive recorded as wheel angles:
+    the wheels' ratio as from the counts, and each wheel's scale in metres per radian, its
+    radius (the left one 1 % large in the simulator)."""
+    from lti_motion.recordings import Recording, save_recording, unwrap_ticks
+
+    log = load_log_of(drive)
+    ok = log.valid
+    angles = unwrap_ticks(log.ticks[ok]) * 2 * np.pi / drive["params"].ticks_per_rev
+    rec = Recording.from_streams(wheel_t_s=log.t_s[ok], dt_s=log.dt_s, wheel_angles_rad=angles,
+                                 cmd_t_s=log.t_s[ok] - log.dt_s, cmd_wheel_m_s=log.cmd_m_s[ok])
+    v2 = save_recording(drive["folder"] / "angles.npz", rec)
+    out = drive["folder"] / "out_angles"
+    assert main(["calibrate", "--log", str(v2), "--reference", str(drive["ref"]),
+                 "--out", str(out)]) == 0
+    assert "holds wheel angles: the counts below are radians" in capsys.readouterr().out
+    result = json.loads((out / "intrinsics.json").read_text())["intrinsics"]
+    assert result["m_per_tick_left"] / result["m_per_tick_right"] == pytest.approx(1.01,
+                                                                                   rel=2e-3)
+    assert result["m_per_tick_right"] == pytest.approx(0.036, rel=0.01)
+
+
+def load_log_of(drive):
+    from lti_motion.recordings import load_log
+
+    return load_log(drive["log"])

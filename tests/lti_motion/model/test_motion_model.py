@@ -204,7 +204,7 @@ def test_save_load_round_trip_is_exact_and_atomic(kind, arx_model, fir_model, tm
     _same(m, loaded)
     assert loaded.selection is None
     doc = json.loads(path.read_text())
-    assert doc["format"] == FORMAT and doc["version"] == VERSION == 2
+    assert doc["format"] == FORMAT and doc["version"] == VERSION == 3
 
 
 def test_failed_write_keeps_the_old_file(arx_model, fir_model, tmp_path, monkeypatch):
@@ -316,6 +316,34 @@ def test_model_file_carries_the_intrinsics_and_reads_version_1(arx_model, tmp_pa
     write_document(tmp_path / "v2neg.json", payload, fmt=FORMAT, version=2)
     with pytest.raises(ModelFileError, match="m_per_tick_left must be a positive"):
         MotionModel.load(tmp_path / "v2neg.json")
+
+
+def test_model_file_carries_the_robot_and_reads_version_2(arx_model, tmp_path):
+    from lti_motion.robot_description import RobotDescription
+
+    robot = RobotDescription(wheel_data="wheel_angles_rad", wheel_base_m=0.287,
+                             dt_s=arx_model.dt_s, encoders="quadrature", ticks_per_rad=651.9,
+                             wheel_radius_m=(0.033, 0.0331), robot="turtlebot3_waffle",
+                             sources={"wheel_radius_m": "--wheel-radius"})
+    loaded = MotionModel.load(arx_model.updated(robot=robot).save(tmp_path / "v3.json"))
+    assert loaded.robot == robot
+    assert loaded.robot.m_per_tick == (0.033 / 651.9, 0.0331 / 651.9)
+    assert loaded.robot.sources["wheel_radius_m"] == "--wheel-radius"
+    # a version-2 file (no "robot" key) still loads, without a robot
+    doc = json.loads(arx_model.updated(robot=robot).save(tmp_path / "x.json").read_text())
+    payload = {k: v for k, v in doc.items() if k not in ("format", "version", "sha256", "robot")}
+    write_document(tmp_path / "v2.json", payload, fmt=FORMAT, version=2)
+    old = MotionModel.load(tmp_path / "v2.json")
+    assert old.robot is None
+    np.testing.assert_array_equal(old.A, arx_model.A)
+    # a version-3 file without the key, or with a nonsense robot, is refused
+    write_document(tmp_path / "v3bad.json", payload, fmt=FORMAT, version=3)
+    with pytest.raises(ModelFileError, match=r"lacks the keys \['robot'\]"):
+        MotionModel.load(tmp_path / "v3bad.json")
+    payload["robot"] = {**robot.as_dict(), "wheel_base_m": -0.287}
+    write_document(tmp_path / "v3neg.json", payload, fmt=FORMAT, version=3)
+    with pytest.raises(ModelFileError, match="wheel_base_m must be positive"):
+        MotionModel.load(tmp_path / "v3neg.json")
 
 
 def test_version_1_files_read_with_a_zero_offset(arx_model, tmp_path):

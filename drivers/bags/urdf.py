@@ -10,6 +10,10 @@ the radius is the left wheel link's collision cylinder's (or sphere's) radius.
 A wheel joint is a ``continuous`` (or ``revolute``) joint whose child link has a cylinder
 or a sphere (collision first, else visual); the left one has ``left`` in its name, the right
 one ``right``, unless the joint names are given.
+
+The text may come from a file (:func:`read_urdf_wheels`) or from a bag's own
+``/robot_description`` topic (``std_msgs/String``, latched by ``robot_state_publisher``;
+:func:`read_bag_urdf`, then :func:`urdf_wheels`).
 """
 
 from __future__ import annotations
@@ -20,7 +24,14 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["UrdfWheels", "read_urdf_wheels"]
+from drivers.bags.messages import is_mcap, open_bag, raw_messages
+from drivers.exceptions import BagError
+
+__all__ = ["ROBOT_DESCRIPTION_TOPIC", "UrdfWheels", "read_bag_urdf", "read_urdf_wheels",
+           "urdf_wheels"]
+
+#: Where ``robot_state_publisher`` publishes the URDF (``std_msgs/String``).
+ROBOT_DESCRIPTION_TOPIC = "/robot_description"
 
 
 @dataclass(frozen=True)
@@ -109,10 +120,37 @@ def read_urdf_wheels(path: str | os.PathLike, *, left_joint: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no URDF file {path}")
+    return urdf_wheels(path.read_text(encoding="utf-8", errors="replace"),
+                       source=f"URDF {path}", left_joint=left_joint, right_joint=right_joint)
+
+
+def urdf_wheels(text: str, *, source: str = "the URDF", left_joint: str | None = None,
+                right_joint: str | None = None) -> UrdfWheels:
+    """The two wheel joints of a URDF's text, their separation and radius (module docstring).
+
+    Parameters
+    ----------
+    text : str
+        The URDF (plain XML; run xacro first).
+    source : str
+        What it is, for the messages (``"URDF robot.urdf"``, ``"the bag's /robot_description"``).
+    left_joint, right_joint : str, optional
+        The wheel joints' names, when their names do not say left and right.
+
+    Returns
+    -------
+    UrdfWheels
+
+    Raises
+    ------
+    ValueError
+        If the text is not XML, or it has no wheel joints (or not one per side).
+    """
+    path = source
     try:
-        root = ET.parse(path).getroot()
+        root = ET.fromstring(text)
     except ET.ParseError as exc:
-        raise ValueError(f"URDF {path} is not XML ({exc}); give the expanded URDF "
+        raise ValueError(f"{path} is not XML ({exc}); give the expanded URDF "
                          "(xacro file.xacro > file.urdf)") from None
     links = {link.get("name"): link for link in root.iter("link")}
     wheels = {}
@@ -128,14 +166,14 @@ def read_urdf_wheels(path: str | os.PathLike, *, left_joint: str | None = None,
     for side, name in named.items():
         if name is not None:
             if name not in wheels:
-                raise ValueError(f"URDF {path} has no wheel joint {name!r} (a continuous joint "
+                raise ValueError(f"{path} has no wheel joint {name!r} (a continuous joint "
                                  f"whose child link has a cylinder or sphere); wheel joints: "
                                  f"{sorted(wheels) or 'none'}")
             chosen[side] = name
             continue
         found = [n for n in wheels if side in n.lower()]
         if len(found) != 1:
-            raise ValueError(f"URDF {path} has no wheel joints to use: {len(found)} {side} "
+            raise ValueError(f"{path} has no wheel joints to use: {len(found)} {side} "
                              f"ones among {sorted(wheels) or 'none'} (a continuous joint whose "
                              "child link has a cylinder or sphere, with 'left' / 'right' in its "
                              "name); name them with --left-joint and --right-joint")
@@ -143,6 +181,30 @@ def read_urdf_wheels(path: str | os.PathLike, *, left_joint: str | None = None,
     (left, radius), (right, _) = wheels[chosen["left"]], wheels[chosen["right"]]
     separation = math.dist(_origin(left), _origin(right))
     if not (separation > 0 and radius > 0):
-        raise ValueError(f"URDF {path}: wheel separation {separation:g} m and radius "
+        raise ValueError(f"{path}: wheel separation {separation:g} m and radius "
                          f"{radius:g} m must be positive")
     return UrdfWheels(chosen["left"], chosen["right"], round(separation, 12), radius)
+
+
+def read_bag_urdf(path: str | os.PathLike, *, topic: str = ROBOT_DESCRIPTION_TOPIC
+                  ) -> str | None:
+    """The URDF a bag recorded on ``topic`` (``std_msgs/String``; its last message), or None.
+
+    Raises
+    ------
+    FileNotFoundError, BagError
+        No such bag, not a bag, or ``topic`` of another type.
+    """
+    with open_bag(path) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        if not conns:
+            return None
+        if conns[0].msgtype != "std_msgs/msg/String":
+            raise BagError(f"topic {topic} holds {conns[0].msgtype}, not the URDF as a "
+                           "std_msgs/String")
+        _, raws = raw_messages(reader, conns, mcap=is_mcap(path))[topic]
+        if not raws:
+            return None
+        store = reader.typestore
+        decode = store.deserialize_cdr if reader.is2 else store.deserialize_ros1
+        return str(decode(raws[-1], "std_msgs/msg/String").data)
