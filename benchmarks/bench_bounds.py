@@ -40,7 +40,7 @@ import numpy as np
 from benchmarks.harness import Figure, benchmark, load_example
 from drivers.sim.config import Room
 from drivers.sim.simulator import Simulator
-from fusion.ekf.model_ekf import ModelEKF
+from fusion.ekf import EKFOptions, ModelEKF
 from fusion.ekf.resets import ScaleBound, scale_statistic
 from fusion.ekf.updates import GatedUpdates
 from fusion.landmark_map import LandmarkMap
@@ -69,7 +69,7 @@ def _run(cls: type[ModelEKF], model: MotionModel, log, speeds: np.ndarray | None
          sightings: RangeBearing) -> tuple[np.ndarray, float, int]:
     """Poses, the largest scale d^2 and the resets of one filter over one drive."""
     ekf = cls(model, initial_pose=START, pose_std=(0.005,) * 3, landmarks=LANDMARKS,
-              history=0)
+              options=EKFOptions(history=0))
     bound = ekf.scale_bound
     by_frame, none = sightings.by_index(), RangeBearing.empty()
     poses = np.empty((len(log.t_s), 3))
@@ -136,7 +136,7 @@ def _step_cost(model: MotionModel) -> tuple[float, float]:
     times: dict[type, list[float]] = {ModelEKF: [], _Unbounded: []}
     for r in range(REPEAT + 1):
         for cls in times:
-            f = cls(model, initial_ticks=log.ticks[0], history=1000)
+            f = cls(model, initial_ticks=log.ticks[0], options=EKFOptions(history=1000))
             t0 = time.perf_counter()
             for i in range(1, N_STEPS + 1):
                 f.predict(log.cmd_m_s[i])

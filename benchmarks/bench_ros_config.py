@@ -24,8 +24,12 @@ Figures:
     Mean over the 150 runs of the position NEES at the end of the route, ``e^T P^-1 e``
     with ``e`` the controller's position error and ``P`` its pose covariance grown along
     its path from the exported noise (``OdometryNoise.from_model``, what the project
-    writes for dead reckoning); a consistent covariance gives a mean inside the 95%
-    interval of ``chi^2(2 N) / N`` (``..._low`` / ``..._high``), ``..._inside`` 1 or 0.
+    writes for dead reckoning): the model carries the odometry errors each calibration
+    measured on its own drive (``IntrinsicsCalibration.odometry_errors``: the random walk
+    per metre of wheel travel and the intrinsics' covariance); a consistent covariance
+    gives a mean inside the 95% interval of ``chi^2(2 N) / N`` (``..._low`` /
+    ``..._high``), ``..._inside`` 1 or 0. Baseline: the same model without the measured
+    errors (the pose grown with ``R`` less the counts' rounding, the fallback).
 ``ros_config.pose_nees_std``
     Its spread over the runs.
 ``ros_config.ekf_pose_nees``
@@ -39,11 +43,15 @@ import math
 
 import numpy as np
 
-from benchmarks.bench_intrinsics import FLOOR, asymmetric_robot, calibration_run
+from benchmarks.bench_intrinsics import FLOOR, REPEATS, asymmetric_robot
 from benchmarks.harness import Figure, benchmark
 from drivers.sim.calibration import calibrate_simulator
+from drivers.sim.config import Room
+from drivers.sim.motion_capture import intrinsics_drive, motion_capture
+from drivers.sim.simulator import Simulator
 from lti_motion.app.ros_config import Nominal, diff_drive_parameters
 from lti_motion.app.route import EkfEstimator, Odometry, drive_route
+from lti_motion.calibration.intrinsics_fit import calibrate_intrinsics
 from lti_motion.calibration.manoeuvres import CalibrationPlan
 from lti_motion.odometry_noise import OdometryNoise
 from lti_motion.recordings.ticks import tick_step
@@ -147,6 +155,30 @@ def chi2_interval(n_runs: int, dof: int = 2) -> tuple[float, float]:
             float(chi2.ppf(0.975, dof * n_runs)) / n_runs)
 
 
+def calibrated_model(model, params, seed: int):
+    """``model`` moved to the intrinsics of ``bench_intrinsics.calibration_run(params,
+    seed)``'s calibration (the same drive, reference and options), carrying the odometry
+    errors that calibration measured on its drive."""
+    cmd = intrinsics_drive(params.period_s, repeats=REPEATS)
+    log = Simulator(params, seed=seed, floor=FLOOR, room=Room.empty(),
+                    initial_pose=(0, 0, 0)).run(cmd)
+    t_ref, poses = motion_capture(log, rng=np.random.default_rng([seed, 0x40CA]))
+    cal = calibrate_intrinsics(log.t_s, log.ticks, t_ref, poses, sensor_pose=False,
+                               encoders="commanded", heading_std_rad=np.deg2rad(0.5))
+    return model.with_intrinsics(cal.intrinsics, odometry_errors=cal.odometry_errors)
+
+
+def end_covariances(m, ddc, res, n_runs: int) -> np.ndarray:
+    """Each run's pose covariance at the end, grown along the controller's path with
+    ``OdometryNoise.from_model(m)``, (N, 3, 3)."""
+    noise = OdometryNoise.from_model(m)
+    inc = np.stack(ddc.increments, axis=1)                       # (N, n, 2)
+    start = np.broadcast_to(res.est_poses[:, :1], (n_runs, 1, 3))
+    poses = np.concatenate([start, res.est_poses], axis=1)       # (N, n + 1, 3)
+    return np.array([noise.pose_covariances(poses[i], inc[i] / m.dt_s,
+                                            np.ones(len(inc[i])))[-1] for i in range(n_runs)])
+
+
 def ros_config_runs(cal_seeds=CAL_SEEDS, route_seeds=ROUTE_SEEDS) -> dict[str, np.ndarray]:
     """Closures [m] and NEES of every (calibration, route seed), keyed by what ran."""
     params = asymmetric_robot()
@@ -156,20 +188,17 @@ def ros_config_runs(cal_seeds=CAL_SEEDS, route_seeds=ROUTE_SEEDS) -> dict[str, n
     model = calibrate_simulator(params, seed=0, floor=FLOOR,
                                 plan=CalibrationPlan(seed=2, excitation_s=60.0)).arx
     seeds = list(route_seeds)
-    out: dict[str, list] = {"ddc": [], "project": [], "nees": [], "ekf_nees": []}
+    out: dict[str, list] = {"ddc": [], "project": [], "nees": [], "nees_unmeasured": [],
+                            "ekf_nees": []}
     for cal_seed in cal_seeds:
-        m = model.with_intrinsics(calibration_run(params, cal_seed)[0])
+        m = calibrated_model(model, params, cal_seed)
         ddc = DiffDriveControllerOdometry(exported(m, nominal), ticks_per_rev=nominal.ticks_per_rev)
         res = drive_route(params, ddc, seeds=seeds, floor=FLOOR)
         out["ddc"].append(res.closure_offset_m)
-        noise = OdometryNoise.from_model(m)
-        inc = np.stack(ddc.increments, axis=1)                       # (N, n, 2)
-        start = np.broadcast_to(res.est_poses[:, :1], (len(seeds), 1, 3))
-        poses = np.concatenate([start, res.est_poses], axis=1)       # (N, n + 1, 3)
-        covs = np.array([noise.pose_covariances(poses[i], inc[i] / m.dt_s,
-                                                np.ones(len(inc[i])))[-1]
-                         for i in range(len(seeds))])
-        out["nees"].append(nees_at_end(res, covs))
+        out["nees"].append(nees_at_end(res, end_covariances(m, ddc, res, len(seeds))))
+        unmeasured = m.updated(odometry_errors=None)
+        out["nees_unmeasured"].append(nees_at_end(res, end_covariances(unmeasured, ddc, res,
+                                                                       len(seeds))))
         out["project"].append(drive_route(params, Odometry(intrinsics=m.intrinsics),
                                           seeds=seeds, floor=FLOOR).closure_offset_m)
         ekf = CovarianceEkf(m)
@@ -201,7 +230,9 @@ def run() -> list[Figure]:
         Figure("ros_config.ddc_closure_std_m", float(runs["ddc"].std()), "m", better="lower"),
         Figure("ros_config.ddc_closure_project_m", float(runs["project"].mean()), "m",
                better="lower"),
-        Figure("ros_config.pose_nees", nees, ""),   # the interval is two-sided: ..._inside
+        Figure("ros_config.pose_nees", nees, "",    # the interval is two-sided: ..._inside
+               baseline="the pose grown with R less the counts' rounding (no measurement)",
+               baseline_value=float(runs["nees_unmeasured"].mean())),
         Figure("ros_config.pose_nees_std", float(runs["nees"].std()), "", better="lower"),
         Figure("ros_config.pose_nees_low", low, ""),
         Figure("ros_config.pose_nees_high", high, ""),
@@ -215,11 +246,11 @@ def table(cal_seeds=CAL_SEEDS, route_seeds=ROUTE_SEEDS) -> None:
     runs = ros_config_runs(cal_seeds, route_seeds)
     n = len(list(route_seeds))
     print("| calibration seed | controller closure [m] | project closure [m] | pose NEES | "
-          "EKF pose NEES |")
-    print("| --- | --- | --- | --- | --- |")
+          "pose NEES, unmeasured | EKF pose NEES |")
+    print("| --- | --- | --- | --- | --- | --- |")
     for i, seed in enumerate(cal_seeds):
         row = slice(i * n, (i + 1) * n)
         cells = [f"{runs[k][row].mean():.4f} ({runs[k][row].std():.4f})"
-                 for k in ("ddc", "project", "nees", "ekf_nees")]
+                 for k in ("ddc", "project", "nees", "nees_unmeasured", "ekf_nees")]
         print(f"| {seed} | " + " | ".join(cells) + " |")
     print(f"nominal parameters: {runs['nominal'].mean():.4f} ({runs['nominal'].std():.4f}) m")

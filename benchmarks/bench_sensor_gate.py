@@ -36,7 +36,7 @@ from fusion.monitoring.monitored_filter import MonitoredFilter
 from fusion.monitoring.phase_one import fit_nominal
 from fusion.monitoring.residual import AlarmEvent, MonitorOptions
 from lti_motion.model.motion_model import MotionModel
-from lti_motion.recordings.ticks import TICK_MODULUS
+from lti_motion.recordings import TICK_MODULUS, SensorFrame
 
 NOMINAL_H = 10.0
 BATCH = 50
@@ -56,7 +56,7 @@ def sensor_alarms(model: MotionModel, cmd: np.ndarray, deltas: np.ndarray,
     ticks = _ticks(deltas)
     mf = MonitoredFilter(model, options=options, initial_ticks=ticks[0], t0_s=model.dt_s)
     for k in range(last):
-        mf.step(ticks[k + 1], cmd[k])
+        mf.step(SensorFrame.of_counts(0.0, ticks[k + 1], cmd[k]))   # the filter keeps time
     return mf.events
 
 

@@ -31,9 +31,16 @@ per period (paper eq. 11, :func:`~lti_motion.kinematics.pose_step_jacobians`) ha
 
 .. math::  P_{k+1} = F_k P_k F_k^T + G_k S G_k^T                             (3)
 
-(Thrun, Burgard & Fox 2005, section 5.4 and table 3.3). :class:`OdometryNoise` grows with
-``S = R - R_q`` (eigenvalues clipped at :data:`VARIANCE_FLOOR`): the part of the model's
-residuals that is not rounding, and adds the last count's rounding on top.
+(Thrun, Burgard & Fox 2005, section 5.4 and table 3.3). What it grows with depends on
+what was measured. A model whose intrinsics were calibrated against a pose reference
+carries encoder odometry's own error model (:mod:`lti_motion.odometry_errors`: a random
+walk per metre of wheel travel, Chong & Kleeman 1997, and the intrinsics' covariance
+propagated along the path, Kelly 2004), and :meth:`OdometryNoise.from_model` grows with
+that. Without it, the growth falls back on ``S = R - R_q`` (eigenvalues clipped at
+:data:`VARIANCE_FLOOR`): the part of the model's residuals that is not rounding, which
+still holds speed changes the model did not predict (the encoders measure them
+exactly), an upper bound that looks like no measurement of slip and is labelled so
+(:attr:`OdometryNoise.measured` False). Either adds the last count's rounding on top.
 
 **The model's speed error over a filter's period.** A filter that predicts ``N = T /
 dt`` model periods ahead from a known state has the speed error covariance
@@ -58,6 +65,7 @@ import numpy as np
 from lti_motion.exceptions import MissingEncoderScaleError, ShapeError
 from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import pose_step_jacobians
+from lti_motion.odometry_errors import intrinsics_sensitivities, wheel_walk_step_covariances
 
 __all__ = [
     "VARIANCE_FLOOR",
@@ -255,6 +263,18 @@ class OdometryNoise:
         The period [s].
     source : str
         Where the numbers came from, for people.
+    wheel_variance_per_m : float
+        Each wheel's travel variance per metre rolled [m^2/m], grown along the path on
+        top of ``growth_cov`` (:func:`lti_motion.odometry_errors.
+        wheel_walk_step_covariances`); 0: none.
+    intrinsics : OdometryIntrinsics or None
+        The intrinsics the odometry uses, with ``intrinsics_covariance``.
+    intrinsics_covariance : ndarray, shape (3, 3), or None
+        Their covariance: the systematic error carried along the path
+        (:func:`lti_motion.odometry_errors.intrinsics_sensitivities`); None: none.
+    measured : bool
+        The pose growth is encoder odometry's error measured against a reference (True),
+        or a stand-in for it (False).
     """
 
     speed_cov: np.ndarray
@@ -262,6 +282,10 @@ class OdometryNoise:
     pose_floor: np.ndarray
     dt_s: float
     source: str
+    wheel_variance_per_m: float = 0.0
+    intrinsics: OdometryIntrinsics | None = None
+    intrinsics_covariance: np.ndarray | None = None
+    measured: bool = False
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
@@ -272,11 +296,23 @@ class OdometryNoise:
             raise ShapeError(f"pose_floor must be a finite (3, 3) covariance, got {floor.shape}")
         setf(self, "pose_floor", floor + VARIANCE_FLOOR * np.eye(3))
         setf(self, "dt_s", _positive(self.dt_s, "dt_s"))
+        k = float(self.wheel_variance_per_m)
+        if not (np.isfinite(k) and k >= 0):
+            raise ValueError(f"wheel_variance_per_m must be a finite number >= 0, got {k}")
+        setf(self, "wheel_variance_per_m", k)
+        if self.intrinsics_covariance is not None:
+            cov = np.asarray(self.intrinsics_covariance, dtype=float)
+            if cov.shape != (3, 3) or self.intrinsics is None:
+                raise ShapeError("intrinsics_covariance must be (3, 3) and come with the "
+                                 f"intrinsics, got shape {cov.shape}")
+            setf(self, "intrinsics_covariance", 0.5 * (cov + cov.T))
 
     @classmethod
     def from_model(cls, model) -> OdometryNoise:
-        """The model's output noise ``R`` for the speeds; ``R - R_q`` grows the pose (module
-        docstring), the last counts' rounding on top.
+        """The model's output noise ``R`` for the speeds; the pose grown with the model's
+        measured odometry errors (:attr:`~lti_motion.model.MotionModel.odometry_errors`)
+        when it has them, else with ``R - R_q`` (module docstring, ``measured`` False); the
+        last counts' rounding on top.
 
         Raises
         ------
@@ -287,8 +323,18 @@ class OdometryNoise:
         if k is None:
             raise MissingEncoderScaleError.needed_by("the odometry's covariances")
         rq = rounding_speed_covariance(k, model.dt_s)
+        errors = getattr(model, "odometry_errors", None)
+        if errors is not None:
+            return cls(model.R, np.zeros((2, 2)), rounding_pose_covariance(k), model.dt_s,
+                       f"the model's output noise R (speeds); encoder odometry's random walk "
+                       f"({errors.wheel_variance_per_m:.3g} m^2 per metre of wheel travel) "
+                       f"and its intrinsics' covariance, measured by the {errors.source} "
+                       "(pose growth)",
+                       wheel_variance_per_m=errors.wheel_variance_per_m, intrinsics=k,
+                       intrinsics_covariance=errors.intrinsics_covariance, measured=True)
         return cls(model.R, model.R - rq, rounding_pose_covariance(k), model.dt_s,
-                   "the model's output noise R (speeds); R less the counts' rounding (growth)")
+                   "the model's output noise R (speeds); R less the counts' rounding (growth: "
+                   "not a measurement of the odometry's error, an upper bound)")
 
     @classmethod
     def from_encoders(cls, intrinsics: OdometryIntrinsics, dt_s: float) -> OdometryNoise:
@@ -310,8 +356,17 @@ class OdometryNoise:
         periods (more than one after lost frames): the growth scales with the periods.
         """
         periods = np.asarray(periods, dtype=float)
+        speeds = np.asarray(speeds, dtype=float)
+        dt = periods * self.dt_s
         # a step of m periods holds their mean speed: its error is S / m, over m dt
         per_step = self.growth_cov[None] / periods[:, None, None]
-        growth = grow_pose_covariances(poses, speeds, periods * self.dt_s, per_step)
+        if self.wheel_variance_per_m > 0 and self.intrinsics is not None:
+            per_step = per_step + wheel_walk_step_covariances(
+                speeds, dt, wheel_base_m=self.intrinsics.wheel_base_m,
+                wheel_variance_per_m=self.wheel_variance_per_m)
+        growth = grow_pose_covariances(poses, speeds, dt, per_step)
+        if self.intrinsics_covariance is not None:
+            s = intrinsics_sensitivities(poses, speeds, dt, self.intrinsics)
+            growth = growth + s @ self.intrinsics_covariance @ np.swapaxes(s, 1, 2)
         return growth + self.pose_floor
 

@@ -121,3 +121,27 @@ def test_no_door_re_exports_a_name_of_one_of_its_modules(door):
     modules = {p.stem for p in here.glob("*.py")} | {p.name for p in here.iterdir()
                                                       if (p / "__init__.py").is_file()}
     assert not set(getattr(package, "__all__", [])) & modules
+
+
+WINGS = [door for door in DOORS if door.count(".") == 1 and door != "lti_motion.app"]
+
+
+@pytest.mark.parametrize("door", WINGS)
+def test_a_wing_door_re_exports_every_public_name_of_its_modules(door):
+    """The doors are the way in (docs/architecture.md, Layout): each lists every name its
+    modules declare public, except a module's own name."""
+    import ast
+
+    here = ROOT.joinpath(*door.split("."))
+    modules = {p.stem for p in here.glob("*.py")}
+    public = set()
+    for path in here.glob("*.py"):
+        if path.name == "__init__.py":
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.Assign, ast.AnnAssign)) and any(
+                    getattr(t, "id", None) == "__all__"
+                    for t in (node.targets if isinstance(node, ast.Assign) else [node.target])):
+                public |= set(ast.literal_eval(node.value))
+    listed = set(importlib.import_module(door).__all__)
+    assert public - modules <= listed, f"{door} misses {sorted(public - modules - listed)}"

@@ -337,6 +337,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
     text = export_text(model, args.to, nominal=_nominal(args), model_name=args.model,
                        publish_rate_hz=args.publish_rate, frequency_hz=args.frequency,
                        node=args.node)
+    if model.odometry_errors is None:                # one line, beside the file's comment
+        print(f"note: {args.model} carries no measured odometry error; the pose covariances "
+              "stand on the model's output noise, an upper bound (calibrate the intrinsics "
+              "against a pose reference to measure it: docs/guide_ros_config.md)",
+              file=sys.stderr)
     if args.out:
         from lti_motion.persistence import atomic_write
 

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from lti_motion.calibration import IntrinsicsCalibration
     from lti_motion.intrinsics import OdometryIntrinsics
+    from lti_motion.odometry_errors import OdometryErrors
 
 __all__ = ["add_intrinsics_arguments", "is_interval_file", "run_intrinsics_calibration",
            "write_into_model"]
@@ -145,6 +146,8 @@ def _result_json(cal: IntrinsicsCalibration, *, radians: bool, sources: dict) ->
            "sensor_pose": cal.sensor_pose.tolist(), "covariance": cal.covariance.tolist(),
            "intervals_used": cal.n_intervals, "intervals_rejected": cal.n_rejected,
            "reference_noise": None if cal.noise is None else cal.noise.tolist(),
+           "odometry_errors": (None if cal.odometry_errors is None
+                               else cal.odometry_errors.as_dict()),
            "undetermined": list(cal.report.undetermined), **sources}
     if radians:
         k = cal.intrinsics
@@ -155,13 +158,14 @@ def _result_json(cal: IntrinsicsCalibration, *, radians: bool, sources: dict) ->
     return out
 
 
-def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out: Path
-                     ) -> Path:
+def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out: Path, *,
+                     odometry_errors: OdometryErrors | None = None) -> Path:
     """A copy of the model file carrying ``intrinsics``, as ``out/model_intrinsics.json``.
 
     The model's outputs move with the counts' new meaning, so that it predicts the same
     counts (:meth:`lti_motion.model.MotionModel.with_intrinsics`); a model without an
-    encoder scale has none to move and just takes the intrinsics.
+    encoder scale has none to move and just takes the intrinsics. ``odometry_errors``, the
+    odometry error model the calibration measured, goes with them (None: not measured).
 
     Raises
     ------
@@ -173,8 +177,10 @@ def write_into_model(model_path: str | Path, intrinsics: OdometryIntrinsics, out
     if not Path(model_path).is_file():
         raise FileNotFoundError(f"no model file {model_path}")
     model = MotionModel.load(model_path)
-    moved = (model.with_intrinsics(intrinsics) if model.encoder_intrinsics is not None
-             else model.updated(intrinsics=intrinsics, m_per_tick=intrinsics.m_per_tick))
+    moved = (model.with_intrinsics(intrinsics, odometry_errors=odometry_errors)
+             if model.encoder_intrinsics is not None
+             else model.updated(intrinsics=intrinsics, m_per_tick=intrinsics.m_per_tick,
+                                odometry_errors=odometry_errors))
     return moved.save(Path(out) / "model_intrinsics.json")
 
 
@@ -286,7 +292,8 @@ def run_intrinsics_calibration(args: argparse.Namespace) -> int:
                                indent=2) + "\n")
     written = [path]
     if args.into_model:
-        written.append(write_into_model(args.into_model, cal.intrinsics, out))
+        written.append(write_into_model(args.into_model, cal.intrinsics, out,
+                                        odometry_errors=cal.odometry_errors))
     for line in _summary(cal, radians=radians):
         print(line)
     print(f"wrote {', '.join(str(p) for p in written)}")

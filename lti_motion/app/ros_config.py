@@ -47,8 +47,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Literal
 
 import numpy as np
@@ -86,7 +87,7 @@ TARGETS: tuple[str, ...] = ("diff_drive_controller", "diff_drive_controller_ros1
 #: definition spells them: ros2_controllers, diff_drive_controller
 #: ``src/diff_drive_controller_parameter.yaml``, branch ``jazzy`` (package 4.42.1; branch
 #: ``humble``, 2.54.0, defines these the same). Type words are generate_parameter_library's.
-DDC_ROS2_TYPES: dict[str, str] = {
+DDC_ROS2_TYPES: Mapping[str, str] = MappingProxyType({
     "left_wheel_names": "string_array",
     "right_wheel_names": "string_array",
     "wheel_separation": "double",
@@ -97,11 +98,11 @@ DDC_ROS2_TYPES: dict[str, str] = {
     "pose_covariance_diagonal": "double_array",
     "twist_covariance_diagonal": "double_array",
     "publish_rate": "double",
-}
+})
 #: The same for ROS 1: ros_controllers 0.21.2 (Noetic), ``diff_drive_controller.cpp``
 #: (``controller_nh.param<double>`` / ``getParam``; the covariance lists are asserted to
 #: hold six ``TypeDouble`` values; a wheel is a string or a list of strings).
-DDC_ROS1_TYPES: dict[str, str] = {
+DDC_ROS1_TYPES: Mapping[str, str] = MappingProxyType({
     "left_wheel": "string_array",
     "right_wheel": "string_array",
     "wheel_separation": "double",
@@ -112,7 +113,7 @@ DDC_ROS1_TYPES: dict[str, str] = {
     "pose_covariance_diagonal": "double_array",
     "twist_covariance_diagonal": "double_array",
     "publish_rate": "double",
-}
+})
 #: ``publish_rate``'s default in both definitions [Hz].
 DDC_DEFAULT_PUBLISH_RATE_HZ = 50.0
 #: robot_localization's default ``frequency`` [Hz] (``ros_filter.cpp``, 3.6.0).
@@ -183,6 +184,18 @@ def _model_intrinsics(model: MotionModel, model_name: str):
             "REF.tum --into-model MODEL' or 'lti-motion calibrate --wall-run --into-model "
             "MODEL' (docs/intrinsics.md) and export the model_intrinsics.json it writes")
     return model.intrinsics
+
+
+def _odometry_error_line(model: MotionModel) -> str:
+    """Where the odometry's pose error comes from: measured, or said not to be."""
+    e = model.odometry_errors
+    if e is None:
+        return ("odometry pose error: NOT MEASURED (the model carries no odometry error "
+                "model; calibrate its intrinsics against a pose reference to measure it): the "
+                "pose covariances stand on the model's output noise R, an upper bound")
+    return (f"odometry pose error: measured, a random walk of {_g(e.wheel_variance_per_m)} "
+            f"m^2 per metre each wheel rolls (+- {_g(e.wheel_variance_std)}) and the "
+            f"intrinsics' covariance, by the {e.source}")
 
 
 def _check_rate(value: float, option: str) -> float:
@@ -447,7 +460,7 @@ def export_text(model: MotionModel, target: Target, *, nominal: Nominal | None =
         raise ValueError(f"unknown --to {target!r}; give one of {', '.join(TARGETS)}")
     header = [f"lti-motion export --to {target}, from the model {model_name or '(in memory)'}",
               f"calibrated {model.calibrated_at}, period {model.dt_s * 1e3:g} ms, "
-              f"floor {model.floor or 'not recorded'}"]
+              f"floor {model.floor or 'not recorded'}", _odometry_error_line(model)]
     if target.startswith("diff_drive_controller"):
         ros1 = target.endswith("_ros1")
         nominal = nominal or Nominal()

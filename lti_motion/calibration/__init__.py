@@ -9,7 +9,9 @@
 - :mod:`lti_motion.calibration.intrinsics_fit`: both wheels' scale and the wheel base
   against a pose reference or interval samples (Censi et al. 2013), with
   :mod:`lti_motion.calibration.intrinsics_solver` its numerical core and
-  :mod:`lti_motion.calibration.intrinsics_runs` runs localised only at their ends;
+  :mod:`lti_motion.calibration.intrinsics_runs` runs localised only at their ends, and
+  :mod:`lti_motion.calibration.odometry_walk` the random walk of encoder odometry measured
+  on the same drive;
 - :mod:`lti_motion.calibration.wall_run`, :mod:`lti_motion.calibration.wall_run_drive`: the
   wheels' diameter ratio from straight runs beside a wall, and the manoeuvre.
 

@@ -45,6 +45,7 @@ mobile robots", IEEE T-RA 12(6), 1996 (UMBmark; type A and type B errors).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -61,8 +62,10 @@ from lti_motion.calibration.intrinsics_solver import (
     rotation_step_precision,
     trim,
 )
+from lti_motion.calibration.odometry_walk import WALK_LENGTHS_S, fit_wheel_walk
 from lti_motion.exceptions import CalibrationError, PoseReferenceError, UnidentifiableError
 from lti_motion.intrinsics import OdometryIntrinsics
+from lti_motion.odometry_errors import OdometryErrors
 from lti_motion.recordings.ticks import tick_deltas, unfold_commanded_direction
 
 __all__ = ["IdentifiabilityReport", "IntrinsicsCalibration", "calibrate_intrinsics",
@@ -100,6 +103,7 @@ _MAX_TRANSLATION_RESIDUAL = 0.5
 _MOUNT_GAIN = 0.5
 #: Floor of the noise estimated from the residuals [m, m, rad] (a perfect reference).
 _NOISE_FLOOR = np.array([1e-7, 1e-7, 1e-8])
+_NOISE_FLOOR.flags.writeable = False
 
 _Encoders = Literal["quadrature", "commanded"]
 
@@ -170,6 +174,11 @@ class IntrinsicsCalibration:
     noise : ndarray, shape (3,)
         The reference's noise per interval estimated from the kept residuals
         ``(x [m], y [m], theta [rad])``: the weights of the final fit.
+    odometry_errors : OdometryErrors or None
+        Encoder odometry's error model measured on the drive (a time series against a
+        pose reference: the random walk per metre of wheel travel over intervals of 1-16
+        s, :mod:`lti_motion.calibration.odometry_walk`, and the intrinsics' covariance);
+        None for interval samples and end-pose runs, which do not measure it.
     """
 
     intrinsics: OdometryIntrinsics
@@ -182,6 +191,7 @@ class IntrinsicsCalibration:
     report: IdentifiabilityReport
     n_rejected: int = 0
     noise: np.ndarray | None = None
+    odometry_errors: OdometryErrors | None = None
 
 
 def _check_options(*, interval_s: float, overlap: int, position_std_m: float,
@@ -584,9 +594,31 @@ def calibrate_intrinsics(
     report = _report(dn_w, rot_w, iv, halves)
     _check_identifiable(report, dn_w, iv, interval_hint=f"over intervals of {interval_s:g} s ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
-    return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
-                  fraction=outlier_fraction, pose_reference=True,
-                  causes=_causes(sensor_pose=sensor_pose, encoders=encoders))
+    cal = _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
+                 fraction=outlier_fraction, pose_reference=True,
+                 causes=_causes(sensor_pose=sensor_pose, encoders=encoders))
+    return _with_odometry_errors(cal, t, counts, rt, rp, overlap=overlap)
+
+
+def _with_odometry_errors(cal: IntrinsicsCalibration, t, counts, rt, rp, *, overlap: int
+                          ) -> IntrinsicsCalibration:
+    """``cal`` with the drive's odometry error model (:mod:`lti_motion.calibration.
+    odometry_walk`) over the interval lengths the drive holds."""
+    span = float(rt[-1] - rt[0])
+    lengths = [s for s in WALK_LENGTHS_S if 4 * s <= span] or [min(WALK_LENGTHS_S)]
+    p = np.array([*cal.intrinsics.as_dict().values(), *(cal.sensor_pose if np.any(
+        cal.sensor_pose) else ())])
+    ivs = [_intervals(t, counts, rt, rp, s, overlap=overlap) for s in lengths]
+    ivs = [iv for iv in ivs if len(iv.starts) >= 2]
+    if not ivs:
+        return cal
+    k, k_std, ref = fit_wheel_walk(ivs, p)
+    source = (f"intrinsics calibration against a pose reference: {len(rt)} reference poses "
+              f"over {span:.0f} s, intervals of {lengths[0]:g}-{lengths[-1]:g} s; reference "
+              f"noise seen {np.sqrt(ref[0] / 2) * 1e3:.2g} mm, "
+              f"{np.rad2deg(np.sqrt(ref[1] / 2)):.2g} deg per pose")
+    errors = OdometryErrors(k, cal.covariance[:3, :3], k_std, source)
+    return dataclasses.replace(cal, odometry_errors=errors)
 
 
 def calibrate_intrinsics_intervals(

@@ -68,6 +68,7 @@ from lti_motion.model.excitation import DEFAULT_MAX_CONDITION, StepSequence, che
 from lti_motion.model.fir import FirFit, fir_state_space
 from lti_motion.model.fir_steps import fir_from_steps
 from lti_motion.model.state_space import StateSpace, simulate_state_space
+from lti_motion.odometry_errors import OdometryErrors
 from lti_motion.persistence import decode_array, encode_array, read_document, write_document
 
 __all__ = [
@@ -239,6 +240,10 @@ class MotionModel:
         Affine output offset ``c`` = (v [m/s], w [rad/s]): the model predicts
         ``y = C z + D u + c`` (:mod:`lti_motion.model.output_error`); zeros for a
         linear model and for files of version 1.
+    odometry_errors : OdometryErrors or None
+        Encoder odometry's error model measured with :attr:`intrinsics` against a pose
+        reference (:mod:`lti_motion.odometry_errors`): what its dead-reckoned pose
+        covariance grows with. None when not measured (files without the key).
 
     Notes
     -----
@@ -298,6 +303,7 @@ class MotionModel:
     diagnostics: Mapping[str, float] = field(default_factory=dict)
     selection: ArxSelection | None = field(default=None, repr=False)
     offset_speeds: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    odometry_errors: OdometryErrors | None = None
 
     def __post_init__(self) -> None:
         setf = object.__setattr__
@@ -330,6 +336,10 @@ class MotionModel:
         if self.intrinsics is not None and not isinstance(self.intrinsics, OdometryIntrinsics):
             raise ValueError(f"intrinsics must be an OdometryIntrinsics or None, got "
                              f"{type(self.intrinsics).__name__}")
+        if self.odometry_errors is not None and not isinstance(self.odometry_errors,
+                                                               OdometryErrors):
+            raise ValueError(f"odometry_errors must be an OdometryErrors or None, got "
+                             f"{type(self.odometry_errors).__name__}")
         setf(self, "offset_speeds", _frozen(self.offset_speeds))
         if self.offset_speeds.shape != (2,) or not np.all(np.isfinite(self.offset_speeds)):
             raise ValueError(f"offset_speeds must be 2 finite numbers (v [m/s], w [rad/s]), "
@@ -382,7 +392,8 @@ class MotionModel:
         """A copy with some fields changed (validated again), e.g. ``m_per_tick``."""
         return dataclasses.replace(self, **changes)
 
-    def with_intrinsics(self, intrinsics: OdometryIntrinsics) -> MotionModel:
+    def with_intrinsics(self, intrinsics: OdometryIntrinsics, *,
+                        odometry_errors: OdometryErrors | None = None) -> MotionModel:
         """A copy that maps counts with ``intrinsics`` and predicts the same counts.
 
         The outputs are encoder body speeds, ``y = J n / dt`` for tick increments
@@ -402,6 +413,10 @@ class MotionModel:
             Each wheel's ground travel per tick and the wheel base, e.g. from
             :meth:`fusion.ekf.ModelEKF.intrinsics_estimate` or
             :func:`lti_motion.calibration.calibrate_intrinsics`.
+        odometry_errors : OdometryErrors, optional
+            The odometry error model measured with ``intrinsics``
+            (``IntrinsicsCalibration.odometry_errors``); any the model held belonged to
+            its old intrinsics and is dropped.
 
         Returns
         -------
@@ -436,7 +451,8 @@ class MotionModel:
         return self.updated(C=T @ self.C, D=T @ self.D, K=self.K @ T_inv, R=0.5 * (r + r.T),
                             coefficients=coef, offset_speeds=T @ self.offset_speeds,
                             intrinsics=intrinsics, m_per_tick=intrinsics.m_per_tick,
-                            wheel_base_m=intrinsics.wheel_base_m)
+                            wheel_base_m=intrinsics.wheel_base_m,
+                            odometry_errors=odometry_errors)
 
     # -- prediction ------------------------------------------------------------------------
     def propagate(self, cmd_m_s: np.ndarray, *, z0: np.ndarray | None = None
@@ -638,6 +654,8 @@ class MotionModel:
             "intrinsics": None if self.intrinsics is None else self.intrinsics.as_dict(),
             "offset_speeds": encode_array(self.offset_speeds),
         }
+        if self.odometry_errors is not None:          # optional: older readers ignore it
+            payload["odometry_errors"] = self.odometry_errors.as_dict()
         return write_document(path, payload, fmt=FORMAT, version=VERSION)
 
     @classmethod
@@ -677,8 +695,10 @@ class MotionModel:
                 **{n: decode_array(doc["matrices"][n], n) for n in "ABCDKQR"},
                 offset_speeds=(decode_array(doc["offset_speeds"], "offset_speeds")
                                if "offset_speeds" in doc else np.zeros(2)),
+                odometry_errors=(OdometryErrors.from_dict(doc["odometry_errors"])
+                                 if doc.get("odometry_errors") is not None else None),
             )
-        except (ValueError, TypeError, AttributeError) as exc:
+        except (ValueError, TypeError, AttributeError, KeyError) as exc:
             if isinstance(exc, ModelFileError):
                 raise
             raise ModelFileError(f"{path} holds an invalid model: {exc}") from None

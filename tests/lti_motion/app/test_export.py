@@ -280,3 +280,24 @@ def test_other_bad_options_are_one_line(model_file, capsys, extra, words):
     line = _one_line_error(["export", "--model", str(model_file), "--to",
                             "diff_drive_controller", *extra], capsys)
     assert words in line
+
+
+def test_a_model_without_measured_odometry_errors_says_so_in_the_file_and_one_line(
+        model_file, capsys):
+    assert main(["export", "--model", str(model_file), "--to", "diff_drive_controller"]) == 0
+    out, err = capsys.readouterr()
+    assert "# odometry pose error: NOT MEASURED" in out
+    assert len(err.strip().splitlines()) == 1
+    assert "carries no measured odometry error" in err and "upper bound" in err
+
+
+def test_a_model_with_measured_odometry_errors_names_them_and_prints_no_note(
+        tiny_model, tmp_path, capsys):
+    from lti_motion.odometry_errors import OdometryErrors
+
+    errors = OdometryErrors(2.3e-6, np.diag([6e-14, 6e-14, 3e-8]), 2e-7, "a test calibration")
+    path = tiny_model.with_intrinsics(K, odometry_errors=errors).save(tmp_path / "m.json")
+    assert main(["export", "--model", str(path), "--to", "robot_localization"]) == 0
+    out, err = capsys.readouterr()
+    assert "# odometry pose error: measured, a random walk of 2.3e-06 m^2" in out
+    assert "a test calibration" in out and err == ""

@@ -86,6 +86,12 @@ def test_into_model_writes_a_model_carrying_the_intrinsics(drive, tmp_path, caps
     # the outputs moved with the counts' meaning: the same counts are predicted
     T = loaded.intrinsics.jacobian() @ np.linalg.inv(model.encoder_intrinsics.jacobian())
     np.testing.assert_allclose(loaded.C, T @ model.C, rtol=1e-12, atol=1e-15)
+    # the odometry's error, measured on the drive, goes with the intrinsics
+    written = json.loads((tmp_path / "o" / "intrinsics.json").read_text())["odometry_errors"]
+    assert loaded.odometry_errors is not None
+    assert loaded.odometry_errors.wheel_variance_per_m == written["wheel_variance_per_m"]
+    np.testing.assert_allclose(loaded.odometry_errors.intrinsics_covariance,
+                               np.asarray(written["intrinsics_covariance"]), rtol=1e-12)
     capsys.readouterr()
     assert main(["calibrate", "--log", str(drive["log"]), "--reference", str(drive["ref"]),
                  "--into-model", str(tmp_path / "none.json"), "--out", str(tmp_path / "p")]) == 2
