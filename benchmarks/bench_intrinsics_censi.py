@@ -22,6 +22,10 @@ Figures (worst over all runs):
 ``intrinsics_censi.std_over_subset_spread_min``, ``..._max``
     Per configuration and parameter, the subsets' mean reported standard deviation over
     the standard deviation of their estimates; smallest and largest (target: 0.5 to 2).
+``intrinsics_censi.std_over_blocks_B_spread_min``, ``..._max`` (B = 6, 10)
+    The same with each whole run cut into B interleaved blocks (sample ``i`` into block
+    ``i mod B``; B = 3 gives the authors' subsets exactly): a spread of B estimates, B - 1
+    degrees of freedom against the subsets' 2 (no target).
 """
 
 from __future__ import annotations
@@ -88,7 +92,30 @@ def run_scores(path: Path) -> dict[str, float]:
         std = np.array([p[1] for p in parts])
         ratios.extend(std.mean(axis=0) / est.std(axis=0, ddof=1))
     err["ratio_min"], err["ratio_max"] = float(min(ratios)), float(max(ratios))
+    for blocks in BLOCKS:
+        ratios = []
+        for run in runs:
+            if "_" not in run:
+                ratios.extend(block_ratios(path / f"{run}.tuple", blocks))
+        err[f"blocks_{blocks}"] = (float(min(ratios)), float(max(ratios)))
     return err
+
+
+#: Interleaved blocks per whole run for the second look at the standard deviations.
+BLOCKS = (6, 10)
+
+
+def block_ratios(tuple_path: Path, blocks: int) -> np.ndarray:
+    """Per parameter: the blocks' mean reported standard deviation over the standard
+    deviation of their estimates, the run cut into ``blocks`` interleaved blocks."""
+    s = read_motion_intervals(tuple_path)
+    parts = [_vector(calibrate_intrinsics_intervals(s.wheel_rad[i::blocks],
+                                                    s.sensor_motion[i::blocks],
+                                                    sensor_pose=True))
+             for i in range(blocks)]
+    est = np.array([p[0] for p in parts])
+    std = np.array([p[1] for p in parts])
+    return std.mean(axis=0) / est.std(axis=0, ddof=1)
 
 
 @benchmark("intrinsics_censi")
@@ -110,4 +137,6 @@ def run() -> list[Figure]:
                target=0.5, better="higher"),
         Figure("intrinsics_censi.std_over_subset_spread_max", e["ratio_max"], "ratio",
                target=2.0, better="lower"),
-    ]
+    ] + [Figure(f"intrinsics_censi.std_over_blocks_{b}_spread_{end}", e[f"blocks_{b}"][i],
+                "ratio", better="lower")
+         for b in BLOCKS for i, end in enumerate(("min", "max"))]

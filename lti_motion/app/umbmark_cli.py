@@ -25,8 +25,15 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-__all__ = ["add_umbmark_arguments", "run_umbmark"]
+if TYPE_CHECKING:
+    import numpy as np
+
+    from drivers.sim import RobotParams
+    from lti_motion.recordings import EndPoseRuns, FrameLog
+
+__all__ = ["add_umbmark_arguments", "run_umbmark", "simulate_umbmark", "umbmark_squares"]
 
 #: Speeds and ramps of the squares (gentle: slip is no intrinsic).
 _SPEED_M_S = 0.2
@@ -72,6 +79,105 @@ def _square(dt_s: float, wheel_base_m: float, side_m: float, direction: int):
     return np.concatenate(parts)
 
 
+def umbmark_squares(dt_s: float, wheel_base_m: float, *, side_m: float, runs: int
+                    ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Wheel commands of UMBmark's bidirectional square: ``runs`` squares counter-clockwise,
+    then ``runs`` clockwise (Borenstein & Feng 1996, sec. 3).
+
+    Parameters
+    ----------
+    dt_s : float
+        Command period [s].
+    wheel_base_m : float
+        The nominal wheel base the commands are computed with [m].
+    side_m : float
+        Side of the square [m] (Borenstein and Feng: 4 m).
+    runs : int
+        Squares each way (Borenstein and Feng: 5).
+
+    Returns
+    -------
+    commands : ndarray, shape (n, 2)
+        Wheel speeds ``(left, right)`` [m/s], one row a period: each square four sides at
+        0.2 m/s and four quarter turns in place at 0.5 rad/s, every manoeuvre ramped at
+        0.1 m/s^2 and followed by 0.5 s at rest.
+    bounds : ndarray of int, shape (2 runs + 1,)
+        The command row at which each square starts, and the end.
+    directions : list of int
+        +1 (counter-clockwise) or -1 (clockwise), one per square.
+    """
+    import numpy as np
+
+    directions = [1] * runs + [-1] * runs
+    squares = [_square(dt_s, wheel_base_m, side_m, d) for d in directions]
+    bounds = np.concatenate([[0], np.cumsum([len(s) for s in squares])])
+    return np.concatenate(squares), bounds, directions
+
+
+def simulate_umbmark(params: RobotParams, *, side_m: float, runs: int, seed: int,
+                     floor: str | None = None,
+                     measure_std: tuple[float, float] = _MEASURE_STD
+                     ) -> tuple[FrameLog, EndPoseRuns]:
+    """Drive UMBmark's squares on the simulator and measure where each starts and ends.
+
+    The measurement is the physical world's side of the procedure (a tape measure): the
+    simulator's true pose at each square's first and last frame plus Gaussian noise of
+    ``measure_std`` ``(position [m], heading [rad])``; the calibration sees only the
+    counts and these poses.
+
+    Parameters
+    ----------
+    params : drivers.sim.RobotParams
+        The simulated robot.
+    side_m, runs
+        As :func:`umbmark_squares`.
+    seed : int
+        The simulator's seed; the measurement noise is drawn from ``[seed, 0x0B]``.
+    floor : str, optional
+        The simulated floor (default the robot's).
+    measure_std : tuple of 2 float
+        Standard deviation of a measured position [m] (each axis) and heading [rad].
+
+    Returns
+    -------
+    log : lti_motion.recordings.FrameLog
+        The drive.
+    runs : lti_motion.recordings.EndPoseRuns
+        Each square's start and end frame times [s], measured poses and whole ``turns``
+        (+1 counter-clockwise, -1 clockwise), as the runs file holds them.
+    """
+    import numpy as np
+
+    from drivers.sim import Room, Simulator
+    from lti_motion.recordings import EndPoseRuns
+
+    cmd, bounds, directions = umbmark_squares(params.period_s, params.wheel_base_m,
+                                              side_m=side_m, runs=runs)
+    sim = Simulator(params, seed=seed, floor=floor, room=Room.empty(),
+                    initial_pose=(0.0, 0.0, 0.0))
+    log = sim.run(cmd)
+    rng = np.random.default_rng([seed, 0x0B])
+    std = np.array([measure_std[0], measure_std[0], measure_std[1]])
+    ends = np.minimum(bounds, len(log.t_s) - 1)
+    measured = log.true_pose[ends] + rng.standard_normal((len(ends), 3)) * std
+    # the headings show the net turn modulo a turn; a square turns one whole turn
+    seen = np.angle(np.exp(1j * np.diff(measured[:, 2])))
+    turns = np.round((2 * np.pi * np.array(directions) - seen) / (2 * np.pi)).astype(int)
+    return log, EndPoseRuns(times_s=np.stack([log.t_s[ends[:-1]], log.t_s[ends[1:]]], 1),
+                            start_poses=measured[:-1], end_poses=measured[1:], turns=turns)
+
+
+def _runs_text(runs: EndPoseRuns) -> str:
+    """The runs file (:data:`lti_motion.recordings.RUNS_HEADER`, one run a line)."""
+    from lti_motion.recordings import RUNS_HEADER
+
+    lines = [RUNS_HEADER]
+    for (t0, t1), p0, p1, turns in zip(runs.times_s, runs.start_poses, runs.end_poses,
+                                       runs.turns, strict=True):
+        lines.append(" ".join(f"{v:.6f}" for v in (t0, t1, *p0, *p1)) + f" {int(turns)}")
+    return "\n".join(lines) + "\n"
+
+
 def run_umbmark(args: argparse.Namespace) -> int:
     """Handler of ``lti-motion calibrate --umbmark``; returns the exit code.
 
@@ -82,10 +188,10 @@ def run_umbmark(args: argparse.Namespace) -> int:
     """
     import numpy as np
 
-    from drivers.sim import Room, Simulator, load_robot
+    from drivers.sim import load_robot
     from lti_motion.app.calibrate_run import check_writable_folder
     from lti_motion.app.intrinsics_cli import run_intrinsics_calibration
-    from lti_motion.recordings import RUNS_HEADER, save_log
+    from lti_motion.recordings import save_log
 
     if not args.sim or args.port or args.log or args.bag:
         raise ValueError("--umbmark drives the simulator: give --robot NAME_OR_FILE (on a "
@@ -100,29 +206,14 @@ def run_umbmark(args: argparse.Namespace) -> int:
     out = Path(args.out)
     check_writable_folder(out)
     params = load_robot(args.sim)
-    squares = [_square(params.period_s, params.wheel_base_m, args.umbmark_side, d)
-               for d in [1] * args.umbmark_runs + [-1] * args.umbmark_runs]
-    bounds = np.concatenate([[0], np.cumsum([len(s) for s in squares])])
     print(f"UMBmark: {args.umbmark_runs} squares of {args.umbmark_side:g} m counter-clockwise, "
           f"then clockwise, simulated {params.name} robot (seed {args.seed})")
-    sim = Simulator(params, seed=args.seed, floor=args.floor, room=Room.empty(),
-                    initial_pose=(0.0, 0.0, 0.0))
-    log = sim.run(np.concatenate(squares))
+    log, runs = simulate_umbmark(params, side_m=args.umbmark_side, runs=args.umbmark_runs,
+                                 seed=args.seed, floor=args.floor)
     out.mkdir(parents=True, exist_ok=True)
     log_path = save_log(out / "log_umbmark.npz", log)
-    rng = np.random.default_rng([args.seed, 0x0B])
-    std = np.array([_MEASURE_STD[0], _MEASURE_STD[0], _MEASURE_STD[1]])
-    ends = np.minimum(bounds, len(log.t_s) - 1)
-    measured = log.true_pose[ends] + rng.standard_normal((len(ends), 3)) * std
-    lines = [RUNS_HEADER]
-    for i, d in enumerate([1] * args.umbmark_runs + [-1] * args.umbmark_runs):
-        a, b = ends[i], ends[i + 1]
-        seen = np.angle(np.exp(1j * (measured[i + 1, 2] - measured[i, 2])))
-        turns = int(np.round((d * 2 * np.pi - seen) / (2 * np.pi)))
-        lines.append(" ".join(f"{v:.6f}" for v in (log.t_s[a], log.t_s[b], *measured[i],
-                                                    *measured[i + 1])) + f" {turns}")
     runs_path = out / "umbmark_runs.txt"
-    runs_path.write_text("\n".join(lines) + "\n")
+    runs_path.write_text(_runs_text(runs))
     print(f"wrote {log_path} and {runs_path} (poses measured with 5 mm, 0.5 deg noise)")
     # the squares end where they start: their travel cannot give the scale, so the
     # wheels' mean scale is the description's and the fit gives the ratio and the base

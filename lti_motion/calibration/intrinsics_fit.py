@@ -20,7 +20,8 @@ robot, that sensor's pose in the robot frame. The method is Censi et al.'s (2013
    :func:`scipy.optimize.least_squares`, in parameters scaled by the closed form's so
    that any count unit gives the same result; the covariance is ``s^2 (J^T J)^-1`` at
    the optimum, ``s^2`` the reduced chi-square.
-4. Censi et al.'s outlier rounds (four, 1% each, gated by a robust scale), the weights
+4. Censi et al.'s outlier rounds (four, 1% each, gated by a robust scale; for a pose
+   reference each interval's translation residual against its own noise), the weights
    and the covariance from the kept residuals
    (:mod:`lti_motion.calibration.intrinsics_solver`).
 
@@ -399,9 +400,12 @@ def _check_mount(iv: Intervals, rms_xy: float) -> None:
 
 def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
            sigma0: np.ndarray, rounds: int, fraction: float, causes: str,
-           mean_scale: float | None = None) -> IntrinsicsCalibration:
+           pose_reference: bool, mean_scale: float | None = None) -> IntrinsicsCalibration:
     """Closed form, refinement and Censi et al.'s outlier rounds
-    (:mod:`lti_motion.calibration.intrinsics_solver`)."""
+    (:mod:`lti_motion.calibration.intrinsics_solver`); ``pose_reference``: the intervals'
+    motions are differences of poses (a trajectory, runs' ends), whose start heading's
+    error grows with the displacement (:func:`~lti_motion.calibration.intrinsics_solver.
+    trim`), not a sensor's own motions (interval samples)."""
     keep = np.ones(len(iv.starts), bool)
     sigma = sigma0
     p = None
@@ -417,7 +421,8 @@ def _solve(iv: Intervals, report: IdentifiabilityReport, *, sensor_pose: bool,
         sigma = noise_from_residuals(r, _NOISE_FLOOR)
         if round_ < rounds:
             kept = np.flatnonzero(keep)
-            keep[kept[~trim(r, fraction)]] = False
+            travel = sub.ref_motion[:, :2] if pose_reference else None
+            keep[kept[~trim(r, fraction, travel=travel)]] = False
     p, cov = refine(sub, p, sigma, mean_scale=mean_scale)   # weights from the residuals
     r = residuals(sub, p)
     if not (np.all(np.isfinite(p)) and np.all(p[:3] > 0)):
@@ -515,7 +520,9 @@ def calibrate_intrinsics(
     outlier_rounds : int
         Rounds of Censi et al.'s outlier rule (4, as their published results; 0: none),
         each rejecting only intervals also beyond 3 robust standard deviations (the
-        scale from the residuals' median; docs/intrinsics.md, "Outliers").
+        scale from the residuals' median; docs/intrinsics.md, "Outliers"); each
+        interval's translation residual is judged against its own noise, the start
+        pose's heading error growing with the interval's displacement.
     outlier_fraction : float
         Fraction of intervals each round rejects by their largest rotation or
         translation residual (0.01: those above the 99th percentile of either).
@@ -588,7 +595,7 @@ def calibrate_intrinsics(
     _check_identifiable(report, dn_w, iv, interval_hint=f"over intervals of {interval_s:g} s ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
     cal = _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
-                 fraction=outlier_fraction,
+                 fraction=outlier_fraction, pose_reference=True,
                  causes=_causes(sensor_pose=sensor_pose, encoders=encoders))
     return _with_odometry_errors(cal, t, counts, rt, rp, overlap=overlap)
 
@@ -701,5 +708,5 @@ def calibrate_intrinsics_intervals(
     _check_identifiable(report, dn, iv, interval_hint="")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad])
     return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
-                  fraction=outlier_fraction,
+                  fraction=outlier_fraction, pose_reference=False,
                   causes=_causes(sensor_pose=sensor_pose, encoders=None))

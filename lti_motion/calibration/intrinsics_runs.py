@@ -172,5 +172,5 @@ def calibrate_intrinsics_runs(
     _check_identifiable(report, dn_w, iv, interval_hint="over the runs ")
     sigma = np.array([position_std_m, position_std_m, heading_std_rad]) * np.sqrt(2.0)
     return _solve(iv, report, sensor_pose=sensor_pose, sigma0=sigma, rounds=outlier_rounds,
-                  fraction=outlier_fraction, mean_scale=mean_m_per_tick,
+                  fraction=outlier_fraction, mean_scale=mean_m_per_tick, pose_reference=True,
                   causes=_causes(sensor_pose=sensor_pose, encoders=encoders))

@@ -18,7 +18,10 @@ drop every interval whose rotation residual ``|e_theta|`` or translation residua
 ``|(e_x, e_y)|`` is above that residual's ``1 - fraction`` quantile of the intervals
 kept, and solve again; ``rounds`` times. An interval is rejected only if it also lies
 beyond 3 robust standard deviations (scale from the residuals' median): on clean data
-the largest residuals are kept (:func:`trim`). The weights of the translation and rotation
+the largest residuals are kept (:func:`trim`). For a pose reference each interval's
+translation residual is judged against its own noise: the start pose's heading error
+turns the interval's displacement, so a long straight interval's residual is larger
+than a turn's without being an outlier. The weights of the translation and rotation
 residuals then come from the kept residuals themselves (their RMS), as Censi et al.
 estimate the scan matcher's noise from the residuals (their ``estimate_noise``), so the
 user's noise figures only weigh the first round.
@@ -237,7 +240,8 @@ def refine(iv: Intervals, p0: np.ndarray, sigma: np.ndarray, *,
     return to_p(fit.x), t @ cov_x @ t.T
 
 
-def trim(r: np.ndarray, fraction: float, *, robust: bool = True) -> np.ndarray:
+def trim(r: np.ndarray, fraction: float, *, robust: bool = True,
+         travel: np.ndarray | None = None) -> np.ndarray:
     """Censi et al.'s rule on the residuals ``r`` (K, 3) of the intervals kept: True for
     those at or below both the rotation's and the translation's ``1 - fraction``
     quantile (their solver: the sorted errors' element ``round((1 - fraction) K)``).
@@ -246,15 +250,42 @@ def trim(r: np.ndarray, fraction: float, *, robust: bool = True) -> np.ndarray:
     standard deviations (scale from the median, Hampel's rule): ``|e_theta| > 3 sigma``
     with ``sigma = median |e_theta| / 0.6745`` (half-normal), ``|e_xy| > 3.44 sigma`` with
     ``sigma = median |e_xy| / 1.1774`` (Rayleigh; the same 0.27% tail), so residuals
-    that are merely the largest of clean data are kept."""
+    that are merely the largest of clean data are kept.
+
+    ``travel`` (K, 2), the reference's displacement over each interval in its start frame,
+    is given when the reference is a pose trajectory: the interval's motion is then
+    ``R(-theta_0) (p_1 - p_0)``, so the start pose's heading error turns the displacement
+    and adds ``sigma_h |d|`` across it, more on a long straight interval than on a turn in
+    place. The translation residual is then judged against its own interval's noise,
+    ``m^2 = e_along^2 / s^2 + e_across^2 / (s^2 + sigma_h^2 |d|^2)`` (``s`` the two
+    positions' noise, ``median e_along^2 / 0.4549``, the chi-square median with one
+    degree of freedom; ``sigma_h^2 = (median |e_theta| / 0.6745)^2 / 2``, one pose's heading
+    variance, the rotation residual holding two), and ``m`` goes through the rule and the
+    gate in place of ``|e_xy|`` (Rayleigh of unit scale when the model holds)."""
     e_th = np.abs(r[:, 2])
-    e_xy = np.hypot(r[:, 0], r[:, 1])
+    e_xy = np.hypot(r[:, 0], r[:, 1]) if travel is None else _standardised_xy(r, travel)
     index = min(max(int(np.round((1.0 - fraction) * len(r))), 0), len(r) - 1)
     lim_th, lim_xy = np.sort(e_th)[index], np.sort(e_xy)[index]
     if robust:
         lim_th = max(lim_th, 3.0 * np.median(e_th) / 0.6745)
         lim_xy = max(lim_xy, 3.44 * np.median(e_xy) / 1.1774)
     return (e_th <= lim_th) & (e_xy <= lim_xy)
+
+
+def _standardised_xy(r: np.ndarray, travel: np.ndarray) -> np.ndarray:
+    """The translation residual over its own interval's noise for a pose reference
+    (:func:`trim`): along the displacement the two positions' noise, across it that plus
+    the start heading's error times the displacement's length."""
+    d = np.hypot(travel[:, 0], travel[:, 1])
+    u = travel / np.maximum(d, 1e-300)[:, None]           # unit along (0 when d = 0)
+    along = r[:, 0] * u[:, 0] + r[:, 1] * u[:, 1]
+    across = u[:, 0] * r[:, 1] - u[:, 1] * r[:, 0]
+    still = d == 0                                         # no direction: both ways alike
+    along = np.where(still, r[:, 0], along)
+    across = np.where(still, r[:, 1], across)
+    s2 = max(float(np.median(along ** 2)) / 0.4549, 1e-300)
+    h2 = (float(np.median(np.abs(r[:, 2]))) / 0.6745) ** 2 / 2.0
+    return np.sqrt(along ** 2 / s2 + across ** 2 / (s2 + h2 * d ** 2))
 
 
 def noise_from_residuals(r: np.ndarray, floor: np.ndarray) -> np.ndarray:

@@ -31,3 +31,19 @@ def test_umbmark_writes_the_runs_and_fits_ratio_and_base(tmp_path, capsys):
 def test_umbmark_needs_the_simulator(tmp_path, capsys):
     assert main(["calibrate", "--umbmark", "--port", "/dev/null", "--out", str(tmp_path)]) == 2
     assert "--umbmark drives the simulator" in capsys.readouterr().err
+
+
+def test_umbmark_benchmark_short_meets_the_targets():
+    """``python -m benchmarks umbmark`` shortened: the asymmetric robot (left wheel 1%
+    larger, right motor 10% weaker, tile), 4 m squares 3 each way, end poses measured with
+    5 mm and 0.5 deg noise, seeds 0-1: ratio within 0.1%, wheel base within 0.3% of the
+    simulator's straight-line truth (scoring only)."""
+    from benchmarks.bench_intrinsics import asymmetric_robot
+    from benchmarks.bench_umbmark import umbmark_errors
+
+    e = umbmark_errors(asymmetric_robot(), [0, 1], side_m=4.0, runs=3)
+    assert e.shape == (2, 4)
+    assert abs(e[:, 0]).max() < 0.1                    # ratio against the straight-line truth
+    assert abs(e[:, 2]).max() < 0.3                    # wheel base against the contact base
+    # the 1% type B error is found: the ratio is 1.01 to within 0.1%, not 1
+    assert abs(e[:, 1]).max() < 0.1
