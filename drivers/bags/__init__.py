@@ -5,6 +5,7 @@
   :func:`bag_grid`, that recording on the model's grid;
 - :mod:`drivers.bags.topics`: the raw per-topic series the reader starts from;
 - :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
+- :mod:`drivers.bags.integrity`: an MCAP file's records walked, a damaged bag refused;
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
 - :mod:`drivers.bags.imu_noise`: the gyro's noise measured from the bag;
@@ -34,16 +35,19 @@ __all__ = [
     "TRUTH_PARENTS",
     "BagAlarm",
     "BagTopics",
+    "Damage",
     "ImuRateNoise",
     "StampedSeries",
     "TfTruth",
     "bag_grid",
     "bag_paths",
     "bag_topics",
+    "check_bag",
     "decode_fields",
     "field_value",
     "imu_rate_noise",
     "is_mcap",
+    "mcap_damage",
     "open_bag",
     "raw_messages",
     "read_bag",
@@ -65,6 +69,11 @@ __getattr__, __dir__ = lazy_exports(
             "ImuRateNoise",
             "imu_rate_noise",
             "with_rate_data",
+        ),
+        "drivers.bags.integrity": (
+            "Damage",
+            "check_bag",
+            "mcap_damage",
         ),
         "drivers.bags.messages": (
             "bag_paths",
@@ -109,6 +118,7 @@ __getattr__, __dir__ = lazy_exports(
 if TYPE_CHECKING:
     from drivers.bags.fields import decode_fields, field_value
     from drivers.bags.imu_noise import ImuRateNoise, imu_rate_noise, with_rate_data
+    from drivers.bags.integrity import Damage, check_bag, mcap_damage
     from drivers.bags.messages import bag_paths, is_mcap, open_bag, raw_messages
     from drivers.bags.reader import (
         CREATE2_TICKS_PER_RAD,

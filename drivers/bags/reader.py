@@ -49,6 +49,7 @@ from typing import Literal
 import numpy as np
 
 from drivers.bags.imu_noise import imu_rate_noise, with_rate_data
+from drivers.bags.integrity import check_bag
 from drivers.bags.topics import (
     LEFT_JOINT,
     RIGHT_JOINT,
@@ -139,10 +140,12 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         A ``ValueError``: every error of :func:`drivers.bags.topics.read_topics`; no
         wheel angles nor odometry (the bag's topics listed); fewer than 2 wheel
         messages; stamps all equal and no ``dt_s``; a non-positive ``dt_s``; an Imu
-        none of whose messages has an angular velocity.
+        none of whose messages has an angular velocity; a damaged MCAP file
+        (:func:`drivers.bags.check_bag`).
     """
     if dt_s is not None and not (math.isfinite(dt_s) and dt_s > 0):
         raise BagError(f"the sensor period must be positive, got {dt_s!r} s")
+    check_bag(path)                 # a damaged file refused before any number is read
     kinds = ("cmd", "wheels", "odom") + (("imu",) if imu else ()) + (("truth",) if truth else ())
     found = read_topics(path, cmd_topic=cmd_topic, wheels_topic=wheels_topic,
                         odom_topic=odom_topic, imu_topic=imu_topic, truth_topic=truth_topic,

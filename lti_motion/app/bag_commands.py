@@ -59,6 +59,7 @@ from drivers.exceptions import BagError
 from fusion.monitoring import AlarmEvent, FrameResult
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
+from lti_motion.app.recorded_health import HeldOut, check_period, held_out_span
 from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
 from lti_motion.app.replay_sources import (
     ReplaySource,
@@ -68,7 +69,13 @@ from lti_motion.app.replay_sources import (
 from lti_motion.calibration import OfflineCalibration, calibrate_recording
 from lti_motion.exceptions import MissingEncoderScaleError
 from lti_motion.model import MotionModel
-from lti_motion.recordings import GridSignals, Recording, SensorFrame, snap_period_s
+from lti_motion.recordings import (
+    GridSignals,
+    Recording,
+    SensorFrame,
+    median_period_s,
+    snap_period_s,
+)
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording", "monitor_bag",
            "plot_bag_fit", "replay_bag", "replay_source"]
@@ -155,7 +162,8 @@ def _grid(rec: Recording, *, wheel_base_m: float, options: BagOptions,
 
 def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
                        options: BagOptions | None = None, floor: str | None = None,
-                       validation: float = 0.3) -> tuple[OfflineCalibration, Recording]:
+                       validation: float = 0.3, held_out: HeldOut | None = None
+                       ) -> tuple[OfflineCalibration, Recording]:
     """Calibrate an ARX model on the drive recorded in a bag.
 
     The bag is read once, put on the grid once (:func:`drivers.bags.bag_grid`), and
@@ -172,7 +180,10 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     floor : str, optional
         Floor name recorded in the model.
     validation : float
-        Held-out tail that chooses order and delay (paper section III.C).
+        Tail of each fitted piece that chooses order and delay (paper section III.C).
+    held_out : HeldOut, optional
+        The time span kept out of the fit, on which the model is measured
+        (:func:`lti_motion.app.recorded_health.held_out_span`; default the last 20%).
 
     Returns
     -------
@@ -190,6 +201,10 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     BagError
         For a bag without wheel angles (nor odometry) or without commands (and the
         reader's errors).
+    ValueError
+        A ``options.dt_s`` further than 10 % from the wheel stamps' own period
+        (:func:`lti_motion.app.recorded_health.check_period`); a held-out span outside
+        the drive.
     NotExcitedError
         If the drive cannot identify the model (the reasons given).
     """
@@ -198,6 +213,9 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     if not rec.source.has("cmd"):
         raise BagError(f"{Path(path).name} has no geometry_msgs/Twist or TwistStamped "
                        "commands; calibration needs what was commanded (record /cmd_vel)")
+    t = rec.wheel.t_s
+    check_period(opt.dt_s, median_period_s(t),
+                 f"the median interval of the stamps on {rec.source.topics['wheel']}")
     grid = _grid(rec, wheel_base_m=wheel_base_m, options=opt, encoders=opt.encoders)
     angles = rec.wheel_kind == "wheel_angles_rad"
     cal = calibrate_recording(
@@ -206,7 +224,8 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
         wheel_radius_m=opt.wheel_radius_m if angles else None, encoders=opt.encoders,
         scale_from=("the nominal wheel radius / ticks per radian" if angles
                     else "the robot's odometry (body speeds)"),
-        dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s)
+        dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s,
+        held_out_s=held_out_span(held_out or HeldOut(), float(t[-1] - t[0])))
     return cal, rec
 
 

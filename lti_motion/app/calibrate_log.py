@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from lti_motion.app.recorded_health import HeldOut
 from lti_motion.calibration import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
 from lti_motion.recordings import Recording, load_recording
@@ -73,8 +74,14 @@ def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
 
 
 def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
-                      floor: str | None = None) -> tuple[OfflineCalibration, list[str]]:
+                      floor: str | None = None, held_out: HeldOut | None = None,
+                      accept_unhealthy: bool = False
+                      ) -> tuple[OfflineCalibration, list[str]]:
     """Calibrate from a log file; write the model and report only when all went well.
+
+    The model is measured on a held-out time span (``held_out``, default the last 20%
+    of the drive; :mod:`lti_motion.app.recorded_health`) and written only when healthy
+    or ``accept_unhealthy``; the report is written either way.
 
     Returns
     -------
@@ -89,19 +96,38 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
         One line each, at the command-line user's level (the CLI exits 2);
         nothing is written.
     """
-    return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor)
+    return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor,
+                                   held_out=held_out, accept_unhealthy=accept_unhealthy)
 
 
 def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Path,
-                            floor: str | None = None
+                            floor: str | None = None, held_out: HeldOut | None = None,
+                            accept_unhealthy: bool = False
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
-    odometry twist, :func:`drivers.bags.read_bag`)."""
+    odometry twist, :func:`drivers.bags.read_bag`).
+
+    Raises
+    ------
+    ValueError
+        Also an unhealthy model (held-out fit below the healthy one, an order or delay at
+        its range's edge) without ``accept_unhealthy``: the report is written, the model
+        not.
+    """
+    from lti_motion.app.recorded_health import (
+        held_out_line,
+        held_out_span,
+        recorded_problems,
+        refuse_unhealthy,
+    )
+
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
+    t = rec.wheel.t_s
+    span = held_out_span(held_out or HeldOut(), float(t[-1] - t[0]))
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
                               encoders="commanded" if frames_v1 else "quadrature",
-                              floor=floor, **scale)
+                              floor=floor, held_out_s=span, **scale)
     lines = cal.report.lines()
     if cal.scale_measured:
         lines.append(f"encoder scale: m_per_tick = {cal.m_per_tick:.6g}, measured by "
@@ -113,12 +139,18 @@ def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Pat
                      "rotation in place beside a wall in this recording: run 'lti-motion "
                      "calibrate --robot/--port' to measure it)")
     m = cal.model
-    lines.append(f"ARX model: order {m.orders['na']}, delay {m.orders['delay']}, period "
-                 f"{m.dt_s * 1e3:.4f} ms; free-run fit on the held-out last 30%: "
-                 f"v {cal.fit_percent[0]:.1f}%, w {cal.fit_percent[1]:.1f}%")
+    if cal.widened:
+        lines.append(f"search widened: {cal.widened}")
+    lines.append(f"ARX model: period {m.dt_s * 1e3:.4f} ms; {held_out_line(cal)}")
     out.mkdir(parents=True, exist_ok=True)
-    model_path = m.save(out / "model_arx.json")
     with atomic_write(out / "excitation.txt", text=True) as fh:
         fh.write("\n".join(lines) + "\n")
+    problems = recorded_problems(cal)
+    if problems and not accept_unhealthy:
+        for line in lines:
+            print(line)
+        lines.clear()
+    refuse_unhealthy(problems, accept_unhealthy=accept_unhealthy, print_fn=lines.append)
+    model_path = m.save(out / "model_arx.json")
     lines.append(f"wrote {model_path} and {out / 'excitation.txt'}")
     return cal, lines

@@ -75,6 +75,7 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
     from lti_motion.app.calibrate_log import RobotDescription, run_calibrate_log
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
+    from lti_motion.app.recorded_health import HeldOut
 
     described = load_robot(args.sim) if args.sim else None
     if args.m_per_tick is not None or args.wheel_radius is not None:
@@ -91,7 +92,9 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
         else (described.wheel_diameter_m / 2 if described else None),
         source=source)
     print(f"calibrating from the recording {args.log}")
-    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor)
+    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor,
+                                 held_out=HeldOut(args.start_s, args.duration_s),
+                                 accept_unhealthy=args.accept_unhealthy)
     for line in lines:
         print(line)
     return 0
@@ -129,11 +132,18 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
     from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.app.plots import plot_order_selection
+    from lti_motion.app.recorded_health import (
+        HeldOut,
+        held_out_line,
+        recorded_problems,
+        refuse_unhealthy,
+    )
 
     out = Path(args.out)
     described = load_robot(args.sim) if args.sim else None
     cal, rec = calibrate_from_bag(args.bag, wheel_base_m=nominal_wheel_base_m(args, described),
-                                  options=_bag_options(args), floor=args.floor)
+                                  options=_bag_options(args), floor=args.floor,
+                                  held_out=HeldOut(args.start_s, args.duration_s))
     model, grid = cal.model, cal.grid
     if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
@@ -145,19 +155,21 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
 
     scale = ("none needed (body speeds)" if cal.m_per_tick is None else
              f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
-    lines = [*cal.report.lines(),
-             f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
-             f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
-             f"w {cal.fit_percent[1]:.1f} %"]
+    lines = [*cal.report.lines(), f"encoder scale {scale}"]
+    if cal.widened:
+        lines.append(f"search widened: {cal.widened}")
+    lines.append(held_out_line(cal))
     for line in lines:
         print(line)
     out.mkdir(parents=True, exist_ok=True)
-    path = model.save(out / "model_arx.json")
     with atomic_write(out / "excitation.txt", text=True) as fh:
         fh.write("\n".join(lines) + "\n")
+    refuse_unhealthy(recorded_problems(cal), accept_unhealthy=args.accept_unhealthy)
+    path = model.save(out / "model_arx.json")
     plot_order_selection(model, out / "order_selection.png")
     fit = plot_bag_fit(model, grid, out / "bag_fit.png")
-    print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
+    print(f"free-run fit on the whole drive (fitted and held-out parts): v {fit[0]:.1f} %, "
+          f"w {fit[1]:.1f} %")
     print(f"wrote {path}, {out / 'order_selection.png'}, {out / 'bag_fit.png'} and "
           f"{out / 'excitation.txt'}")
     return 0

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 from lti_motion.lazy import lazy_exports
 
 __all__ = [
+    "MIN_FIT_SAMPLES",
     "MIN_RUN_M",
     "Calibration",
     "CalibrationPlan",
@@ -82,6 +83,7 @@ __getattr__, __dir__ = lazy_exports(
             "speeds_from_log",
         ),
         "lti_motion.calibration.recorded": (
+            "MIN_FIT_SAMPLES",
             "ExcitationReport",
             "OfflineCalibration",
             "calibrate_recording",
@@ -128,6 +130,7 @@ if TYPE_CHECKING:
         speeds_from_log,
     )
     from lti_motion.calibration.recorded import (
+        MIN_FIT_SAMPLES,
         ExcitationReport,
         OfflineCalibration,
         calibrate_recording,
