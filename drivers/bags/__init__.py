@@ -5,6 +5,7 @@
   :func:`bag_grid`, that recording on the model's grid;
 - :mod:`drivers.bags.topics`: the raw per-topic series the reader starts from;
 - :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
+- :mod:`drivers.bags.clocks`: header stamps against receive times, one time base;
 - :mod:`drivers.bags.integrity`: an MCAP file's records walked, a damaged bag refused;
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
@@ -26,8 +27,10 @@ __all__ = [
     "CREATE2_WHEEL_RADIUS_M",
     "LEFT_JOINT",
     "MAX_GAP_S",
+    "MAX_LAG_S",
     "MAX_WHEEL_M_S",
     "RIGHT_JOINT",
+    "STAMP_CHOICES",
     "TF_TYPE",
     "TOPIC_OPTIONS",
     "TOPIC_TYPES",
@@ -35,6 +38,7 @@ __all__ = [
     "TRUTH_PARENTS",
     "BagAlarm",
     "BagTopics",
+    "ClockCheck",
     "Damage",
     "ImuRateNoise",
     "StampedSeries",
@@ -43,6 +47,8 @@ __all__ = [
     "bag_paths",
     "bag_topics",
     "check_bag",
+    "choose_time_base",
+    "command_lag_s",
     "decode_fields",
     "field_value",
     "imu_rate_noise",
@@ -61,6 +67,13 @@ __all__ = [
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
+        "drivers.bags.clocks": (
+            "MAX_LAG_S",
+            "STAMP_CHOICES",
+            "ClockCheck",
+            "choose_time_base",
+            "command_lag_s",
+        ),
         "drivers.bags.fields": (
             "decode_fields",
             "field_value",
@@ -116,6 +129,13 @@ __getattr__, __dir__ = lazy_exports(
 )
 
 if TYPE_CHECKING:
+    from drivers.bags.clocks import (
+        MAX_LAG_S,
+        STAMP_CHOICES,
+        ClockCheck,
+        choose_time_base,
+        command_lag_s,
+    )
     from drivers.bags.fields import decode_fields, field_value
     from drivers.bags.imu_noise import ImuRateNoise, imu_rate_noise, with_rate_data
     from drivers.bags.integrity import Damage, check_bag, mcap_damage

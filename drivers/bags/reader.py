@@ -43,11 +43,13 @@ from __future__ import annotations
 import logging
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from drivers.bags.clocks import Stamps, choose_time_base
 from drivers.bags.imu_noise import imu_rate_noise, with_rate_data
 from drivers.bags.integrity import check_bag
 from drivers.bags.topics import (
@@ -100,7 +102,8 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
              imu_topic: str | None = None, truth_topic: str | None = None,
              left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
              truth_parent: str | None = None, truth_child: str | None = None,
-             imu: bool = True, truth: bool = True, dt_s: float | None = None) -> Recording:
+             imu: bool = True, truth: bool = True, dt_s: float | None = None,
+             stamps: Stamps = "auto") -> Recording:
     """The drive recorded in a bag, by the rule of the module docstring.
 
     The bag is opened once; only the topics needed are decoded.
@@ -123,6 +126,11 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     dt_s : float, optional
         The nominal sensor period [s] (the wheel stream's); default the median
         interval of its stamps.
+    stamps : {"auto", "header", "receive"}
+        The time base of every topic (:func:`drivers.bags.choose_time_base`): the
+        messages' header stamps, the bag's receive times, or (default) the header
+        stamps unless the topics' clocks disagree by more than a wheel period. The
+        check is in ``meta["clocks"]`` (its ``lines`` to print).
 
     Returns
     -------
@@ -152,6 +160,10 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
                         left_joint=left_joint, right_joint=right_joint,
                         truth_parent=truth_parent, truth_child=truth_child, kinds=kinds,
                         odom_without_wheels=True)
+    kinds_read = {k: getattr(found, k) for k in ("cmd", "wheels", "odom", "imu", "truth")}
+    on_base, clocks = choose_time_base(kinds_read, stamps=stamps)
+    firsts = [int(s.t_ns[0]) for s in on_base.values() if s is not None and len(s)]
+    found = replace(found, **on_base, start_ns=min(firsts) if firsts else found.start_ns)
     wheels = found.wheels if found.wheels is not None else found.odom
     if wheels is None:
         raise BagError(f"{Path(path).name} has no sensor_msgs/JointState wheel angles (nor a "
@@ -176,7 +188,7 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         streams["cmd"] = found.cmd.topic
     else:                                   # none recorded: zero, per frame
         cmd = {"cmd_body": np.zeros((len(t), 2))}
-    extra, meta = {}, {}
+    extra, meta = {}, {"clocks": clocks.as_meta()}
     if found.truth is not None:
         extra.update(true_pose_t_s=seconds(found.truth), true_pose=found.truth.values)
         streams["true_pose"] = found.truth.topic

@@ -122,12 +122,19 @@ class StampedSeries:
         Stamps [ns] (header stamp, else receive time), non-decreasing.
     values : ndarray, shape (n, k)
         The kind's columns (:data:`COLUMNS`), SI units; headings unwrapped.
+    recv_ns : ndarray of int64, shape (n,), or None
+        The times the bag received the messages [ns] (``None``: not known, e.g. tf
+        poses gathered from several messages).
+    header : bool
+        Whether ``t_ns`` are the messages' header stamps (else the receive times).
     """
 
     topic: str
     msgtype: str
     t_ns: np.ndarray
     values: np.ndarray
+    recv_ns: np.ndarray | None = None
+    header: bool = False
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -268,16 +275,18 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
         raise BagError(f"topic {topic}: a message is missing a field ({exc})") from exc
     if stamped and not reader.is2:
         data = data[:, 1:]
+    header = stamped
     if stamped:
         t_ns = data[:, 0].astype(np.int64) * 1_000_000_000 + data[:, 1].astype(np.int64)
         data = data[:, 2:]
         if not np.any(t_ns):                  # header never filled in: the bag's times
-            t_ns = recv_ns
+            t_ns, header = recv_ns, False
     else:
         t_ns = recv_ns
     if kind in ("odom", "truth"):
         data = _planar(data)
-    return StampedSeries(topic, msgtype, t_ns, data), names
+    return StampedSeries(topic, msgtype, t_ns, data, recv_ns=np.asarray(recv_ns, np.int64),
+                         header=header), names
 
 
 def read_topics(path: str | os.PathLike, *, cmd_topic: str | None = None,

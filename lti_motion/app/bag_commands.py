@@ -113,6 +113,8 @@ class BagOptions:
     gyro : bool
         Replay and monitor: read the bag's Imu yaw rate and fuse it (``--gyro``;
         default ``False``: the Imu is not read).
+    stamps : {"auto", "header", "receive"}
+        The time base of every topic (``--stamps``, :func:`drivers.bags.choose_time_base`).
     """
 
     topics: dict = field(default_factory=dict)
@@ -126,6 +128,7 @@ class BagOptions:
     encoders: Literal["commanded", "quadrature"] = "commanded"
     max_wheel_m_s: float = MAX_WHEEL_M_S
     gyro: bool = False
+    stamps: Literal["auto", "header", "receive"] = "auto"
 
     @property
     def m_per_tick(self) -> float:
@@ -148,7 +151,7 @@ def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = 
     opt = options or BagOptions()
     return read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint,
                     truth_parent=opt.truth_parent, truth_child=opt.truth_child, imu=imu,
-                    truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s,
+                    truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s, stamps=opt.stamps,
                     **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
 
 
@@ -344,6 +347,8 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                               "new name")
     opt = options or BagOptions()
     rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s)
+    for line in rec.meta["clocks"]["lines"]:
+        print_fn(line)
     if "imu_noise" in rec.meta:
         print_fn(rec.meta["imu_noise"]["summary"])
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
@@ -453,6 +458,8 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     lost = int(np.count_nonzero(~src.valid))
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * src.dt_s:.1f} s, {lost} lost), "
              f"topics {dict(rec.source.topics)}")
+    for line in rec.meta["clocks"]["lines"]:
+        print_fn(line)
     gyro = None
     if yaw is not None:
         density = rec.gyro_density_rad_s_sqrt_hz

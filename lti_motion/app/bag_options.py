@@ -47,6 +47,10 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
                                 "the wheel turns")
     group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
                        help="refuse wheel speeds above this as impossible [m/s] (default 20)")
+    group.add_argument("--stamps", choices=["auto", "header", "receive"], default="auto",
+                       help="time base of every topic: the messages' header stamps, the "
+                            "bag's receive times, or auto (default): the header stamps unless "
+                            "the topics' clocks disagree by more than a period; printed")
     group.add_argument("--dt", type=float, default=None,
                        help="sensor period [s] (default: calibrate from the wheel stamps, "
                             "replay and monitor the model's)")

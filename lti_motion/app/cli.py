@@ -125,7 +125,8 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders or "commanded", gyro=gyro, **extra)
+                      encoders=args.encoders or "commanded", gyro=gyro, stamps=args.stamps,
+                      **extra)
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
@@ -155,7 +156,7 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
 
     scale = ("none needed (body speeds)" if cal.m_per_tick is None else
              f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
-    lines = [*cal.report.lines(), f"encoder scale {scale}"]
+    lines = [*rec.meta["clocks"]["lines"], *cal.report.lines(), f"encoder scale {scale}"]
     if cal.widened:
         lines.append(f"search widened: {cal.widened}")
     lines.append(held_out_line(cal))
