@@ -6,6 +6,7 @@
 - :mod:`drivers.bags.topics`: the raw per-topic series the reader starts from;
 - :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
 - :mod:`drivers.bags.clocks`: header stamps against receive times, one time base;
+- :mod:`drivers.bags.twist_checks`: odometry twists inconsistent with their neighbours;
 - :mod:`drivers.bags.integrity`: an MCAP file's records walked, a damaged bag refused;
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
@@ -25,10 +26,13 @@ from lti_motion.lazy import lazy_exports
 __all__ = [
     "CREATE2_TICKS_PER_RAD",
     "CREATE2_WHEEL_RADIUS_M",
+    "HALF_WINDOW",
     "LEFT_JOINT",
     "MAX_GAP_S",
     "MAX_LAG_S",
     "MAX_WHEEL_M_S",
+    "MIN_JUMP",
+    "OUTLIER_K",
     "RIGHT_JOINT",
     "STAMP_CHOICES",
     "TF_TYPE",
@@ -43,6 +47,7 @@ __all__ = [
     "ImuRateNoise",
     "StampedSeries",
     "TfTruth",
+    "TwistOutliers",
     "bag_grid",
     "bag_paths",
     "bag_topics",
@@ -50,6 +55,7 @@ __all__ = [
     "choose_time_base",
     "command_lag_s",
     "decode_fields",
+    "drop_twist_outliers",
     "field_value",
     "imu_rate_noise",
     "is_mcap",
@@ -59,6 +65,7 @@ __all__ = [
     "read_bag",
     "read_topics",
     "tf_truth",
+    "twist_outliers",
     "with_rate_data",
     "write_drive_bag",
     "write_estimates_bag",
@@ -119,6 +126,14 @@ __getattr__, __dir__ = lazy_exports(
             "bag_topics",
             "read_topics",
         ),
+        "drivers.bags.twist_checks": (
+            "HALF_WINDOW",
+            "MIN_JUMP",
+            "OUTLIER_K",
+            "TwistOutliers",
+            "drop_twist_outliers",
+            "twist_outliers",
+        ),
         "drivers.bags.writer": (
             "BagAlarm",
             "write_drive_bag",
@@ -158,5 +173,13 @@ if TYPE_CHECKING:
         StampedSeries,
         bag_topics,
         read_topics,
+    )
+    from drivers.bags.twist_checks import (
+        HALF_WINDOW,
+        MIN_JUMP,
+        OUTLIER_K,
+        TwistOutliers,
+        drop_twist_outliers,
+        twist_outliers,
     )
     from drivers.bags.writer import BagAlarm, write_drive_bag, write_estimates_bag

@@ -317,7 +317,8 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     counts over ``ticks_per_rad``, stamped with the frame times. ``/odom`` holds
     the encoder odometry, as ``diff_drive_controller`` publishes it: the pose
     integrated from the wheel travel and the twist, the body speeds over the
-    period since the last received frame, with the covariances of ``odom_noise``: the
+    interval since the last received frame's stamp (its travel over ``now - last``, as
+    ``diff_drive_controller`` divides by its own clock), with the covariances of ``odom_noise``: the
     twist's its speed covariance over those periods, the pose's grown along the path
     (:meth:`~lti_motion.odometry_noise.OdometryNoise.pose_covariances`). A gyro's
     reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
@@ -403,7 +404,7 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     odom = integrate_poses(body_m, 1.0)
     twist = np.zeros((len(rows), 2))            # (v [m/s], w [rad/s]) since the last frame
     spans = np.diff(rows)                        # periods since the last received frame
-    twist[1:] = body_m / (spans * log.dt_s)[:, None]
+    twist[1:] = body_m / np.diff(log.t_s[rows])[:, None]      # over its own stamps' interval
     written_twist = twist.copy()
     for j, vw in (odom_twist_replaced or {}).items():
         written_twist[j] = vw

@@ -78,7 +78,7 @@ from lti_motion.recordings import (
 )
 
 __all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording", "monitor_bag",
-           "plot_bag_fit", "replay_bag", "replay_source"]
+           "plot_bag_fit", "reading_lines", "replay_bag", "replay_source"]
 
 
 @dataclass(frozen=True)
@@ -138,8 +138,8 @@ class BagOptions:
 
 
 def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
-                       imu: bool = True, truth: bool = True,
-                       dt_s: float | None = None) -> Recording:
+                       imu: bool = True, truth: bool = True, dt_s: float | None = None,
+                       twist_outliers: Literal["drop", "keep"] = "drop") -> Recording:
     """The drive in a bag as one recording (:func:`drivers.bags.read_bag` with the
     options' topics and joints); the Imu and the reference read only when asked.
 
@@ -152,7 +152,16 @@ def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = 
     return read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint,
                     truth_parent=opt.truth_parent, truth_child=opt.truth_child, imu=imu,
                     truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s, stamps=opt.stamps,
+                    twist_outliers=twist_outliers,
                     **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
+
+
+def reading_lines(rec: Recording) -> list[str]:
+    """What reading the bag found, to print: its clocks and time base
+    (:func:`drivers.bags.choose_time_base`), and the odometry twists left out
+    (:func:`drivers.bags.drop_twist_outliers`)."""
+    return [*rec.meta.get("clocks", {}).get("lines", []),
+            *rec.meta.get("twist_outliers", {}).get("lines", [])]
 
 
 def _grid(rec: Recording, *, wheel_base_m: float, options: BagOptions,
@@ -283,7 +292,8 @@ def _bag_ns(start_ns: int, t_s: np.ndarray | float) -> np.ndarray:
 
 
 def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptions | None,
-                  *, start_s: float = 0.0, duration_s: float | None = None
+                  *, start_s: float = 0.0, duration_s: float | None = None,
+                  twist_outliers: Literal["drop", "keep"] = "drop"
                   ) -> tuple[Recording, GridSignals, ReplaySource]:
     """The bag's drive read once, on the model's grid once (on the model's period unless a
     period is given; with the Imu's yaw rate when ``options.gyro``), as the estimators'
@@ -291,7 +301,7 @@ def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptio
     the model's encoder scale turns into metres), a twist as body speeds."""
     opt = options or BagOptions()
     rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True,
-                             dt_s=opt.dt_s or model.dt_s)
+                             dt_s=opt.dt_s or model.dt_s, twist_outliers=twist_outliers)
     # the counts go to the EKF as the robot's stream gives them: no unfolding
     grid = _grid(rec, wheel_base_m=model.wheel_base_m, options=opt, encoders="quadrature")
     name = Path(path).name
@@ -347,7 +357,7 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                               "new name")
     opt = options or BagOptions()
     rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s)
-    for line in rec.meta["clocks"]["lines"]:
+    for line in reading_lines(rec):
         print_fn(line)
     if "imu_noise" in rec.meta:
         print_fn(rec.meta["imu_noise"]["summary"])
@@ -430,7 +440,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    rec, _, src = _model_source(path, model, options)
+    rec, _, src = _model_source(path, model, options, twist_outliers="keep")
     if src.ticks is not None:
         ticks, yaw = src.ticks, src.yaw_rate_rad_s
     else:                                        # a twist: the counts it stands for
@@ -458,7 +468,7 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     lost = int(np.count_nonzero(~src.valid))
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * src.dt_s:.1f} s, {lost} lost), "
              f"topics {dict(rec.source.topics)}")
-    for line in rec.meta["clocks"]["lines"]:
+    for line in reading_lines(rec):
         print_fn(line)
     gyro = None
     if yaw is not None:

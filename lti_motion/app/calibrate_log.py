@@ -75,7 +75,7 @@ def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
 
 def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
                       floor: str | None = None, held_out: HeldOut | None = None,
-                      accept_unhealthy: bool = False
+                      accept_unhealthy: bool = False, max_wheel_speed_m_s: float | None = None
                       ) -> tuple[OfflineCalibration, list[str]]:
     """Calibrate from a log file; write the model and report only when all went well.
 
@@ -97,15 +97,18 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
         nothing is written.
     """
     return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor,
-                                   held_out=held_out, accept_unhealthy=accept_unhealthy)
+                                   held_out=held_out, accept_unhealthy=accept_unhealthy,
+                                   max_wheel_speed_m_s=max_wheel_speed_m_s)
 
 
 def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Path,
                             floor: str | None = None, held_out: HeldOut | None = None,
-                            accept_unhealthy: bool = False
+                            accept_unhealthy: bool = False,
+                            max_wheel_speed_m_s: float | None = None
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
-    odometry twist, :func:`drivers.bags.read_bag`).
+    odometry twist, :func:`drivers.bags.read_bag`); ``max_wheel_speed_m_s``
+    (``--max-wheel-speed``) bounds the wheels' speed [m/s] (default: the core's).
 
     Raises
     ------
@@ -127,7 +130,9 @@ def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Pat
     span = held_out_span(held_out or HeldOut(), float(t[-1] - t[0]))
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
                               encoders="commanded" if frames_v1 else "quadrature",
-                              floor=floor, held_out_s=span, **scale)
+                              floor=floor, held_out_s=span, **scale,
+                              **({} if max_wheel_speed_m_s is None
+                                 else {"max_wheel_speed_m_s": max_wheel_speed_m_s}))
     lines = cal.report.lines()
     if cal.scale_measured:
         lines.append(f"encoder scale: m_per_tick = {cal.m_per_tick:.6g}, measured by "

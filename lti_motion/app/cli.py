@@ -94,7 +94,8 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     print(f"calibrating from the recording {args.log}")
     _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor,
                                  held_out=HeldOut(args.start_s, args.duration_s),
-                                 accept_unhealthy=args.accept_unhealthy)
+                                 accept_unhealthy=args.accept_unhealthy,
+                                 max_wheel_speed_m_s=args.max_wheel_speed)
     for line in lines:
         print(line)
     return 0
@@ -130,7 +131,7 @@ def _bag_options(args: argparse.Namespace):
 
 
 def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
-    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit
+    from lti_motion.app.bag_commands import calibrate_from_bag, plot_bag_fit, reading_lines
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
     from lti_motion.app.plots import plot_order_selection
     from lti_motion.app.recorded_health import (
@@ -156,7 +157,7 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
 
     scale = ("none needed (body speeds)" if cal.m_per_tick is None else
              f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
-    lines = [*rec.meta["clocks"]["lines"], *cal.report.lines(), f"encoder scale {scale}"]
+    lines = [*reading_lines(rec), *cal.report.lines(), f"encoder scale {scale}"]
     if cal.widened:
         lines.append(f"search widened: {cal.widened}")
     lines.append(held_out_line(cal))
@@ -540,6 +541,7 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
                          f"{args.sim} has its own ({described.wheel_base_m:g} m)")
     positive("--wheel-base", args.wheel_base)
     positive("--clock-rate", args.clock_rate)
+    positive("--max-wheel-speed", args.max_wheel_speed)
 
 
 def _check_record_path(path: Path) -> None:

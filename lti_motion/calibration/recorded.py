@@ -32,7 +32,7 @@ from lti_motion.kinematics import body_from_wheel
 from lti_motion.model.excitation import DEFAULT_MAX_CONDITION, excitation_condition_number
 from lti_motion.model.motion_model import MotionModel, fit_arx
 from lti_motion.recordings.recording import Recording
-from lti_motion.recordings.resample import GridSignals, on_grid
+from lti_motion.recordings.resample import MAX_WHEEL_SPEED_M_S, GridSignals, on_grid
 
 __all__ = ["MIN_FIT_SAMPLES", "ExcitationReport", "OfflineCalibration", "calibrate_recording",
            "excitation_report", "rotation_scale"]
@@ -287,6 +287,7 @@ def calibrate_recording(
     orders: Sequence[int] = range(1, 13), delays: Sequence[int] = range(0, 9),
     grid: GridSignals | None = None, dt_s: float | None = None,
     held_out_s: tuple[float, float] | None = None,
+    max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S,
 ) -> OfflineCalibration:
     """Fit the ARX motion model on any recording with enough excitation.
 
@@ -330,6 +331,9 @@ def calibrate_recording(
         fit is measured (``held_out_fit_percent``); the fit uses the drive
         before and after it, each piece with its own ``validation`` tail.
         Default: none (the fit on the validation tail is the only measure).
+    max_wheel_speed_m_s : float
+        A wheel or wheel command faster than this [m/s] is refused as impossible
+        (:func:`lti_motion.recordings.on_grid`; used when ``grid`` is not given).
 
     Returns
     -------
@@ -356,7 +360,8 @@ def calibrate_recording(
         scale_from = f"{scale_from} ({found})"
     if grid is None:
         grid = on_grid(rec, wheel_base_m=wheel_base_m, m_per_tick=m_per_tick,
-                       wheel_radius_m=wheel_radius_m, encoders=encoders)
+                       wheel_radius_m=wheel_radius_m, encoders=encoders,
+                       max_wheel_speed_m_s=max_wheel_speed_m_s)
     report = excitation_report(grid, wheel_base_m=wheel_base_m,
                                scale_from=None if measured else scale_from)
     if report.refusals:
