@@ -77,8 +77,8 @@ from lti_motion.recordings import (
     snap_period_s,
 )
 
-__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording", "monitor_bag",
-           "plot_bag_fit", "reading_lines", "replay_bag", "replay_source"]
+__all__ = ["NEED_COMMANDS", "BagOptions", "BagRun", "calibrate_from_bag", "load_bag_recording",
+           "monitor_bag", "plot_bag_fit", "reading_lines", "replay_bag", "replay_source"]
 
 
 @dataclass(frozen=True)
@@ -359,6 +359,10 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
     rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s)
     for line in reading_lines(rec):
         print_fn(line)
+    if not rec.source.has("cmd"):
+        estimators = _without_commands(path, src.available(), estimators, gyro=opt.gyro)
+        print_fn(f"{Path(path).name} has no commands: replaying only the estimators that need "
+                 f"none ({', '.join(estimators)})")
     if "imu_noise" in rec.meta:
         print_fn(rec.meta["imu_noise"]["summary"])
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
@@ -372,6 +376,37 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                                       speeds=result.speeds[name], twist_covs=model.R)
         print_fn(f"wrote the {name} estimates (nav_msgs/Odometry with covariance) to {written}")
     return result
+
+
+#: The estimators that predict from what was commanded (:data:`~lti_motion.app.replay.ESTIMATORS`).
+NEED_COMMANDS = ("commands", "sensorless", "ekf", "ekf_landmarks")
+_NO_COMMANDS = "the commands, a geometry_msgs/Twist or TwistStamped topic (e.g. /cmd_vel)"
+
+
+def _bag_listing(path: str | os.PathLike) -> str:
+    from drivers.bags import bag_topics
+
+    return ", ".join(f"{t} ({m})" for t, m in sorted(bag_topics(path).items()))
+
+
+def _without_commands(path: str | os.PathLike, available: Sequence[str],
+                      asked: Sequence[str] | None, *, gyro: bool) -> list[str]:
+    """The estimators to replay on a bag without commands: those asked for (or available)
+    that need none; one that needs them is refused, naming it and the missing topic."""
+    name = Path(path).name
+    for est in asked or ():
+        if est in NEED_COMMANDS:
+            raise BagError(f"estimator {est!r} needs {_NO_COMMANDS}, which {name} does not "
+                           f"have (it has {_bag_listing(path)}); estimators that need none: "
+                           f"{', '.join(n for n in available if n not in NEED_COMMANDS)}")
+    if gyro:
+        raise BagError(f"--gyro fuses the Imu in estimator 'ekf', which needs {_NO_COMMANDS}; "
+                       f"{name} has none (it has {_bag_listing(path)}): leave out --gyro")
+    names = [n for n in (asked or available) if n not in NEED_COMMANDS]
+    if not names:
+        raise BagError(f"{name} has no commands and nothing an estimator without them reads "
+                       f"(wheel angles or an odometry twist); it has {_bag_listing(path)}")
+    return names
 
 
 @dataclass(frozen=True)
@@ -441,6 +476,11 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
     rec, _, src = _model_source(path, model, options, twist_outliers="keep")
+    if not rec.source.has("cmd"):
+        raise BagError(f"monitor --bag needs {_NO_COMMANDS}: each of its tests compares the "
+                       "wheels with the model's prediction from what was commanded, and "
+                       f"{Path(path).name} has none (it has {_bag_listing(path)}); 'replay "
+                       "--bag --estimators odometry' runs without them")
     if src.ticks is not None:
         ticks, yaw = src.ticks, src.yaw_rate_rad_s
     else:                                        # a twist: the counts it stands for
