@@ -45,6 +45,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import struct
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,6 +53,7 @@ from types import MappingProxyType
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.serde import SerdeError
 
 from drivers.bags.fields import decode_fields
 from drivers.bags.messages import is_mcap, open_bag, raw_messages
@@ -273,6 +275,9 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
                              paths_of=paths_of)
     except IndexError as exc:
         raise BagError(f"topic {topic}: a message is missing a field ({exc})") from exc
+    except (SerdeError, struct.error, UnicodeDecodeError) as exc:
+        raise BagError(f"topic {topic}: a message cannot be decoded as {msgtype} ({exc}): the "
+                       "bag is damaged or its message definition is not the one written") from exc
     if stamped and not reader.is2:
         data = data[:, 1:]
     header = stamped

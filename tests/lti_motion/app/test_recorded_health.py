@@ -122,3 +122,16 @@ def test_a_bag_with_4_kib_zeroed_mid_file_is_refused(drive, tmp_path, capsys):
                  "--accept-unhealthy"]) == 2
     _one_line_refusal(capsys, "damaged at byte", "into the bag")
     assert not (tmp_path / "o" / "model_arx.json").exists()
+
+
+@pytest.mark.parametrize("offset", [0, 100_000, -200_000])
+def test_a_ros1_bag_with_4_kib_zeroed_is_refused(drive, tmp_path, capsys, offset):
+    """ROS 1 bags have no checksums: the record lengths and opcodes rosbags reads break."""
+    bag = write_drive_bag(tmp_path / "drive.bag", drive["log"], start_ns=START_NS)
+    data = bytearray(bag.read_bytes())
+    at = len(data) // 2 + offset
+    data[at:at + 4096] = bytes(4096)
+    bag.write_bytes(bytes(data))
+    assert main(["calibrate", "--bag", str(bag), "--out", str(tmp_path / "o"),
+                 "--accept-unhealthy"]) == 2
+    _one_line_refusal(capsys, "drive.bag is damaged: its messages cannot be read")
