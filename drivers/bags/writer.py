@@ -318,7 +318,8 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     the encoder odometry, as ``diff_drive_controller`` publishes it: the pose
     integrated from the wheel travel and the twist, the body speeds over the
     interval since the last received frame's stamp (its travel over ``now - last``, as
-    ``diff_drive_controller`` divides by its own clock), with the covariances of ``odom_noise``: the
+    ``diff_drive_controller`` divides by its own clock; over the nominal periods where two
+    frames share a stamp), with the covariances of ``odom_noise``: the
     twist's its speed covariance over those periods, the pose's grown along the path
     (:meth:`~lti_motion.odometry_noise.OdometryNoise.pose_covariances`). A gyro's
     reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
@@ -404,7 +405,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     odom = integrate_poses(body_m, 1.0)
     twist = np.zeros((len(rows), 2))            # (v [m/s], w [rad/s]) since the last frame
     spans = np.diff(rows)                        # periods since the last received frame
-    twist[1:] = body_m / np.diff(log.t_s[rows])[:, None]      # over its own stamps' interval
+    interval_s = np.diff(log.t_s[rows])          # over its own stamps' interval; two frames
+    interval_s = np.where(interval_s > 0, interval_s, spans * log.dt_s)   # on one stamp: periods
+    twist[1:] = body_m / interval_s[:, None]
     written_twist = twist.copy()
     for j, vw in (odom_twist_replaced or {}).items():
         written_twist[j] = vw

@@ -54,4 +54,5 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
                             "the topics' clocks disagree by more than a period; printed")
     group.add_argument("--dt", type=float, default=None,
                        help="sensor period [s] (default: calibrate from the wheel stamps, "
-                            "replay and monitor the model's)")
+                            "replay and monitor the model's); calibrate refuses one more "
+                            "than 10%% from the wheel stamps' own period")

@@ -18,7 +18,7 @@ from pathlib import Path
 from lti_motion.app.recorded_health import HeldOut
 from lti_motion.calibration import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
-from lti_motion.recordings import Recording, load_recording
+from lti_motion.recordings import Recording, load_recording, median_period_s
 
 __all__ = ["RobotDescription", "run_calibrate_log", "run_calibrate_recording"]
 
@@ -75,8 +75,8 @@ def _scale_for(rec: Recording, robot: RobotDescription) -> dict:
 
 def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
                       floor: str | None = None, held_out: HeldOut | None = None,
-                      accept_unhealthy: bool = False, max_wheel_speed_m_s: float | None = None
-                      ) -> tuple[OfflineCalibration, list[str]]:
+                      accept_unhealthy: bool = False, max_wheel_speed_m_s: float | None = None,
+                      dt_s: float | None = None) -> tuple[OfflineCalibration, list[str]]:
     """Calibrate from a log file; write the model and report only when all went well.
 
     The model is measured on a held-out time span (``held_out``, default the last 20%
@@ -98,17 +98,20 @@ def run_calibrate_log(path: str, robot: RobotDescription, *, out: Path,
     """
     return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor,
                                    held_out=held_out, accept_unhealthy=accept_unhealthy,
-                                   max_wheel_speed_m_s=max_wheel_speed_m_s)
+                                   max_wheel_speed_m_s=max_wheel_speed_m_s, dt_s=dt_s)
 
 
 def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Path,
                             floor: str | None = None, held_out: HeldOut | None = None,
                             accept_unhealthy: bool = False,
-                            max_wheel_speed_m_s: float | None = None
+                            max_wheel_speed_m_s: float | None = None,
+                            dt_s: float | None = None
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
     odometry twist, :func:`drivers.bags.read_bag`); ``max_wheel_speed_m_s``
-    (``--max-wheel-speed``) bounds the wheels' speed [m/s] (default: the core's).
+    (``--max-wheel-speed``) bounds the wheels' speed [m/s] (default: the core's); ``dt_s``
+    (``--dt``) is the model's period [s], refused more than 10 % from the recording's own
+    (:func:`lti_motion.app.recorded_health.check_period`).
 
     Raises
     ------
@@ -118,6 +121,7 @@ def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Pat
         not.
     """
     from lti_motion.app.recorded_health import (
+        check_period,
         held_out_line,
         held_out_span,
         recorded_problems,
@@ -127,10 +131,11 @@ def run_calibrate_recording(rec: Recording, robot: RobotDescription, *, out: Pat
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
     t = rec.wheel.t_s
+    check_period(dt_s, median_period_s(t), "the median interval of its wheel stamps")
     span = held_out_span(held_out or HeldOut(), float(t[-1] - t[0]))
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
                               encoders="commanded" if frames_v1 else "quadrature",
-                              floor=floor, held_out_s=span, **scale,
+                              floor=floor, held_out_s=span, dt_s=dt_s, **scale,
                               **({} if max_wheel_speed_m_s is None
                                  else {"max_wheel_speed_m_s": max_wheel_speed_m_s}))
     lines = cal.report.lines()

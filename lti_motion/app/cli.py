@@ -95,7 +95,7 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor,
                                  held_out=HeldOut(args.start_s, args.duration_s),
                                  accept_unhealthy=args.accept_unhealthy,
-                                 max_wheel_speed_m_s=args.max_wheel_speed)
+                                 max_wheel_speed_m_s=args.max_wheel_speed, dt_s=args.dt)
     for line in lines:
         print(line)
     return 0

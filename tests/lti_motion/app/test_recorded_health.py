@@ -135,3 +135,12 @@ def test_a_ros1_bag_with_4_kib_zeroed_is_refused(drive, tmp_path, capsys, offset
     assert main(["calibrate", "--bag", str(bag), "--out", str(tmp_path / "o"),
                  "--accept-unhealthy"]) == 2
     _one_line_refusal(capsys, "drive.bag is damaged: its messages cannot be read")
+
+
+def test_a_log_with_a_far_period_is_refused(drive, tmp_path, capsys):
+    from lti_motion.recordings import save_recording
+
+    path = save_recording(tmp_path / "drive.npz", Recording.from_frame_log(drive["log"]))
+    assert main(["calibrate", "--log", str(path), "--robot", "create2", "--dt", "0.1",
+                 "--out", str(tmp_path / "o")]) == 2
+    _one_line_refusal(capsys, "--dt 100 ms", "its wheel stamps")
