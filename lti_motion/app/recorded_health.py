@@ -133,7 +133,7 @@ def refuse_unhealthy(problems: list[str], *, accept_unhealthy: bool,
         return
     if not accept_unhealthy:
         raise ValueError(f"the model is unhealthy and was not saved: {'; '.join(problems)} "
-                         "(README, 'healthy fit'; docs/guide_calibrate_real_robot.md, section "
-                         "4): check the drive's excitation and clocks above, or save it anyway "
-                         "with --accept-unhealthy")
+                         "(the README's healthy bar for calibrate; "
+                         "docs/guide_calibrate_real_robot.md, section 4): check the drive's "
+                         "excitation and clocks above, or save it anyway with --accept-unhealthy")
     print_fn(f"saving an unhealthy model as --accept-unhealthy asks: {'; '.join(problems)}")
