@@ -542,6 +542,9 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
     positive("--wheel-base", args.wheel_base)
     positive("--clock-rate", args.clock_rate)
     positive("--max-wheel-speed", args.max_wheel_speed)
+    positive("--duration-s", args.duration_s)
+    if args.start_s is not None and not (math.isfinite(args.start_s) and args.start_s >= 0):
+        raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
 
 
 def _check_record_path(path: Path) -> None:

@@ -25,6 +25,7 @@ from lti_motion.calibration import OfflineCalibration
 __all__ = [
     "HELD_OUT_FRACTION",
     "MAX_PERIOD_MISMATCH",
+    "MIN_HELD_OUT_S",
     "HeldOut",
     "check_period",
     "held_out_line",
@@ -35,6 +36,8 @@ __all__ = [
 
 #: The part of the drive held out by default: its last 20% [fraction of its duration].
 HELD_OUT_FRACTION = 0.2
+#: The shortest held-out span the fit is measured on [s].
+MIN_HELD_OUT_S = 5.0
 #: A ``--dt`` further than this from the recording's own period is refused [fraction].
 MAX_PERIOD_MISMATCH = 0.1
 
@@ -56,7 +59,8 @@ def held_out_span(held: HeldOut, duration_s: float) -> tuple[float, float]:
     Raises
     ------
     ValueError
-        A span outside the drive, in one line naming the options and the drive's length.
+        A span outside the drive, or shorter than :data:`MIN_HELD_OUT_S`, in one line
+        naming the options and the drive's length.
     """
     start, length = held.start_s, held.duration_s
     if start is None and length is None:
@@ -68,7 +72,12 @@ def held_out_span(held: HeldOut, duration_s: float) -> tuple[float, float]:
         raise ValueError(f"--start-s {start:g} / --duration-s "
                          f"{'to the end' if length is None else f'{length:g}'} holds out no "
                          f"part of the {duration_s:.1f} s drive: give a window inside it")
-    return (start, min(end, duration_s))
+    end = min(end, duration_s)
+    if end - start < MIN_HELD_OUT_S:
+        raise ValueError(f"the held-out span {start:.1f}-{end:.1f} s is shorter than "
+                         f"{MIN_HELD_OUT_S:g} s, too short to measure the model's fit on: give "
+                         "a longer --duration-s or an earlier --start-s")
+    return (start, end)
 
 
 def check_period(dt_s: float | None, own_period_s: float, what: str) -> None:

@@ -144,3 +144,15 @@ def test_a_log_with_a_far_period_is_refused(drive, tmp_path, capsys):
     assert main(["calibrate", "--log", str(path), "--robot", "create2", "--dt", "0.1",
                  "--out", str(tmp_path / "o")]) == 2
     _one_line_refusal(capsys, "--dt 100 ms", "its wheel stamps")
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["--duration-s", "-5"], ("--duration-s must be a positive number",)),
+    (["--start-s", "-1"], ("--start-s must be 0 or more",)),
+    (["--start-s", "44.9"], ("shorter than 5 s",)),
+])
+def test_a_held_out_window_that_cannot_measure_is_refused(drive, tmp_path, capsys, argv,
+                                                          words):
+    assert main(["calibrate", "--bag", str(drive["bag"]), "--out", str(tmp_path / "o"),
+                 *argv]) == 2
+    _one_line_refusal(capsys, *words)
