@@ -31,10 +31,13 @@ from drivers.bags.writer import write_drive_bag
 from drivers.sim.config import PRESETS, Fault
 from drivers.sim.simulator import Simulator
 from lti_motion.app.bag_commands import calibrate_from_bag
+from lti_motion.app.recorded_health import HeldOut, held_out_span
+from lti_motion.calibration import calibrate_recording
 from lti_motion.calibration.manoeuvres import CalibrationPlan, speeds_from_log
 from lti_motion.metrics import fit_percent
 from lti_motion.model.excitation import random_held_normal
-from lti_motion.model.motion_model import MotionModel, fit_arx
+from lti_motion.model.motion_model import MotionModel
+from lti_motion.recordings import Recording
 from lti_motion.recordings.frames import FrameLog
 
 DT_S = 0.02
@@ -61,9 +64,14 @@ def _drive(seed: int, duration_s: float, *, lost: float = 0.02) -> FrameLog:
 
 
 def _memory_model(log: FrameLog) -> MotionModel:
-    cmd_m_s, speeds = speeds_from_log(log, m_per_tick=M_PER_TICK, wheel_base_m=WHEEL_BASE_M)
-    return fit_arx([(cmd_m_s, speeds)], dt_s=DT_S, wheel_base_m=WHEEL_BASE_M,
-                   m_per_tick=M_PER_TICK, dc_gain="wheel_servo")
+    """The fit from the log in memory the way ``calibrate_from_bag`` fits: the drive before
+    its held-out last 20 % (:func:`~lti_motion.app.recorded_health.held_out_span`), an order
+    or delay at the top of its range widened (:func:`calibrate_recording`)."""
+    rec = Recording.from_frame_log(log)
+    t = rec.wheel.t_s
+    return calibrate_recording(rec, wheel_base_m=WHEEL_BASE_M, m_per_tick=M_PER_TICK,
+                               encoders="commanded", dt_s=DT_S,
+                               held_out_s=held_out_span(HeldOut(), float(t[-1] - t[0]))).model
 
 
 def _jittered(log: FrameLog, seed: int) -> FrameLog:

@@ -5,11 +5,13 @@
   :func:`bag_grid`, that recording on the model's grid;
 - :mod:`drivers.bags.topics`: the raw per-topic series the reader starts from;
 - :mod:`drivers.bags.messages`: a bag opened, the raw messages of the wanted topics;
+- :mod:`drivers.bags.clocks`: header stamps against receive times, one time base;
+- :mod:`drivers.bags.twist_checks`: odometry twists inconsistent with their neighbours;
+- :mod:`drivers.bags.integrity`: an MCAP file's records walked, a damaged bag refused;
 - :mod:`drivers.bags.fields`: numbers at field paths decoded from raw messages;
 - :mod:`drivers.bags.tf`: reference poses from ``/tf``;
 - :mod:`drivers.bags.imu_noise`: the gyro's noise measured from the bag;
-- :mod:`drivers.bags.urdf`: a robot's wheels from its URDF (a file, or the bag's own
-  ``/robot_description``);
+- :mod:`drivers.bags.urdf`: a robot's wheels (separation, radius) from its URDF;
 - :mod:`drivers.bags.writer`: estimates and simulated drives written as bags.
 
 The names below load with their module on first use (:mod:`lti_motion.lazy`), so
@@ -25,11 +27,16 @@ from lti_motion.lazy import lazy_exports
 __all__ = [
     "CREATE2_TICKS_PER_RAD",
     "CREATE2_WHEEL_RADIUS_M",
+    "HALF_WINDOW",
     "LEFT_JOINT",
     "MAX_GAP_S",
+    "MAX_LAG_S",
     "MAX_WHEEL_M_S",
+    "MIN_JUMP",
+    "OUTLIER_K",
     "RIGHT_JOINT",
     "ROBOT_DESCRIPTION_TOPIC",
+    "STAMP_CHOICES",
     "TF_TYPE",
     "TOPIC_OPTIONS",
     "TOPIC_TYPES",
@@ -37,17 +44,25 @@ __all__ = [
     "TRUTH_PARENTS",
     "BagAlarm",
     "BagTopics",
+    "ClockCheck",
+    "Damage",
     "ImuRateNoise",
     "StampedSeries",
     "TfTruth",
+    "TwistOutliers",
     "UrdfWheels",
     "bag_grid",
     "bag_paths",
     "bag_topics",
+    "check_bag",
+    "choose_time_base",
+    "command_lag_s",
     "decode_fields",
+    "drop_twist_outliers",
     "field_value",
     "imu_rate_noise",
     "is_mcap",
+    "mcap_damage",
     "open_bag",
     "raw_messages",
     "read_bag",
@@ -55,6 +70,7 @@ __all__ = [
     "read_topics",
     "read_urdf_wheels",
     "tf_truth",
+    "twist_outliers",
     "urdf_wheels",
     "with_rate_data",
     "write_drive_bag",
@@ -64,6 +80,13 @@ __all__ = [
 __getattr__, __dir__ = lazy_exports(
     __name__,
     {
+        "drivers.bags.clocks": (
+            "ClockCheck",
+            "MAX_LAG_S",
+            "STAMP_CHOICES",
+            "choose_time_base",
+            "command_lag_s",
+        ),
         "drivers.bags.fields": (
             "decode_fields",
             "field_value",
@@ -72,6 +95,11 @@ __getattr__, __dir__ = lazy_exports(
             "ImuRateNoise",
             "imu_rate_noise",
             "with_rate_data",
+        ),
+        "drivers.bags.integrity": (
+            "Damage",
+            "check_bag",
+            "mcap_damage",
         ),
         "drivers.bags.messages": (
             "bag_paths",
@@ -104,6 +132,14 @@ __getattr__, __dir__ = lazy_exports(
             "bag_topics",
             "read_topics",
         ),
+        "drivers.bags.twist_checks": (
+            "HALF_WINDOW",
+            "MIN_JUMP",
+            "OUTLIER_K",
+            "TwistOutliers",
+            "drop_twist_outliers",
+            "twist_outliers",
+        ),
         "drivers.bags.urdf": (
             "ROBOT_DESCRIPTION_TOPIC",
             "UrdfWheels",
@@ -121,8 +157,16 @@ __getattr__, __dir__ = lazy_exports(
 )
 
 if TYPE_CHECKING:
+    from drivers.bags.clocks import (
+        MAX_LAG_S,
+        STAMP_CHOICES,
+        ClockCheck,
+        choose_time_base,
+        command_lag_s,
+    )
     from drivers.bags.fields import decode_fields, field_value
     from drivers.bags.imu_noise import ImuRateNoise, imu_rate_noise, with_rate_data
+    from drivers.bags.integrity import Damage, check_bag, mcap_damage
     from drivers.bags.messages import bag_paths, is_mcap, open_bag, raw_messages
     from drivers.bags.reader import (
         CREATE2_TICKS_PER_RAD,
@@ -142,6 +186,14 @@ if TYPE_CHECKING:
         StampedSeries,
         bag_topics,
         read_topics,
+    )
+    from drivers.bags.twist_checks import (
+        HALF_WINDOW,
+        MIN_JUMP,
+        OUTLIER_K,
+        TwistOutliers,
+        drop_twist_outliers,
+        twist_outliers,
     )
     from drivers.bags.urdf import (
         ROBOT_DESCRIPTION_TOPIC,

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag1 import ReaderError as ReaderError1
+from rosbags.rosbag2 import ReaderError as ReaderError2
 from rosbags.typesys import Stores, get_typestore
 
 from drivers.exceptions import BagError
@@ -84,6 +87,11 @@ def raw_messages(reader: AnyReader, conns: Sequence[object], *, mcap: bool
     -------
     dict of str to (ndarray of int64, list of bytes)
         Per topic: receive times [ns] and the serialized messages.
+
+    Raises
+    ------
+    BagError
+        A damaged bag: a chunk that cannot be read or decompressed, a record cut short.
     """
     if not conns:
         return {}
@@ -94,12 +102,17 @@ def raw_messages(reader: AnyReader, conns: Sequence[object], *, mcap: bool
         # the bag's own reader (one bag: nothing for AnyReader to merge across bags)
         return cs[0].owner.messages(connections=cs)
 
-    if mcap:
-        groups: dict[str, list] = {t: [] for t in by_topic}
-        for item in read(conns):
-            groups[item[0].topic].append(item)
-    else:
-        groups = {t: list(read(cs)) for t, cs in by_topic.items()}
+    try:
+        if mcap:
+            groups: dict[str, list] = {t: [] for t in by_topic}
+            for item in read(conns):
+                groups[item[0].topic].append(item)
+        else:
+            groups = {t: list(read(cs)) for t, cs in by_topic.items()}
+    except (ReaderError1, ReaderError2, OSError, ValueError, EOFError, struct.error) as exc:
+        raise BagError(f"{conns[0].owner.path if hasattr(conns[0].owner, 'path') else 'the bag'} "
+                       f"is damaged: its messages cannot be read ({exc}); copy the bag again "
+                       "from the robot or repair it ('rosbag reindex', 'mcap recover')") from exc
     return {t: (np.fromiter((m[1] for m in items), np.int64, len(items)),
                 [m[2] for m in items]) for t, items in groups.items()}
 

@@ -9,7 +9,8 @@ stream with its own stamps, in seconds from the bag's first stamp
   ``wheel_angles_rad``; a bag without them but with ``nav_msgs/Odometry`` gives the
   odometry's twist (``linear.x``, ``angular.z``) as ``body_speeds``, each the mean
   since the robot's previous message (``rates="since_last"``, as
-  ``diff_drive_controller`` publishes it);
+  ``diff_drive_controller`` publishes it), a twist inconsistent with its neighbours
+  left out and reported (:mod:`drivers.bags.twist_checks`, ``meta["twist_outliers"]``);
 - the commands: the ``Twist`` / ``TwistStamped`` body speeds as ``cmd_body``
   (a bag without any: zeros, and the source lists no ``cmd`` topic);
 - an Imu's yaw rate (its messages with an angular velocity;
@@ -43,12 +44,15 @@ from __future__ import annotations
 import logging
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from drivers.bags.clocks import Stamps, choose_time_base
 from drivers.bags.imu_noise import imu_rate_noise, with_rate_data
+from drivers.bags.integrity import check_bag
 from drivers.bags.topics import (
     LEFT_JOINT,
     RIGHT_JOINT,
@@ -57,6 +61,7 @@ from drivers.bags.topics import (
     StampedSeries,
     read_topics,
 )
+from drivers.bags.twist_checks import drop_twist_outliers
 from drivers.exceptions import BagError
 from lti_motion.exceptions import WheelSpeedError
 from lti_motion.recordings.clocks import median_period_s
@@ -99,7 +104,9 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
              imu_topic: str | None = None, truth_topic: str | None = None,
              left_joint: str = LEFT_JOINT, right_joint: str = RIGHT_JOINT,
              truth_parent: str | None = None, truth_child: str | None = None,
-             imu: bool = True, truth: bool = True, dt_s: float | None = None) -> Recording:
+             imu: bool = True, truth: bool = True, dt_s: float | None = None,
+             stamps: Stamps = "auto", twist_outliers: Literal["drop", "keep"] = "drop"
+             ) -> Recording:
     """The drive recorded in a bag, by the rule of the module docstring.
 
     The bag is opened once; only the topics needed are decoded.
@@ -122,6 +129,16 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
     dt_s : float, optional
         The nominal sensor period [s] (the wheel stream's); default the median
         interval of its stamps.
+    stamps : {"auto", "header", "receive"}
+        The time base of every topic (:func:`drivers.bags.choose_time_base`): the
+        messages' header stamps, the bag's receive times, or (default) the header
+        stamps unless the topics' clocks disagree by more than a wheel period. The
+        check is in ``meta["clocks"]`` (its ``lines`` to print).
+    twist_outliers : {"drop", "keep"}
+        An odometry twist read as the wheels (no wheel angles): its messages
+        inconsistent with their neighbours (:func:`drivers.bags.twist_outliers`) are
+        left out (default), or kept and only reported (the monitor, whose tests look
+        for such glitches); either way ``meta["twist_outliers"]`` lists them.
 
     Returns
     -------
@@ -139,17 +156,27 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         A ``ValueError``: every error of :func:`drivers.bags.topics.read_topics`; no
         wheel angles nor odometry (the bag's topics listed); fewer than 2 wheel
         messages; stamps all equal and no ``dt_s``; a non-positive ``dt_s``; an Imu
-        none of whose messages has an angular velocity.
+        none of whose messages has an angular velocity; a damaged MCAP file
+        (:func:`drivers.bags.check_bag`).
     """
     if dt_s is not None and not (math.isfinite(dt_s) and dt_s > 0):
         raise BagError(f"the sensor period must be positive, got {dt_s!r} s")
+    check_bag(path)                 # a damaged file refused before any number is read
     kinds = ("cmd", "wheels", "odom") + (("imu",) if imu else ()) + (("truth",) if truth else ())
     found = read_topics(path, cmd_topic=cmd_topic, wheels_topic=wheels_topic,
                         odom_topic=odom_topic, imu_topic=imu_topic, truth_topic=truth_topic,
                         left_joint=left_joint, right_joint=right_joint,
                         truth_parent=truth_parent, truth_child=truth_child, kinds=kinds,
                         odom_without_wheels=True)
+    kinds_read = {k: getattr(found, k) for k in ("cmd", "wheels", "odom", "imu", "truth")}
+    on_base, clocks = choose_time_base(kinds_read, stamps=stamps)
+    firsts = [int(s.t_ns[0]) for s in on_base.values() if s is not None and len(s)]
+    found = replace(found, **on_base, start_ns=min(firsts) if firsts else found.start_ns)
     wheels = found.wheels if found.wheels is not None else found.odom
+    outliers = None
+    if found.wheels is None and wheels is not None:      # a driver's twist: a measurement
+        kept, outliers = drop_twist_outliers(wheels, found.start_ns)
+        wheels = kept if twist_outliers == "drop" else wheels
     if wheels is None:
         raise BagError(f"{Path(path).name} has no sensor_msgs/JointState wheel angles (nor a "
                        f"nav_msgs/Odometry twist); it has {_listing(found.topics)}")
@@ -164,7 +191,6 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         raise BagError(f"topic {wheels.topic}: no sensor period in its stamps (all equal); "
                        "give the period with --dt")
     streams: dict = {"wheel": wheels.topic}
-    extra, meta = {}, {}
     if found.wheels is not None:
         wheel = {"wheel_angles_rad": wheels.values}
     else:                                   # the robot's own odometry: its twist
@@ -174,6 +200,12 @@ def read_bag(path: str | os.PathLike, *, cmd_topic: str | None = None,
         streams["cmd"] = found.cmd.topic
     else:                                   # none recorded: zero, per frame
         cmd = {"cmd_body": np.zeros((len(t), 2))}
+    extra, meta = {}, {"clocks": clocks.as_meta()}
+    if outliers is not None:
+        dropped = twist_outliers == "drop"
+        meta["twist_outliers"] = {"topic": outliers.topic, "index": outliers.index.tolist(),
+                                  "t_s": outliers.t_s.tolist(), "left_out": dropped,
+                                  "lines": outliers.lines(left_out=dropped)}
     if found.truth is not None:
         extra.update(true_pose_t_s=seconds(found.truth), true_pose=found.truth.values)
         streams["true_pose"] = found.truth.topic
@@ -266,6 +298,6 @@ def _speed_message(rec: Recording, exc: WheelSpeedError) -> str:
         what = f"{names[exc.side] if names else side} wheel"
         message = exc.sample
     return (f"topic {topic}: the {what} moves at {exc.speed_m_s:.3g} m/s at message "
-            f"{message}, more than {exc.limit_m_s:g} m/s: wrong joint, units, wheel radius "
-            "or stamps")
+            f"{message} (t = {exc.t_s:.3f} s), more than {exc.limit_m_s:g} m/s "
+            "(--max-wheel-speed): wrong joint, units, wheel radius or stamps")
 

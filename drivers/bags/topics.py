@@ -47,6 +47,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import struct
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,6 +55,7 @@ from types import MappingProxyType
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.serde import SerdeError
 
 from drivers.bags.fields import decode_fields
 from drivers.bags.messages import is_mcap, open_bag, raw_messages
@@ -132,6 +134,11 @@ class StampedSeries:
     frames : tuple of str
         The first message's ``header.frame_id`` (and an Odometry's ``child_frame_id``)
         for reference poses, else ``()``.
+    recv_ns : ndarray of int64, shape (n,), or None
+        The times the bag received the messages [ns] (``None``: not known, e.g. tf
+        poses gathered from several messages).
+    header : bool
+        Whether ``t_ns`` are the messages' header stamps (else the receive times).
     """
 
     topic: str
@@ -139,6 +146,8 @@ class StampedSeries:
     t_ns: np.ndarray
     values: np.ndarray
     frames: tuple[str, ...] = ()
+    recv_ns: np.ndarray | None = None
+    header: bool = False
 
     def __len__(self) -> int:
         return len(self.t_ns)
@@ -279,24 +288,30 @@ def _series(kind: str, topic: str, msgtype: str, recv_ns: np.ndarray, raws: Sequ
                              paths_of=paths_of)
     except IndexError as exc:
         raise BagError(f"topic {topic}: a message is missing a field ({exc})") from exc
+    except (SerdeError, struct.error, UnicodeDecodeError) as exc:
+        raise BagError(f"topic {topic}: a message cannot be decoded as {msgtype} ({exc}): the "
+                       "bag is damaged or its message definition is not the one written") from exc
     if stamped and not reader.is2:
         data = data[:, 1:]
+    header = stamped
     if stamped:
         t_ns = data[:, 0].astype(np.int64) * 1_000_000_000 + data[:, 1].astype(np.int64)
         data = data[:, 2:]
         if not np.any(t_ns):                  # header never filled in: the bag's times
-            t_ns = recv_ns
+            t_ns, header = recv_ns, False
     else:
         t_ns = recv_ns
     frames: tuple[str, ...] = ()
     if kind in ("odom", "truth"):
         data = _planar(data)
+    frames: tuple[str, ...] = ()
     if kind == "truth":
         data = data[:, :3]                    # an Odometry's pose only
         first = deserialize(raws[0])
         frames = (str(first.header.frame_id),
                   *((str(first.child_frame_id),) if hasattr(first, "child_frame_id") else ()))
-    return StampedSeries(topic, msgtype, t_ns, data, frames), names
+    return StampedSeries(topic, msgtype, t_ns, data, frames,
+                         recv_ns=np.asarray(recv_ns, np.int64), header=header), names
 
 
 def read_topics(path: str | os.PathLike, *, cmd_topic: str | None = None,

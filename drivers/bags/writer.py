@@ -40,8 +40,8 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -305,7 +305,10 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                     truth: Literal["pose", "tf", "tf_chain"] = "pose",
                     gyro_noise_density_rad_s_sqrt_hz: float | None = None,
                     imu_topic: str = "/imu/data", joint_states: bool = True,
-                    odom_noise: OdometryNoise | None = None) -> Path:
+                    odom_noise: OdometryNoise | None = None,
+                    header_offsets_s: Mapping[str, float] | None = None,
+                    odom_twist_replaced: Mapping[int, tuple[float, float]] | None = None
+                    ) -> Path:
     """Write a single-robot drive as ROS would record it (module docstring).
 
     Lost frames (``valid`` false) are left out, as they never arrived. The
@@ -314,7 +317,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     counts over ``ticks_per_rad``, stamped with the frame times. ``/odom`` holds
     the encoder odometry, as ``diff_drive_controller`` publishes it: the pose
     integrated from the wheel travel and the twist, the body speeds over the
-    period since the last received frame, with the covariances of ``odom_noise``: the
+    interval since the last received frame's stamp (its travel over ``now - last``, as
+    ``diff_drive_controller`` divides by its own clock; over the nominal periods where two
+    frames share a stamp), with the covariances of ``odom_noise``: the
     twist's its speed covariance over those periods, the pose's grown along the path
     (:meth:`~lti_motion.odometry_noise.OdometryNoise.pose_covariances`). A gyro's
     reading of frame ``k`` (the mean yaw rate over period ``k``) goes on
@@ -353,6 +358,16 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         The odometry's noise, e.g. ``OdometryNoise.from_model(model)``; default
         :meth:`~lti_motion.odometry_noise.OdometryNoise.from_encoders` of the nominal
         encoders (the counts' rounding, grown as if it accumulated: an upper bound).
+    header_offsets_s : Mapping of str to float, optional
+        Per topic, seconds added to its messages' header stamps and not to the times
+        the bag records them at: a publisher whose clock runs ahead of (positive) or
+        behind the recorder's, e.g. ``{"/joint_states": 0.8, "/odom": 0.8}`` for a
+        robot 0.8 s ahead of the PC that sends ``/cmd_vel`` (a bare ``Twist``: no
+        header to shift).
+    odom_twist_replaced : Mapping of int to (float, float), optional
+        ``/odom`` message index -> the ``(v [m/s], w [rad/s])`` its twist holds
+        instead: a driver's glitch, e.g. a heading that wrapped by 2 pi within one
+        message interval (the pose is left as integrated).
 
     Returns
     -------
@@ -390,7 +405,13 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
     odom = integrate_poses(body_m, 1.0)
     twist = np.zeros((len(rows), 2))            # (v [m/s], w [rad/s]) since the last frame
     spans = np.diff(rows)                        # periods since the last received frame
-    twist[1:] = body_m / (spans * log.dt_s)[:, None]
+    interval_s = np.diff(log.t_s[rows])          # over its own stamps' interval; two frames
+    interval_s = np.where(interval_s > 0, interval_s, spans * log.dt_s)   # on one stamp: periods
+    twist[1:] = body_m / interval_s[:, None]
+    written_twist = twist.copy()
+    for j, vw in (odom_twist_replaced or {}).items():
+        written_twist[j] = vw
+    shifts = {topic: round(offset * 1e9) for topic, offset in (header_offsets_s or {}).items()}
     if odom_noise is None:
         k = wheel_radius_m / ticks_per_rad
         odom_noise = OdometryNoise.from_encoders(
@@ -423,7 +444,7 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
                 pose=t["geometry_msgs/msg/PoseWithCovariance"](
                     pose=bag.pose(*odom[j]), covariance=_covariance6(odom_pose_covs[j])),
                 twist=t["geometry_msgs/msg/TwistWithCovariance"](
-                    twist=bag.twist(*twist[j]),
+                    twist=bag.twist(*written_twist[j]),
                     covariance=_covariance6(odom_twist_covs[j], (0, 5))))))
             if log.true_pose is not None and truth == "pose":
                 out.append((t_ns[k], "/ground_truth", t["geometry_msgs/msg/PoseStamped"](
@@ -431,6 +452,9 @@ def write_drive_bag(path: str | os.PathLike, log: FrameLog, *, start_ns: int = 1
         out += _gyro_messages(bag, log, t_ns, imu_topic, gyro_noise_density_rad_s_sqrt_hz)
         out.sort(key=lambda item: item[0])        # in time order, as a recorder writes
         for stamp, topic, msg in out:
+            if shifts.get(topic) and hasattr(msg, "header"):   # the publisher's own clock
+                own = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                msg = replace(msg, header=bag.header(own + shifts[topic], msg.header.frame_id))
             bag.write(topic, stamp, msg)
     return Path(path)
 

@@ -61,6 +61,7 @@ from drivers.exceptions import BagError
 from fusion.monitoring import AlarmEvent, FrameResult
 from fusion.noise import GyroNoise
 from lti_motion.app.monitor import format_alarm, monitor_frames
+from lti_motion.app.recorded_health import HeldOut, check_period, held_out_span
 from lti_motion.app.replay import ReplayResult, run_replay, twist_counts
 from lti_motion.app.replay_sources import (
     ReplaySource,
@@ -70,16 +71,22 @@ from lti_motion.app.replay_sources import (
 from lti_motion.calibration import OfflineCalibration, calibrate_recording
 from lti_motion.exceptions import MissingEncoderScaleError, RobotMismatchError
 from lti_motion.model import MotionModel
-from lti_motion.recordings import GridSignals, Recording, SensorFrame, snap_period_s
+from lti_motion.recordings import (
+    GridSignals,
+    Recording,
+    SensorFrame,
+    median_period_s,
+    snap_period_s,
+)
 from lti_motion.robot_description import (
     ANGLE_COUNTS_PER_RAD,
     PERIOD_TOLERANCE,
     RobotDescription,
 )
 
-__all__ = ["BagOptions", "BagRun", "calibrate_from_bag", "check_commands",
-           "load_bag_recording", "monitor_bag", "plot_bag_fit", "reference_label", "replay_bag",
-           "replay_source"]
+__all__ = ["NEED_COMMANDS", "BagOptions", "BagRun", "calibrate_from_bag", "check_commands",
+           "load_bag_recording", "monitor_bag", "plot_bag_fit", "reading_lines",
+           "reference_label", "replay_bag", "replay_source"]
 
 
 @dataclass(frozen=True)
@@ -121,6 +128,8 @@ class BagOptions:
     sources : dict of str to str
         Where ``ticks_per_rad``, ``wheel_radius_m`` and ``encoders`` came from, for the
         output (``{"wheel_radius_m": "--wheel-radius"}``).
+    stamps : {"auto", "header", "receive"}
+        The time base of every topic (``--stamps``, :func:`drivers.bags.choose_time_base`).
     """
 
     topics: dict = field(default_factory=dict)
@@ -135,6 +144,7 @@ class BagOptions:
     max_wheel_m_s: float = MAX_WHEEL_M_S
     gyro: bool = False
     sources: dict = field(default_factory=dict)
+    stamps: Literal["auto", "header", "receive"] = "auto"
 
     @property
     def m_per_tick(self) -> float | None:
@@ -148,8 +158,8 @@ class BagOptions:
 
 
 def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = None,
-                       imu: bool = True, truth: bool = True,
-                       dt_s: float | None = None) -> Recording:
+                       imu: bool = True, truth: bool = True, dt_s: float | None = None,
+                       twist_outliers: Literal["drop", "keep"] = "drop") -> Recording:
     """The drive in a bag as one recording (:func:`drivers.bags.read_bag` with the
     options' topics and joints); the Imu and the reference read only when asked.
 
@@ -161,8 +171,17 @@ def load_bag_recording(path: str | os.PathLike, *, options: BagOptions | None = 
     opt = options or BagOptions()
     return read_bag(path, left_joint=opt.left_joint, right_joint=opt.right_joint,
                     truth_parent=opt.truth_parent, truth_child=opt.truth_child, imu=imu,
-                    truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s,
+                    truth=truth, dt_s=opt.dt_s if dt_s is None else dt_s, stamps=opt.stamps,
+                    twist_outliers=twist_outliers,
                     **{f"{kind}_topic": topic for kind, topic in opt.topics.items()})
+
+
+def reading_lines(rec: Recording) -> list[str]:
+    """What reading the bag found, to print: its clocks and time base
+    (:func:`drivers.bags.choose_time_base`), and the odometry twists left out
+    (:func:`drivers.bags.drop_twist_outliers`)."""
+    return [*rec.meta.get("clocks", {}).get("lines", []),
+            *rec.meta.get("twist_outliers", {}).get("lines", [])]
 
 
 def _grid(rec: Recording, *, wheel_base_m: float, options: BagOptions,
@@ -190,7 +209,8 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
                        options: BagOptions | None = None, floor: str | None = None,
                        validation: float = 0.3, recording: Recording | None = None,
                        robot_name: str | None = None,
-                       sources: Mapping[str, str] | None = None
+                       sources: Mapping[str, str] | None = None,
+                       held_out: HeldOut | None = None
                        ) -> tuple[OfflineCalibration, Recording]:
     """Calibrate an ARX model on the drive recorded in a bag.
 
@@ -222,6 +242,9 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
         The robot's name, kept in the model's robot description.
     sources : mapping of str to str, optional
         Where each number came from (``{"wheel_radius_m": "--wheel-radius"}``), kept too.
+    held_out : HeldOut, optional
+        The time span kept out of the fit, on which the model is measured
+        (:func:`lti_motion.app.recorded_health.held_out_span`; default the last 20%).
 
     Returns
     -------
@@ -239,6 +262,10 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     BagError
         For a bag without wheel angles (nor odometry) or without commands, or wheel
         angles without a wheel radius (and the reader's errors).
+    ValueError
+        A ``options.dt_s`` further than 10 % from the wheel stamps' own period
+        (:func:`lti_motion.app.recorded_health.check_period`); a held-out span outside
+        the drive.
     NotExcitedError
         If the drive cannot identify the model (the reasons given).
     """
@@ -246,6 +273,9 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
     rec = recording if recording is not None else load_bag_recording(
         path, options=opt, imu=False, truth=False)
     check_commands(path, rec)
+    t = rec.wheel.t_s
+    check_period(opt.dt_s, median_period_s(t),
+                 f"the median interval of the stamps on {rec.source.topics['wheel']}")
     angles = rec.wheel_kind == "wheel_angles_rad"
     if angles and opt.wheel_radius_m is None:
         raise BagError(f"{Path(path).name} holds wheel angles and no wheel radius was given: "
@@ -259,7 +289,8 @@ def calibrate_from_bag(path: str | os.PathLike, *, wheel_base_m: float,
         wheel_radius_m=opt.wheel_radius_m if angles else None, encoders=encoders,
         scale_from=("the nominal wheel radius / ticks per radian" if angles
                     else "the robot's odometry (body speeds)"),
-        dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s)
+        dt_s=snap_period_s(grid.period_s) if opt.dt_s is None else opt.dt_s,
+        held_out_s=held_out_span(held_out or HeldOut(), float(t[-1] - t[0])))
     robot = RobotDescription(
         wheel_data=rec.wheel_kind, wheel_base_m=wheel_base_m, dt_s=cal.model.dt_s,
         encoders=encoders, ticks_per_rad=ticks if angles else None,
@@ -404,14 +435,16 @@ def _off(a: float, b: float) -> float:
 
 def _model_source(path: str | os.PathLike, model: MotionModel, options: BagOptions | None,
                   *, start_s: float = 0.0, duration_s: float | None = None,
-                  print_fn: Callable[[str], object] = print
+                  print_fn: Callable[[str], object] = print,
+                  twist_outliers: Literal["drop", "keep"] = "drop"
                   ) -> tuple[Recording, GridSignals, ReplaySource]:
     """The bag's drive read once, checked against the model's robot, on the model's grid
     once (with the Imu's yaw rate when ``options.gyro``), as the estimators' source: wheel
     angles as the encoder's counts (the angles times counts per radian, which the model's
     encoder scale turns into metres), a twist as body speeds."""
     opt = options or BagOptions()
-    rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True, dt_s=opt.dt_s)
+    rec = load_bag_recording(path, options=opt, imu=opt.gyro, truth=True, dt_s=opt.dt_s,
+                             twist_outliers=twist_outliers)
     radius, ticks = _bag_robot(path, model, opt, rec, print_fn)
     rec = replace(rec, dt_s=model.dt_s)
     opt = replace(opt, wheel_radius_m=radius, ticks_per_rad=ticks)
@@ -479,6 +512,8 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
     opt = options or BagOptions()
     rec, src = replay_source(path, model, options=opt, start_s=start_s, duration_s=duration_s,
                              print_fn=print_fn)
+    for line in reading_lines(rec):
+        print_fn(line)
     if src.has_truth and initial_pose is None and not np.all(np.isfinite(src.truth[0])):
         late = float(src.t_s[np.flatnonzero(np.isfinite(src.truth[:, 0]))[0]] - src.t_s[0])
         print_fn(f"{reference_label(rec)} starts {late:.3f} s after the first wheel frame: "
@@ -487,6 +522,10 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                                  duration_s=None if duration_s is None else duration_s - late)
     if src.has_truth:
         src = replace(src, truth_label=reference_label(rec))
+    if not rec.source.has("cmd"):
+        estimators = _without_commands(path, src.available(), estimators, gyro=opt.gyro)
+        print_fn(f"{Path(path).name} has no commands: replaying only the estimators that need "
+                 f"none ({', '.join(estimators)})")
     if "imu_noise" in rec.meta:
         print_fn(rec.meta["imu_noise"]["summary"])
     result = run_replay(src, model, out_dir, estimators=estimators, initial_pose=initial_pose,
@@ -505,6 +544,37 @@ def replay_bag(path: str | os.PathLike, model: MotionModel, out_dir: str | os.Pa
                  f"{frame_id}{', the reference' + chr(39) + 's' if src.has_truth else ''}) to "
                  f"{written}")
     return result
+
+
+#: The estimators that predict from what was commanded (:data:`~lti_motion.app.replay.ESTIMATORS`).
+NEED_COMMANDS = ("commands", "sensorless", "ekf", "ekf_landmarks")
+_NO_COMMANDS = "the commands, a geometry_msgs/Twist or TwistStamped topic (e.g. /cmd_vel)"
+
+
+def _bag_listing(path: str | os.PathLike) -> str:
+    from drivers.bags import bag_topics
+
+    return ", ".join(f"{t} ({m})" for t, m in sorted(bag_topics(path).items()))
+
+
+def _without_commands(path: str | os.PathLike, available: Sequence[str],
+                      asked: Sequence[str] | None, *, gyro: bool) -> list[str]:
+    """The estimators to replay on a bag without commands: those asked for (or available)
+    that need none; one that needs them is refused, naming it and the missing topic."""
+    name = Path(path).name
+    for est in asked or ():
+        if est in NEED_COMMANDS:
+            raise BagError(f"estimator {est!r} needs {_NO_COMMANDS}, which {name} does not "
+                           f"have (it has {_bag_listing(path)}); estimators that need none: "
+                           f"{', '.join(n for n in available if n not in NEED_COMMANDS)}")
+    if gyro:
+        raise BagError(f"--gyro fuses the Imu in estimator 'ekf', which needs {_NO_COMMANDS}; "
+                       f"{name} has none (it has {_bag_listing(path)}): leave out --gyro")
+    names = [n for n in (asked or available) if n not in NEED_COMMANDS]
+    if not names:
+        raise BagError(f"{name} has no commands and nothing an estimator without them reads "
+                       f"(wheel angles or an odometry twist); it has {_bag_listing(path)}")
+    return names
 
 
 @dataclass(frozen=True)
@@ -573,7 +643,12 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     if out_bag is not None and Path(out_bag).exists():
         raise FileExistsError(f"{out_bag} exists; lti-motion never overwrites a bag, give a "
                               "new name")
-    rec, _, src = _model_source(path, model, options, print_fn=print_fn)
+    rec, _, src = _model_source(path, model, options, print_fn=print_fn, twist_outliers="keep")
+    if not rec.source.has("cmd"):
+        raise BagError(f"monitor --bag needs {_NO_COMMANDS}: each of its tests compares the "
+                       "wheels with the model's prediction from what was commanded, and "
+                       f"{Path(path).name} has none (it has {_bag_listing(path)}); 'replay "
+                       "--bag --estimators odometry' runs without them")
     if src.ticks is not None:
         ticks, yaw = src.ticks, src.yaw_rate_rad_s
     else:                                        # a twist: the counts it stands for
@@ -601,6 +676,8 @@ def monitor_bag(path: str | os.PathLike, model: MotionModel, *,
     lost = int(np.count_nonzero(~src.valid))
     print_fn(f"monitoring {Path(path).name}: {n} frames ({n * src.dt_s:.1f} s, {lost} lost), "
              f"topics {dict(rec.source.topics)}")
+    for line in reading_lines(rec):
+        print_fn(line)
     gyro = None
     if yaw is not None:
         density = rec.gyro_density_rad_s_sqrt_hz

@@ -49,7 +49,13 @@ def add_bag_options(parser: argparse.ArgumentParser, *, shared_with_log: bool = 
                                 "(Roomba, Create 2); quadrature: they know the way the wheel "
                                 "turns (default)")
     group.add_argument("--max-wheel-speed", type=float, default=None, metavar="M_S",
-                       help="refuse wheel speeds above this as impossible [m/s] (default 20)")
+                       help="refuse wheel speeds above this as impossible [m/s] (default 20 for a "
+                            "bag; calibrate --log: 5)")
+    group.add_argument("--stamps", choices=["auto", "header", "receive"], default="auto",
+                       help="time base of every topic: the messages' header stamps, the "
+                            "bag's receive times, or auto (default): the header stamps unless "
+                            "the topics' clocks disagree by more than a period; printed")
     group.add_argument("--dt", type=float, default=None,
                        help="sensor period [s] (default: calibrate from the wheel stamps, "
-                            "replay and monitor the model's)")
+                            "replay and monitor the model's); calibrate refuses one more "
+                            "than 10%% from the wheel stamps' own period")

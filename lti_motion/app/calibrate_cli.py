@@ -78,5 +78,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(log_<manoeuvre>.npz) and drive only the rest")
     parser.add_argument("--accept-unhealthy", action="store_true",
                         help="save the model even if its held-out fit is below the healthy 85%% "
-                             "(docs/guide_calibrate_real_robot.md)")
+                             "(docs/guide_calibrate_real_robot.md), or, with --log or --bag, "
+                             "its order or delay is at the top of the widened search range")
+    parser.add_argument("--start-s", type=float, default=None,
+                        help="with --log or --bag: start of the time span held out of the fit "
+                             "[s from the drive's start] (default: the last 20%% of the drive)")
+    parser.add_argument("--duration-s", type=float, default=None,
+                        help="with --log or --bag: length of the held-out span [s] (default: "
+                             "to the end of the drive)")
     add_bag_options(parser, shared_with_log=True)

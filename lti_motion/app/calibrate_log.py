@@ -15,9 +15,10 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from lti_motion.app.recorded_health import HeldOut
 from lti_motion.calibration import OfflineCalibration, calibrate_recording, rotation_scale
 from lti_motion.persistence import atomic_write
-from lti_motion.recordings import Recording, load_recording
+from lti_motion.recordings import Recording, load_recording, median_period_s
 from lti_motion.robot_description import ANGLE_COUNTS_PER_RAD, RobotDescription
 
 __all__ = ["LogRobot", "run_calibrate_log", "run_calibrate_recording"]
@@ -81,8 +82,14 @@ def _scale_for(rec: Recording, robot: LogRobot) -> dict:
 
 
 def run_calibrate_log(path: str, robot: LogRobot, *, out: Path,
-                      floor: str | None = None) -> tuple[OfflineCalibration, list[str]]:
+                      floor: str | None = None, held_out: HeldOut | None = None,
+                      accept_unhealthy: bool = False, max_wheel_speed_m_s: float | None = None,
+                      dt_s: float | None = None) -> tuple[OfflineCalibration, list[str]]:
     """Calibrate from a log file; write the model and report only when all went well.
+
+    The model is measured on a held-out time span (``held_out``, default the last 20%
+    of the drive; :mod:`lti_motion.app.recorded_health`) and written only when healthy
+    or ``accept_unhealthy``; the report is written either way.
 
     Returns
     -------
@@ -97,19 +104,49 @@ def run_calibrate_log(path: str, robot: LogRobot, *, out: Path,
         One line each, at the command-line user's level (the CLI exits 2);
         nothing is written.
     """
-    return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor)
+    return run_calibrate_recording(load_recording(path), robot, out=out, floor=floor,
+                                   held_out=held_out, accept_unhealthy=accept_unhealthy,
+                                   max_wheel_speed_m_s=max_wheel_speed_m_s, dt_s=dt_s)
 
 
 def run_calibrate_recording(rec: Recording, robot: LogRobot, *, out: Path,
-                            floor: str | None = None
+                            floor: str | None = None, held_out: HeldOut | None = None,
+                            accept_unhealthy: bool = False,
+                            max_wheel_speed_m_s: float | None = None,
+                            dt_s: float | None = None
                             ) -> tuple[OfflineCalibration, list[str]]:
     """:func:`run_calibrate_log` on a recording already read (a log file's, or a bag's
-    odometry twist, :func:`drivers.bags.read_bag`)."""
+    odometry twist, :func:`drivers.bags.read_bag`); ``max_wheel_speed_m_s``
+    (``--max-wheel-speed``) bounds the wheels' speed [m/s] (default: the core's); ``dt_s``
+    (``--dt``) is the model's period [s], refused more than 10 % from the recording's own
+    (:func:`lti_motion.app.recorded_health.check_period`).
+
+    Raises
+    ------
+    ValueError
+        Also an unhealthy model (held-out fit below the healthy one, an order or delay at
+        its range's edge) without ``accept_unhealthy``: the report is written, the model
+        not.
+    """
+    from lti_motion.app.recorded_health import (
+        check_period,
+        held_out_line,
+        held_out_span,
+        recorded_problems,
+        refuse_unhealthy,
+    )
+
     scale = _scale_for(rec, robot)
     frames_v1 = rec.wheel_kind == "counts" and rec.counter_bits == 16 and rec.cmd_per_frame
+    t = rec.wheel.t_s
+    check_period(dt_s, median_period_s(t), "the median interval of its wheel stamps")
+    span = held_out_span(held_out or HeldOut(), float(t[-1] - t[0]))
     encoders = "commanded" if frames_v1 else "quadrature"
     cal = calibrate_recording(rec, wheel_base_m=robot.wheel_base_m, scale_from=robot.source,
-                              encoders=encoders, floor=floor, **scale)
+                              encoders=encoders, floor=floor, held_out_s=span, dt_s=dt_s,
+                              **scale,
+                              **({} if max_wheel_speed_m_s is None
+                                 else {"max_wheel_speed_m_s": max_wheel_speed_m_s}))
     described = RobotDescription(
         wheel_data=rec.wheel_kind, wheel_base_m=robot.wheel_base_m, dt_s=cal.model.dt_s,
         encoders=encoders, m_per_tick=scale.get("m_per_tick", cal.m_per_tick),
@@ -130,12 +167,18 @@ def run_calibrate_recording(rec: Recording, robot: LogRobot, *, out: Path,
                      "rotation in place beside a wall in this recording: run 'lti-motion "
                      "calibrate --robot/--port' to measure it)")
     m = cal.model
-    lines.append(f"ARX model: order {m.orders['na']}, delay {m.orders['delay']}, period "
-                 f"{m.dt_s * 1e3:.4f} ms; free-run fit on the held-out last 30%: "
-                 f"v {cal.fit_percent[0]:.1f}%, w {cal.fit_percent[1]:.1f}%")
+    if cal.widened:
+        lines.append(f"search widened: {cal.widened}")
+    lines.append(f"ARX model: period {m.dt_s * 1e3:.4f} ms; {held_out_line(cal)}")
     out.mkdir(parents=True, exist_ok=True)
-    model_path = m.save(out / "model_arx.json")
     with atomic_write(out / "excitation.txt", text=True) as fh:
         fh.write("\n".join(lines) + "\n")
+    problems = recorded_problems(cal)
+    if problems and not accept_unhealthy:
+        for line in lines:
+            print(line)
+        lines.clear()
+    refuse_unhealthy(problems, accept_unhealthy=accept_unhealthy, print_fn=lines.append)
+    model_path = m.save(out / "model_arx.json")
     lines.append(f"wrote {model_path} and {out / 'excitation.txt'}")
     return cal, lines

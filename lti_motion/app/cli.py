@@ -76,6 +76,7 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
     """``calibrate --log FILE``: the ARX model from any recorded drive (docs/calibration.md)."""
     from lti_motion.app.calibrate_log import LogRobot, run_calibrate_log
     from lti_motion.app.calibrate_run import nominal_wheel_base_m
+    from lti_motion.app.recorded_health import HeldOut
 
     described = load_robot(args.sim) if args.sim else None
     if args.m_per_tick is not None or args.wheel_radius is not None:
@@ -93,7 +94,10 @@ def _cmd_calibrate_log(args: argparse.Namespace) -> int:
         else (described.wheel_diameter_m / 2 if described else None),
         source=source)
     print(f"calibrating from the recording {args.log}")
-    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor)
+    _, lines = run_calibrate_log(args.log, robot, out=Path(args.out), floor=args.floor,
+                                 held_out=HeldOut(args.start_s, args.duration_s),
+                                 accept_unhealthy=args.accept_unhealthy,
+                                 max_wheel_speed_m_s=args.max_wheel_speed, dt_s=args.dt)
     for line in lines:
         print(line)
     return 0
@@ -130,7 +134,8 @@ def _bag_options(args: argparse.Namespace):
         raise ValueError("--imu-topic chooses the Imu that --gyro fuses; add --gyro")
     return BagOptions(topics=topics, left_joint=args.left_joint, right_joint=args.right_joint,
                       truth_parent=args.truth_parent, truth_child=args.truth_child,
-                      encoders=args.encoders, gyro=gyro, sources=sources, **extra)
+                      encoders=args.encoders, gyro=gyro, sources=sources, stamps=args.stamps,
+                      **extra)
 
 
 def _robot_file(args: argparse.Namespace) -> str | None:
@@ -148,9 +153,16 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
         check_commands,
         load_bag_recording,
         plot_bag_fit,
+        reading_lines,
     )
     from lti_motion.app.bag_robot import bag_geometry
     from lti_motion.app.plots import plot_order_selection
+    from lti_motion.app.recorded_health import (
+        HeldOut,
+        held_out_line,
+        recorded_problems,
+        refuse_unhealthy,
+    )
 
     out = Path(args.out)
     options = _bag_options(args)
@@ -164,7 +176,8 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
                       ticks_per_rad=geometry.ticks_per_rad, encoders=geometry.encoders)
     cal, rec = calibrate_from_bag(args.bag, wheel_base_m=geometry.wheel_base_m,
                                   options=options, floor=args.floor, recording=rec,
-                                  robot_name=geometry.robot, sources=geometry.sources)
+                                  robot_name=geometry.robot, sources=geometry.sources,
+                                  held_out=HeldOut(args.start_s, args.duration_s))
     model, grid = cal.model, cal.grid
     if rec.wheel_kind == "body_speeds":           # no wheel angles: the robot's own odometry
         print(f"calibrating from {args.bag}: no sensor_msgs/JointState wheel angles; the "
@@ -176,20 +189,21 @@ def _cmd_calibrate_bag(args: argparse.Namespace) -> int:
 
     scale = ("none needed (body speeds)" if cal.m_per_tick is None else
              f"{cal.m_per_tick:.6g} m/tick (nominal: wheel radius / ticks per radian)")
-    lines = [*cal.report.lines(),
-             f"ARX order {model.orders['na']}, delay {model.orders['delay']}; encoder scale "
-             f"{scale}; free-run fit on the held-out last 30%: v {cal.fit_percent[0]:.1f} %, "
-             f"w {cal.fit_percent[1]:.1f} %",
-             f"robot description kept in the model: {model.robot.describe()}"]
+    lines = [*reading_lines(rec), *cal.report.lines(), f"encoder scale {scale}"]
+    if cal.widened:
+        lines.append(f"search widened: {cal.widened}")
+    lines += [held_out_line(cal), f"robot description kept in the model: {model.robot.describe()}"]
     for line in lines:
         print(line)
     out.mkdir(parents=True, exist_ok=True)
-    path = model.save(out / "model_arx.json")
     with atomic_write(out / "excitation.txt", text=True) as fh:
         fh.write("\n".join(lines) + "\n")
+    refuse_unhealthy(recorded_problems(cal), accept_unhealthy=args.accept_unhealthy)
+    path = model.save(out / "model_arx.json")
     plot_order_selection(model, out / "order_selection.png")
     fit = plot_bag_fit(model, grid, out / "bag_fit.png")
-    print(f"free-run fit on the whole drive: v {fit[0]:.1f} %, w {fit[1]:.1f} %")
+    print(f"free-run fit on the whole drive (fitted and held-out parts): v {fit[0]:.1f} %, "
+          f"w {fit[1]:.1f} %")
     print(f"wrote {path}, {out / 'order_selection.png'}, {out / 'bag_fit.png'} and "
           f"{out / 'excitation.txt'}")
     return 0
@@ -593,6 +607,10 @@ def _check_calibrate_args(args: argparse.Namespace, positive: Callable) -> None:
                          f"{args.sim} has its own ({described.wheel_base_m:g} m)")
     positive("--wheel-base", args.wheel_base)
     positive("--clock-rate", args.clock_rate)
+    positive("--max-wheel-speed", args.max_wheel_speed)
+    positive("--duration-s", args.duration_s)
+    if args.start_s is not None and not (math.isfinite(args.start_s) and args.start_s >= 0):
+        raise ValueError(f"--start-s must be 0 or more, got {args.start_s:g}")
 
 
 def _check_record_path(path: Path) -> None:

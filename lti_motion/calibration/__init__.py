@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 from lti_motion.lazy import lazy_exports
 
 __all__ = [
+    "MIN_FIT_SAMPLES",
     "MIN_RUN_M",
     "Calibration",
     "CalibrationPlan",
@@ -85,6 +86,7 @@ __getattr__, __dir__ = lazy_exports(
         ),
         "lti_motion.calibration.recorded": (
             "ExcitationReport",
+            "MIN_FIT_SAMPLES",
             "OfflineCalibration",
             "calibrate_recording",
             "excitation_report",
@@ -130,6 +132,7 @@ if TYPE_CHECKING:
         speeds_from_log,
     )
     from lti_motion.calibration.recorded import (
+        MIN_FIT_SAMPLES,
         ExcitationReport,
         OfflineCalibration,
         calibrate_recording,

@@ -32,9 +32,9 @@ from lti_motion.kinematics import body_from_wheel
 from lti_motion.model.excitation import DEFAULT_MAX_CONDITION, excitation_condition_number
 from lti_motion.model.motion_model import MotionModel, fit_arx
 from lti_motion.recordings.recording import Recording
-from lti_motion.recordings.resample import GridSignals, on_grid
+from lti_motion.recordings.resample import MAX_WHEEL_SPEED_M_S, GridSignals, on_grid
 
-__all__ = ["ExcitationReport", "OfflineCalibration", "calibrate_recording",
+__all__ = ["MIN_FIT_SAMPLES", "ExcitationReport", "OfflineCalibration", "calibrate_recording",
            "excitation_report", "rotation_scale"]
 
 _log = logging.getLogger(__name__)
@@ -251,6 +251,18 @@ class OfflineCalibration:
         the robot description.
     scale_measured : bool
         Whether the recording's rotation in place measured it.
+    held_out_s : tuple of float or None
+        The time span [s from the grid's start] kept out of the fit (``None``:
+        none was; then ``fit_percent`` is the only measure).
+    held_out_fit_percent : ndarray, shape (2,), or None
+        Free-run fit [%] of (v, w) on that span, which neither fitted the model
+        nor chose its order and delay: the honest measure of the model.
+    at_edge : tuple of str
+        An order or delay chosen at the top of its search range after the range
+        was widened once (empty: none); such a model is not to be trusted.
+    widened : str
+        How the search range was widened because the first choice was at its
+        edge (empty: it was not).
     """
 
     model: MotionModel
@@ -260,6 +272,10 @@ class OfflineCalibration:
     m_per_tick: float | None = None
     scale_from: str = ""
     scale_measured: bool = False
+    held_out_s: tuple[float, float] | None = None
+    held_out_fit_percent: np.ndarray | None = None
+    at_edge: tuple[str, ...] = ()
+    widened: str = ""
 
 
 def calibrate_recording(
@@ -270,6 +286,8 @@ def calibrate_recording(
     dc_gain: Literal["wheel_servo", "free"] = "wheel_servo", floor: str | None = None,
     orders: Sequence[int] = range(1, 13), delays: Sequence[int] = range(0, 9),
     grid: GridSignals | None = None, dt_s: float | None = None,
+    held_out_s: tuple[float, float] | None = None,
+    max_wheel_speed_m_s: float = MAX_WHEEL_SPEED_M_S,
 ) -> OfflineCalibration:
     """Fit the ARX motion model on any recording with enough excitation.
 
@@ -307,17 +325,30 @@ def calibrate_recording(
         The model's sample period [s], e.g. the fitted period as the robot is
         configured (:func:`lti_motion.recordings.snap_period_s`); default the grid's
         fitted period.
+    held_out_s : tuple of float, optional
+        ``(start, end)`` [s from the grid's start]: a time span left out of the
+        fit and of the choice of order and delay, on which the model's free-run
+        fit is measured (``held_out_fit_percent``); the fit uses the drive
+        before and after it, each piece with its own ``validation`` tail.
+        Default: none (the fit on the validation tail is the only measure).
+    max_wheel_speed_m_s : float
+        A wheel or wheel command faster than this [m/s] is refused as impossible
+        (:func:`lti_motion.recordings.on_grid`; used when ``grid`` is not given).
 
     Returns
     -------
     OfflineCalibration
+        With ``at_edge`` / ``widened``: an order or delay chosen at the top of
+        its range widens that range to twice its top and fits again; a choice
+        still at the (new) top is reported in ``at_edge``.
 
     Raises
     ------
     NotExcitedError
         If the data cannot identify a model; the message gives every reason.
     ValueError
-        For bad input (:func:`lti_motion.recordings.on_grid`).
+        For bad input (:func:`lti_motion.recordings.on_grid`); a held-out span
+        outside the drive or leaving less than :data:`MIN_FIT_SAMPLES` to fit.
     """
     found = rotation_scale(rec, wheel_base_m=wheel_base_m)
     measured = not isinstance(found, str)
@@ -329,20 +360,94 @@ def calibrate_recording(
         scale_from = f"{scale_from} ({found})"
     if grid is None:
         grid = on_grid(rec, wheel_base_m=wheel_base_m, m_per_tick=m_per_tick,
-                       wheel_radius_m=wheel_radius_m, encoders=encoders)
+                       wheel_radius_m=wheel_radius_m, encoders=encoders,
+                       max_wheel_speed_m_s=max_wheel_speed_m_s)
     report = excitation_report(grid, wheel_base_m=wheel_base_m,
                                scale_from=None if measured else scale_from)
     if report.refusals:
         raise NotExcitedError("this recording cannot identify a model: "
                               + "; ".join(report.refusals))
     u, y = grid.cmd_m_s, grid.speeds
-    model = fit_arx([(u, y)], dt_s=grid.period_s if dt_s is None else dt_s,
-                    wheel_base_m=wheel_base_m,
-                    validation=validation, dc_gain=dc_gain, orders=orders, delays=delays,
-                    m_per_tick=m_per_tick, floor=floor)
-    tail = round(len(u) * (1 - validation))
-    fit = model.fit_percent([(u[tail:], y[tail:])])
-    _log.info("offline ARX fit %.1f%% (v), %.1f%% (w) on the held-out tail", *fit)
-    return OfflineCalibration(model=model, report=report, fit_percent=fit, grid=grid,
+    runs, span = _fit_runs(u, y, grid.period_s, held_out_s)
+
+    def fit(orders_: Sequence[int], delays_: Sequence[int]) -> MotionModel:
+        return fit_arx(runs, dt_s=grid.period_s if dt_s is None else dt_s,
+                       wheel_base_m=wheel_base_m, validation=validation, dc_gain=dc_gain,
+                       orders=orders_, delays=delays_, m_per_tick=m_per_tick, floor=floor)
+
+    model = fit(orders, delays)
+    wider = _widened(model, orders, delays)
+    widened = ""
+    if wider is not None:
+        widened = (f"order {model.orders['na']} / delay {model.orders['delay']} was at the "
+                   f"top of orders {min(orders)}-{max(orders)}, delays "
+                   f"{min(delays)}-{max(delays)}: searched orders {min(wider[0])}-"
+                   f"{max(wider[0])}, delays {min(wider[1])}-{max(wider[1])}")
+        orders, delays = wider
+        model = fit(orders, delays)
+    at_edge = _at_edge(model, orders, delays)
+    fits = [model.fit_percent([(ru[round(len(ru) * (1 - validation)):],
+                                ry[round(len(ru) * (1 - validation)):])]) for ru, ry in runs]
+    lengths = [len(ru) for ru, _ in runs]
+    tail_fit = np.average(fits, axis=0, weights=lengths)
+    held = None
+    if span is not None:
+        held = model.fit_percent([(u[span[0]:span[1]], y[span[0]:span[1]])])
+        _log.info("offline ARX fit %.1f%% (v), %.1f%% (w) on the held-out span", *held)
+    _log.info("offline ARX fit %.1f%% (v), %.1f%% (w) on the validation tail", *tail_fit)
+    return OfflineCalibration(model=model, report=report, fit_percent=tail_fit, grid=grid,
                               m_per_tick=m_per_tick,
-                              scale_from=scale_from, scale_measured=measured)
+                              scale_from=scale_from, scale_measured=measured,
+                              held_out_s=None if span is None else
+                              (span[0] * grid.period_s, span[1] * grid.period_s),
+                              held_out_fit_percent=held, at_edge=at_edge, widened=widened)
+
+
+#: Fewest grid samples a piece of the drive needs to take part in the fit.
+MIN_FIT_SAMPLES = 200
+
+
+def _fit_runs(u: np.ndarray, y: np.ndarray, period_s: float,
+              held_out_s: tuple[float, float] | None
+              ) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[int, int] | None]:
+    """The pieces of the drive to fit (before and after the held-out span) and that span
+    in grid samples ``[a, b)``."""
+    if held_out_s is None:
+        return [(u, y)], None
+    start_s, end_s = held_out_s
+    n = len(u)
+    a, b = round(start_s / period_s), min(n, round(end_s / period_s))
+    if not (0 <= a < b <= n) or b - a < 2:
+        raise ValueError(f"the held-out span {start_s:.3g}-{end_s:.3g} s is not inside the "
+                         f"drive (0-{n * period_s:.3g} s)")
+    runs = [(u[i:j], y[i:j]) for i, j in ((0, a), (b, n)) if j - i >= MIN_FIT_SAMPLES]
+    if not runs:
+        raise ValueError(f"holding out {start_s:.3g}-{end_s:.3g} s leaves less than "
+                         f"{MIN_FIT_SAMPLES * period_s:.3g} s of the {n * period_s:.3g} s "
+                         "drive in one piece to fit; hold out a shorter span")
+    return runs, (a, b)
+
+
+def _widened(model: MotionModel, orders: Sequence[int],
+             delays: Sequence[int]) -> tuple[range, range] | None:
+    """Twice the top of the order and delay ranges when the choice is at a top, else
+    ``None``."""
+    if not _at_edge(model, orders, delays):
+        return None
+    top_na, top_d = max(orders), max(delays)
+    return (range(min(orders), 2 * top_na + 1) if model.orders["na"] == top_na
+            else range(min(orders), top_na + 1),
+            range(min(delays), 2 * top_d + 1) if model.orders["delay"] == top_d
+            else range(min(delays), top_d + 1))
+
+
+def _at_edge(model: MotionModel, orders: Sequence[int], delays: Sequence[int]) -> tuple[str, ...]:
+    """The order or delay chosen at the top of its search range (several values tried)."""
+    out = []
+    if len(orders) > 1 and model.orders["na"] == max(orders):
+        out.append(f"order {model.orders['na']} is the top of the orders tried "
+                   f"({min(orders)}-{max(orders)})")
+    if len(delays) > 1 and model.orders["delay"] == max(delays):
+        out.append(f"delay {model.orders['delay']} is the top of the delays tried "
+                   f"({min(delays)}-{max(delays)})")
+    return tuple(out)

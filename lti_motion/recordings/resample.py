@@ -149,7 +149,9 @@ def _cumulative(rec: Recording, used: np.ndarray, t_used: np.ndarray, *,
         return (v - v[0]) * wheel_radius_m
     rate = v * wheel_radius_m if kind == "wheel_speeds_rad_s" else v
     if rec.rates == "since_last":       # a mean since the previous frame: backward rectangle
-        inc = rate[1:] * np.diff(t_used)[:, None]
+        # over the message's own interval (its stamps), not the periods it was put on: a
+        # twist of a 43.7 ms interval on a 33 ms grid would otherwise turn the robot too far
+        inc = rate[1:] * np.diff(rec.wheel.t_s[used])[:, None]
     else:                               # readings at their stamps: trapezoid rule
         inc = 0.5 * (rate[1:] + rate[:-1]) * np.diff(t_used)[:, None]
     return np.vstack([np.zeros((1, 2)), np.cumsum(inc, axis=0)])

@@ -368,7 +368,8 @@ def test_a_wheel_at_100_m_s(tmp_path):
     angles[3:, 1] = 100.0 * 0.02 / 0.036                     # 100 m/s for one period
     path = _joints_bag(tmp_path, stamps, angles)
     with pytest.raises(BagError, match=r"^topic /joint_states: the wheel_right_joint wheel "
-                                       r"moves at 100 m/s at message 3, more than 20 m/s"):
+                                       r"moves at 100 m/s at message 3 \(t = 0.060 s\), "
+                                       r"more than 20 m/s \(--max-wheel-speed\)"):
         bag_grid(read_bag(path), wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
     # a command as impossible: the topic, the wheel and the message
     store = get_typestore(Stores.ROS1_NOETIC)
@@ -381,7 +382,7 @@ def test_a_wheel_at_100_m_s(tmp_path):
                         angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0))))
     fast, _ = _raw_bag(tmp_path / "fast_cmd.bag", msgs)
     with pytest.raises(BagError, match=r"^topic /cmd_vel: the left wheel command moves at "
-                                       r"30 m/s at message 1, more than 20 m/s"):
+                                       r"30 m/s at message 1 \(t = \S+ s\), more than 20 m/s"):
         bag_grid(read_bag(fast), wheel_base_m=0.235, wheel_radius_m=CREATE2_WHEEL_RADIUS_M)
 
 

@@ -38,7 +38,7 @@ def _angles(log):
 
 def test_a_roomba_log_and_a_wheel_angle_recording_both_calibrate(drive, tmp_path, capsys):
     v1 = save_log(tmp_path / "v1.npz", drive)
-    assert main(["calibrate", "--log", str(v1), "--robot", "create2",
+    assert main(["calibrate", "--accept-unhealthy", "--log", str(v1), "--robot", "create2",
                  "--out", str(tmp_path / "a")]) == 0
     out = capsys.readouterr().out
     assert "condition of the regression" in out and "at rest" in out
@@ -52,7 +52,7 @@ def test_a_roomba_log_and_a_wheel_angle_recording_both_calibrate(drive, tmp_path
     assert robot.wheel_base_m == 0.235 and robot.dt_s == model_a.dt_s
 
     v2 = save_recording(tmp_path / "v2.npz", _angles(drive))
-    assert main(["calibrate", "--log", str(v2), "--wheel-radius",
+    assert main(["calibrate", "--accept-unhealthy", "--log", str(v2), "--wheel-radius",
                  str(PARAMS.wheel_diameter_m / 2), "--out", str(tmp_path / "b")]) == 0
     model_b = MotionModel.load(tmp_path / "b" / "model_arx.json")
     assert model_b.m_per_tick == pytest.approx(PARAMS.wheel_diameter_m / 2 / 1e4)
@@ -130,7 +130,8 @@ def test_a_recording_with_a_rotation_in_place_measures_the_scale(tmp_path, capsy
                        for name in ("t_s", "ticks", "light_bump", "bumps", "cmd_m_s",
                                     "valid")}, dt_s=dt)
     path = save_log(tmp_path / "both.npz", both)
-    assert main(["calibrate", "--log", str(path), "--out", str(tmp_path / "o")]) == 0
+    assert main(["calibrate", "--accept-unhealthy", "--log", str(path),
+                 "--out", str(tmp_path / "o")]) == 0
     out = capsys.readouterr().out
     assert "measured by the rotation in place" in out and "NOT measured" not in out
     model = MotionModel.load(tmp_path / "o" / "model_arx.json")
