@@ -291,21 +291,21 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         raise ValueError("monitor --port needs --model FILE: calibrate the robot first with "
                          f"'lti-motion calibrate --port {args.port}'")
     if args.sim:
-        live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
-                                      seed=args.seed, floor=args.floor, fault=args.fault,
-                                      fault_at_s=args.fault_at, record=args.record,
-                                      nominal_drives=args.nominal_drives, gyro=args.gyro)
+        run = live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
+                                            seed=args.seed, floor=args.floor, fault=args.fault,
+                                            fault_at_s=args.fault_at, record=args.record,
+                                            nominal_drives=args.nominal_drives, gyro=args.gyro)
     else:
         from drivers.exceptions import PassiveModeError
 
         try:
-            live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
-                                     clock_rate=args.clock_rate, listen=args.listen,
-                                     seed=args.seed, record=args.record,
-                                     nominal_logs=args.nominal or ())
+            run = live_monitor.run_on_port(model, args.port, duration_s=args.duration,
+                                           baud=args.baud, clock_rate=args.clock_rate,
+                                           listen=args.listen, seed=args.seed,
+                                           record=args.record, nominal_logs=args.nominal or ())
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
-    return 0
+    return EXIT_INTERRUPTED if run.interrupted else 0     # Ctrl-C: the drive kept, still 130
 
 
 def _cmd_virtual_roomba(args: argparse.Namespace) -> int:

@@ -213,6 +213,9 @@ class MonitorRun:
         What ran, one line each (gate, dynamics, scale).
     gyro_windows : tuple of 2 int or None
         With a gyro: its windows fused and gated by the EKF; ``None`` without.
+    interrupted : bool
+        The drive was ended by Ctrl-C (``KeyboardInterrupt``) before its last
+        frame; what came before it is summarised (and recorded) as usual.
     """
 
     frames: int = 0
@@ -225,6 +228,7 @@ class MonitorRun:
     final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tests: list[str] = field(default_factory=list)
     gyro_windows: tuple[int, int] | None = None
+    interrupted: bool = False
 
     def summary(self) -> list[str]:
         """Lines for the end of the command's output."""
@@ -303,6 +307,8 @@ def monitor_frames(model: MotionModel,
     Returns
     -------
     MonitorRun
+        ``interrupted`` set if Ctrl-C (``KeyboardInterrupt``) ended the frames early:
+        the frames before it are summarised, nothing is raised.
 
     Raises
     ------
@@ -323,16 +329,19 @@ def monitor_frames(model: MotionModel,
                          pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
                      glitch_gate_nis=mf.monitor.thresholds().gate)
-    for item in frames:
-        frame, seen = item if isinstance(item, tuple) else (item, None)
-        if on_frame is not None:
-            on_frame(frame)
-        run.frames += 1
-        if gyro is None and frame.yaw_rate_rad_s is not None:
-            frame = replace(frame, yaw_rate_rad_s=None)     # the filter has no gyro
-        result = mf.step(frame, sightings=seen)
-        if on_step is not None and mf.ekf is not None:
-            on_step(result, mf.ekf.P[:3, :3].copy())
+    try:
+        for item in frames:
+            frame, seen = item if isinstance(item, tuple) else (item, None)
+            if on_frame is not None:
+                on_frame(frame)
+            run.frames += 1
+            if gyro is None and frame.yaw_rate_rad_s is not None:
+                frame = replace(frame, yaw_rate_rad_s=None)     # the filter has no gyro
+            result = mf.step(frame, sightings=seen)
+            if on_step is not None and mf.ekf is not None:
+                on_step(result, mf.ekf.P[:3, :3].copy())
+    except KeyboardInterrupt:           # Ctrl-C ends the drive; what came before is kept
+        run.interrupted = True
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
@@ -420,6 +429,12 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     print_fn : callable
         Where the lines go.
 
+    Returns
+    -------
+    MonitorRun
+        Ctrl-C during the drive ends it: ``interrupted`` is set, the frames before
+        it are summarised and, with ``record``, written (as :func:`run_on_port`).
+
     Raises
     ------
     MissingEncoderScaleError
@@ -491,8 +506,10 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
                          on_alarm_line=print_fn, counter_bits=params.counter_bits,
                          gyro=noise if gyro and density is not None else None)
+    if run.interrupted:
+        print_fn(f"stopped by Ctrl-C after {run.frames} frames")
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
-    if record:
+    if record and len(rec):
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
     return run
 
@@ -521,6 +538,15 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     nominal_logs : sequence of str
         Logs of nominal drives of this robot on this route (``--record``):
         Phase I (:func:`nominal_from_logs`); none leaves the dynamics tests off.
+    print_fn : callable
+        Where the lines go.
+
+    Returns
+    -------
+    MonitorRun
+        Ctrl-C during the drive ends it (closing the port stops the wheels):
+        ``interrupted`` is set, the frames before it are summarised and, with
+        ``record``, written.
 
     Raises
     ------
@@ -550,16 +576,17 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     with Roomba(port, options=options) as robot:
 
         def frames() -> Iterator[SensorFrame]:
-            try:
-                for cmd in commands:
-                    frame = robot.read_frame() if listen else robot.step(cmd)
-                    if record:
-                        rec.add(frame)
-                    yield frame
-            except KeyboardInterrupt:           # end the drive; closing stops the wheels
-                print_fn("stopped by Ctrl-C")
+            for cmd in commands:
+                frame = robot.read_frame() if listen else robot.step(cmd)
+                if record:
+                    rec.add(frame)
+                yield frame
 
+        # Ctrl-C ends the drive (monitor_frames keeps what came before); closing the
+        # robot stops the wheels
         run = monitor_frames(model, frames(), nominal=nominal, on_alarm_line=print_fn)
+    if run.interrupted:
+        print_fn(f"stopped by Ctrl-C after {run.frames} frames")
     _report(run, print_fn, fault=None, fault_at_s=None, expected=None)
     if record and len(rec):
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
