@@ -32,7 +32,7 @@ from drivers.sim import (
     print_progress,
     summarize,
 )
-from lti_motion.app.plots import plot_calibration
+from lti_motion.app.plots import plot_calibration, save_figure
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
     ROUTE_M,
@@ -46,6 +46,7 @@ from lti_motion.app.route import (
 )
 from lti_motion.app.route_smoother import SmootherEstimator
 from lti_motion.calibration import Calibration, CalibrationPlan
+from lti_motion.persistence import atomic_write
 
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
@@ -111,7 +112,7 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
         ax.legend(fontsize=7, loc="center")
     fig.suptitle("The closed route, run 1: true path and the estimate it steered on")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 #: One marker shape per estimator in the closure plot.
@@ -142,7 +143,7 @@ def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
     fig.suptitle(f"Where the robots stopped ({len(next(iter(results.values())).finished)} "
                  "runs each)")
     fig.tight_layout(rect=(0, 0.12, 1, 1))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 def _table(metrics: dict) -> str:
@@ -214,7 +215,8 @@ def _write_report(path: Path, metrics: dict, table: str, plots: list[Path]) -> N
         "## Calibration", "",
         *[f"![{p.stem}]({p.name})" for p in plots], "",
     ]
-    path.write_text("\n".join(report))
+    with atomic_write(path, text=True) as f:
+        f.write("\n".join(report))
 
 
 def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create2",
@@ -281,7 +283,8 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
                        runs=runs)
     _plot_trajectories(results, out_dir / "trajectories.png")
     _plot_closure(results, out_dir / "closure.png")
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    with atomic_write(out_dir / "metrics.json", text=True) as f:       # whole or not at all
+        f.write(json.dumps(metrics, indent=2) + "\n")
     table = _table(metrics)
     _write_report(out_dir / "report.md", metrics, table, plots)
     print_fn("3. closure offset, as the paper's Table II:")

@@ -62,3 +62,21 @@ def test_ctrl_c_in_monitor_port_exits_130_and_keeps_the_drive(model_file, tmp_pa
     assert "Traceback" not in captured.err
     assert "stopped by Ctrl-C after 100 frames" in captured.out
     assert len(load_log(log).ticks) == 100
+
+
+def test_ctrl_c_while_the_demo_draws_leaves_no_truncated_plot(tmp_path, monkeypatch, capsys):
+    from matplotlib.figure import Figure
+
+    def interrupted_halfway(self, fname, **kwargs):     # a Ctrl-C while the PNG is written
+        if hasattr(fname, "write"):
+            fname.write(b"\x89PNG\r\n\x1a\n half an image")
+        else:
+            with open(fname, "wb") as f:
+                f.write(b"\x89PNG\r\n\x1a\n half an image")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Figure, "savefig", interrupted_halfway)
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--runs", "1", "--excitation-s", "20"]) == 130
+    assert capsys.readouterr().err.strip() == "lti-motion demo: stopped by Ctrl-C"
+    assert sorted(p.name for p in out.iterdir()) == ["model_arx.json"]    # whole, saved before
