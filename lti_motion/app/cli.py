@@ -261,6 +261,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     if args.out_bag:
         raise ValueError("--out-bag writes what monitor --bag found; give --bag")
     from lti_motion.app import monitor as live_monitor
+    from lti_motion.app.progress import StatusLine
 
     if args.fault and not args.sim:
         raise ValueError("--fault injects a simulator fault; it needs --robot (the simulator)")
@@ -294,7 +295,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         run = live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
                                             seed=args.seed, floor=args.floor, fault=args.fault,
                                             fault_at_s=args.fault_at, record=args.record,
-                                            nominal_drives=args.nominal_drives, gyro=args.gyro)
+                                            nominal_drives=args.nominal_drives, gyro=args.gyro,
+                                            progress=StatusLine().phase_one)
     else:
         from drivers.exceptions import PassiveModeError
 
@@ -302,7 +304,8 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
             run = live_monitor.run_on_port(model, args.port, duration_s=args.duration,
                                            baud=args.baud, clock_rate=args.clock_rate,
                                            listen=args.listen, seed=args.seed,
-                                           record=args.record, nominal_logs=args.nominal or ())
+                                           record=args.record, nominal_logs=args.nominal or (),
+                                           progress=StatusLine().phase_one)
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
     return EXIT_INTERRUPTED if run.interrupted else 0     # Ctrl-C: the drive kept, still 130
@@ -321,9 +324,12 @@ def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from lti_motion.app.demo import run_demo
+    from lti_motion.app.progress import StatusLine
 
+    status = StatusLine()            # the route's progress; the printed lines unchanged
     run_demo(Path(args.out), seed=args.seed, robot=load_robot(args.preset), floor=args.floor,
-             runs=args.runs, excitation_s=args.excitation_s)
+             runs=args.runs, excitation_s=args.excitation_s, print_fn=status.print,
+             progress=status.route)
     return 0
 
 

@@ -221,7 +221,8 @@ def _write_report(path: Path, metrics: dict, table: str, plots: list[Path]) -> N
 
 def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create2",
              floor: str | FloorMap | None = None, runs: int = 30, excitation_s: float = 180.0,
-             print_fn: Callable[[str], object] = print) -> dict:
+             print_fn: Callable[[str], object] = print,
+             progress: Callable[[str, float, int, int], None] | None = None) -> dict:
     """Calibrate on the simulator, run the route for every estimator, write the report.
 
     Parameters
@@ -241,6 +242,11 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
         Length of the calibration's random excitation [s].
     print_fn : callable
         Where the progress lines go.
+    progress : callable, optional
+        Called while each estimator drives the route, as ``progress(label, t_s, home,
+        n)`` (:func:`~lti_motion.app.route.drive_route`'s, with the estimator's
+        label): the longest silent steps (the iSAM2 smoother's route, minutes).
+        Nothing of it goes to ``print_fn``.
 
     Returns
     -------
@@ -271,12 +277,16 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
     seconds: dict[str, float] = {}
     for name, est in _estimators(cal, params.wheel_base_m).items():
         t0 = time.perf_counter()
+        label = LABELS.get(name, name)
         results[name] = drive_route(params, est, seeds=seeds, floor=floor,
                                     landmarks=ROUTE_LANDMARKS if name in USES_LANDMARKS
-                                    else None)
+                                    else None,
+                                    progress=None if progress is None else
+                                    (lambda t_s, home, n, label=label:
+                                     progress(label, t_s, home, n)))
         res = results[name]
         seconds[name] = time.perf_counter() - t0
-        print_fn(f"   {LABELS.get(name, name):34s} closure {res.closure_offset_m.mean():.3f} "
+        print_fn(f"   {label:34s} closure {res.closure_offset_m.mean():.3f} "
                  f"+- {res.closure_offset_m.std():.3f} m  ({seconds[name]:.1f} s)")
 
     metrics = _metrics(cal, results, seconds, preset=preset, floor=floor_name(floor), seed=seed,

@@ -400,7 +400,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                      floor: str | FloorMap | None = None, fault: str | None = None,
                      fault_at_s: float | None = None, record: str | None = None,
                      nominal_drives: int = 20, landmarks: bool = True, gyro: bool = False,
-                     print_fn: Callable[[str], object] = print) -> MonitorRun:
+                     print_fn: Callable[[str], object] = print,
+                     progress: Callable[[str, int, int], None] | None = None) -> MonitorRun:
     """Drive :func:`monitor_route` on the simulator, monitor it, print alarms and a summary.
 
     Parameters
@@ -428,6 +429,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         hard floor with the default scale priors it can cost accuracy, ``docs/ekf.md``).
     print_fn : callable
         Where the lines go.
+    progress : callable, optional
+        Phase I's steps (:func:`~fusion.monitoring.fit_nominal`'s ``progress``).
 
     Returns
     -------
@@ -464,7 +467,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                  f"nominal drives of {duration_s:g} s (seeds {seed + 1000}-"
                  f"{seed + 999 + nominal_drives}, no fault) ...")
         nominal = nominal_on_simulator(model, robot=params, n_drives=nominal_drives,
-                                       duration_s=duration_s, seed=seed, floor=floor)
+                                       duration_s=duration_s, seed=seed, floor=floor,
+                                       progress=progress)
     sim = Simulator(params, seed=seed, floor=floor, room=Room.empty(),
                     initial_pose=(0.0, 0.0, 0.0), faults=faults)
     commands = monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
@@ -517,7 +521,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
 def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud: int = 115200,
                 clock_rate: float = 1.0, listen: bool = False, seed: int = 0,
                 record: str | None = None, nominal_logs: Sequence[str] = (),
-                print_fn: Callable[[str], object] = print) -> MonitorRun:
+                print_fn: Callable[[str], object] = print,
+                progress: Callable[[str, int, int], None] | None = None) -> MonitorRun:
     """Drive :func:`monitor_route` on a Roomba / Create 2 (or only listen), monitor it.
 
     Parameters
@@ -540,6 +545,8 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
         Phase I (:func:`nominal_from_logs`); none leaves the dynamics tests off.
     print_fn : callable
         Where the lines go.
+    progress : callable, optional
+        Phase I's steps (:func:`~fusion.monitoring.fit_nominal`'s ``progress``).
 
     Returns
     -------
@@ -564,7 +571,7 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     if nominal_logs:
         print_fn(f"phase I: fitting the dynamics null and the encoder gate on "
                  f"{len(nominal_logs)} nominal drive log(s) ...")
-        nominal = nominal_from_logs(model, nominal_logs)
+        nominal = nominal_from_logs(model, nominal_logs, progress=progress)
     commands = monitor_route(duration_s, dt_s=model.dt_s, wheel_base_m=model.wheel_base_m,
                              rng=np.random.default_rng(seed))
     rec = Recorder(meta={"source": "lti-motion monitor --port", "port": port, "listen": listen})
