@@ -445,6 +445,24 @@ def build_parser() -> argparse.ArgumentParser:
 #: on its held-out last 30%, and the calibration-sequence plot shows its first 20 s.
 MIN_EXCITATION_S = 20.0
 
+#: Longest random excitation [s]: an hour of driving (the commands are made before the
+#: drive; 1e9 s asked numpy for 993 GiB).
+MAX_EXCITATION_S = 3600.0
+
+#: Longest ``monitor`` drive [s]: a day (its route is made before the drive).
+MAX_MONITOR_S = 86400.0
+
+#: The driver's references to the Open Interface spec and its gotchas ("(spec §1.3, G3,
+#: G15)"): the library's readers have them (drivers/roomba/oi.py); a command-line user
+#: gets the advice around them.
+_SPEC_REFERENCE = re.compile(r"\s*\((?:spec )?§[^)]*\)|\s*\(G\d+(?:, G\d+)*\)"
+                             r"|;\s*spec §[^)]*(?=\))")
+
+
+def _one_line(exc: BaseException) -> str:
+    """An error as the command line prints it: one line, without the spec references."""
+    return _SPEC_REFERENCE.sub("", " ".join(str(exc).split()))
+
 
 def _check_args(args: argparse.Namespace) -> None:
     """Refuse options that make no sense, before anything runs (cases: test_cli_nonsense.py).
@@ -465,10 +483,20 @@ def _check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--excitation-s must be a finite number of seconds, at least "
                          f"{MIN_EXCITATION_S:g} (the model's order is chosen on its last 30%), "
                          f"got {excitation_s:g}")
+    if excitation_s is not None and excitation_s > MAX_EXCITATION_S:
+        raise ValueError(f"--excitation-s {excitation_s:g} s is more driving than a "
+                         f"calibration needs: give at most {MAX_EXCITATION_S:g} s (an hour; "
+                         "180 s is the default)")
+    seed = getattr(args, "seed", None)
+    if seed is not None and seed < 0:
+        raise ValueError(f"--seed must be a whole number of 0 or more, got {seed}")
     if args.command == "calibrate":
         _check_calibrate_args(args, positive)
     elif args.command == "monitor":
         positive("--duration", args.duration)
+        if args.duration > MAX_MONITOR_S:
+            raise ValueError(f"--duration {args.duration:g} s is longer than a monitor drive "
+                             f"can be: give at most {MAX_MONITOR_S:g} s (a day)")
         positive("--clock-rate", args.clock_rate)
         if args.fault_at is not None and args.fault is None:
             raise ValueError("--fault-at is the onset of --fault; give --fault too")
@@ -555,9 +583,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MissingEncoderScaleError:
         print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)
         return 2
-    except (ValueError, OSError) as exc:
-        one_line = " ".join(str(exc).split())             # the README promises one line
-        print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
+    except (ValueError, OSError) as exc:                # the README promises one line
+        print(f"lti-motion {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         # sub-commands that drive a robot or keep a recording answer Ctrl-C themselves (what

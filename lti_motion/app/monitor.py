@@ -368,12 +368,17 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     else:
         dyn = mon.dynamics
         ratio = gate / nominal.max_nominal_nis if nominal.max_nominal_nis > 0 else math.inf
+        # an infinite threshold is a test the nominal drives could not set up: say it is off
+        lag = (f"lag {dyn.lag_threshold:.2f} (from the nominal drives)"
+               if math.isfinite(dyn.lag_threshold)
+               else "lag off (no window of the nominal drives carried lag information)")
+        start = (f"start {dyn.start_threshold:.2f}" if math.isfinite(dyn.start_threshold)
+                 else "start off (the nominal drives gave no start-from-rest null)")
         lines.append(f"tests: glitch gate NIS {_nis(gate)} ({ratio:.3g} x the nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
-                     f"dynamics CUSUM thresholds: lag {dyn.lag_threshold:.2f} (from the "
-                     f"nominal drives), covariance {dyn.covariance_threshold:.1f}, start "
-                     f"{dyn.start_threshold:.2f} (null from {nominal.n_drives} nominal drives, "
-                     f"{nominal.duration_s / 60.0:.1f} min)")
+                     f"dynamics CUSUM thresholds: {lag}, covariance "
+                     f"{dyn.covariance_threshold:.1f}, {start} (null from {nominal.n_drives} "
+                     f"nominal drives, {nominal.duration_s / 60.0:.1f} min)")
     if landmarks is not None:
         lines.append(f"       scale test on {len(landmarks.ids)} landmarks at 2 Hz (threshold "
                      f"{mon.scale.threshold:.1f})")
@@ -481,6 +486,11 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     print_fn(f"driving the simulated {preset} robot for {duration_s:g} s (seed {seed}, "
              f"{floor_name(floor)} floor)"
              + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
+    own = [f for f in params.faults if f.t_s < duration_s]
+    if own:
+        print_fn(f"the robot {preset} has faults of its own in this drive (its file's "
+                 f"[[faults]], left out of Phase I): "
+                 + ", ".join(f"{f.kind} at {f.t_s:g} s" for f in own))
     sensor_rng = np.random.default_rng([seed, 0x5E45])
 
     def frames() -> Iterator[tuple[SensorFrame, RangeBearing | None]]:
