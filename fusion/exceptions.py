@@ -34,6 +34,7 @@ __all__ = [
     "MarkerPoseError",
     "MeasurementShapeError",
     "NonFiniteInputError",
+    "NotAModelError",
     "TimeOrderError",
     "UnknownLandmarkError",
     "UnknownPoseError",
@@ -55,6 +56,11 @@ class UnknownLandmarkError(FusionError):
 class NonFiniteInputError(FusionError, NonFiniteError):
     """A command, an option or a sighting (:class:`fusion.range_bearing.RangeBearing`) holds NaN
     or infinity (a single reading with NaN given to a filter's update is skipped instead)."""
+
+
+class NotAModelError(FusionError, TypeError):
+    """A filter was given something other than a :class:`~lti_motion.model.MotionModel` (a
+    model file's path, say); the message says to load the file with ``MotionModel.load``."""
 
 
 class FilterOptionError(FusionError):

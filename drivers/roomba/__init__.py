@@ -29,6 +29,7 @@ __all__ = [
     "GROUPS",
     "MAX_WHEEL_SPEED_MM_S",
     "PACKETS",
+    "SERIAL_LATENCY_TOLERANCE_S",
     "STREAM_HEADER",
     "STREAM_PERIOD_S",
     "EmulatorStats",
@@ -59,6 +60,7 @@ __all__ = [
     "expand_ids",
     "full",
     "is_group",
+    "is_pseudo_terminal",
     "lookup_packet",
     "pause_resume_stream",
     "query_list",
@@ -80,6 +82,7 @@ __getattr__, __dir__ = lazy_exports(
         "drivers.roomba.driver": (
             "LinkCounters",
             "Roomba",
+            "is_pseudo_terminal",
         ),
         "drivers.roomba.oi": (
             "BAUD_RATES",
@@ -126,7 +129,10 @@ __getattr__, __dir__ = lazy_exports(
             "lookup_packet",
             "query_reply_size",
         ),
-        "drivers.roomba.roomba_options": ("RoombaOptions",),
+        "drivers.roomba.roomba_options": (
+            "RoombaOptions",
+            "SERIAL_LATENCY_TOLERANCE_S",
+        ),
         "drivers.roomba.stream_clock": ("StreamClock",),
         "drivers.roomba.virtual": (
             "EmulatorStats",
@@ -144,7 +150,7 @@ __getattr__, __dir__ = lazy_exports(
 )
 
 if TYPE_CHECKING:
-    from drivers.roomba.driver import LinkCounters, Roomba
+    from drivers.roomba.driver import LinkCounters, Roomba, is_pseudo_terminal
     from drivers.roomba.oi import (
         BAUD_RATES,
         COMMAND_DATA_BYTES,
@@ -190,7 +196,7 @@ if TYPE_CHECKING:
         lookup_packet,
         query_reply_size,
     )
-    from drivers.roomba.roomba_options import RoombaOptions
+    from drivers.roomba.roomba_options import SERIAL_LATENCY_TOLERANCE_S, RoombaOptions
     from drivers.roomba.stream_clock import StreamClock
     from drivers.roomba.virtual import EmulatorStats, ReceivedCommand, VirtualRoomba, serve
     from drivers.roomba.virtual_options import (

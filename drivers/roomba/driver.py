@@ -47,7 +47,10 @@ import contextlib
 import dataclasses
 import logging
 import math
+import os
+import stat
 import struct
+import sys
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
@@ -71,11 +74,11 @@ from drivers.roomba.oi import (
     stop,
     stream,
 )
-from drivers.roomba.roomba_options import RoombaOptions
+from drivers.roomba.roomba_options import SERIAL_LATENCY_TOLERANCE_S, RoombaOptions
 from drivers.roomba.stream_clock import StreamClock
 from lti_motion.recordings.frames import N_LIGHT_BUMPS, SensorFrame
 
-__all__ = ["LinkCounters", "Roomba", "RoombaOptions", "StreamClock"]
+__all__ = ["LinkCounters", "Roomba", "RoombaOptions", "StreamClock", "is_pseudo_terminal"]
 
 _log = logging.getLogger(__name__)
 
@@ -123,6 +126,26 @@ class LinkCounters:
 # ---------------------------------------------------------------------- the driver
 
 
+#: Linux's device majors of pseudo-terminal slaves (Unix98 ptys, ``/dev/pts/N``: 136-143).
+_PTY_MAJORS = range(136, 144)
+
+
+def is_pseudo_terminal(port: str) -> bool:
+    """Whether ``port`` is a pseudo-terminal (a :class:`~drivers.roomba.VirtualRoomba`'s
+    ``/dev/pts/N``), not a serial device: by its device major on Linux, else by its path.
+
+    >>> is_pseudo_terminal("/dev/ttyUSB0")
+    False
+    """
+    try:
+        st = os.stat(port)
+    except OSError:
+        return False
+    if stat.S_ISCHR(st.st_mode) and sys.platform.startswith("linux"):
+        return os.major(st.st_rdev) in _PTY_MAJORS
+    return os.path.realpath(port).startswith(("/dev/pts/", "/dev/ttys"))
+
+
 class Roomba:
     """A Roomba 600 / Create 2 on a serial port, streaming sensor frames.
 
@@ -147,6 +170,11 @@ class Roomba:
     read_timeout_s : float
         The pyserial read timeout in use [s] (``options.read_timeout_s`` or
         derived from the stall window).
+    latency_tolerance_s : float
+        The stream clock's latency tolerance in use [robot s]:
+        ``options.latency_tolerance_s``, or by the link:
+        :data:`~drivers.roomba.SERIAL_LATENCY_TOLERANCE_S` on a serial device,
+        ``math.inf`` (frames counted) on a pseudo-terminal (:func:`is_pseudo_terminal`).
 
     Raises
     ------
@@ -172,6 +200,11 @@ class Roomba:
             raise ValueError(f"options must be a RoombaOptions, got {type(opts).__name__}")
         self.port = str(port)
         self.options = opts
+        # on a pseudo-terminal lateness is what a busy host delays, in wall time and
+        # without bound: the frames are counted (late, not lost)
+        self.latency_tolerance_s = (
+            opts.latency_tolerance_s if opts.latency_tolerance_s is not None
+            else math.inf if is_pseudo_terminal(self.port) else SERIAL_LATENCY_TOLERANCE_S)
         self._index_fields(opts.stream_ids, cmd_source=opts.cmd_source)
         self.dt_s = STREAM_PERIOD_S
         self._set_timeouts(opts.read_timeout_s)
@@ -208,7 +241,7 @@ class Roomba:
         self._ser: serial.Serial | None = None
         self._parser = StreamParser(self.layout.ids)
         self._clock = StreamClock(clock_rate=self.options.clock_rate,
-                                  latency_tolerance_s=self.options.latency_tolerance_s)
+                                  latency_tolerance_s=self.latency_tolerance_s)
         self._pending: deque[tuple[StreamFrame, int, float]] = deque()
         self._sent_m_s = (0.0, 0.0)
         self._stalls = 0
@@ -229,6 +262,8 @@ class Roomba:
         """What :func:`lti_motion.calibration.drive` records about this link in a log's meta."""
         opts = self.options
         return {"port": self.port, "baud": opts.baud_bps, "mode": opts.mode, "clock": opts.clock,
+                "latency_tolerance_s": (None if math.isinf(self.latency_tolerance_s)
+                                        else self.latency_tolerance_s),    # robot s
                 "counters": dataclasses.asdict(self.counters)}
 
     @property
@@ -409,6 +444,33 @@ class Roomba:
                              f"got shape {cmd.shape}")
         self.send_wheels(cmd[0], cmd[1])
         return self.read_frame()
+
+    def catch_up(self) -> int:
+        """Drop the frames that wait to be read; how many were dropped.
+
+        For a host that fell behind while the robot stood still (before a manoeuvre:
+        loading a library, a person at a prompt): :meth:`step` returns frames oldest
+        first, so its commands would answer frames seconds old, and a manoeuvre would be
+        logged from before it began. The stream clock still counts the dropped frames'
+        periods. Never called by the driver itself: during a drive no frame is dropped.
+        """
+        ser = self._require_open()
+        dropped = len(self._pending)
+        self._pending.clear()
+        # read until a frame comes while the host waits for it: what arrives then is new
+        # (a virtual Roomba queues what the pseudo-terminal cannot hold and refills it as
+        # it is read, so an empty buffer alone does not mean the backlog is gone)
+        deadline = time.monotonic() + max(2.0, self._stall_window_s)
+        while time.monotonic() < deadline:
+            chunk, host_s, fresh = self._receive(ser)
+            n = self._take(chunk, host_s, False)     # counted: a backlog carries no timing
+            dropped += len(self._pending)
+            self._pending.clear()
+            if fresh and n <= 2:
+                break
+        if dropped:
+            _log.info("Roomba on %s: dropped %d waiting frames to catch up", self.port, dropped)
+        return dropped
 
     def read_frame(self) -> SensorFrame:
         """The next valid stream frame, oldest first.

@@ -16,7 +16,11 @@ from typing import Literal
 
 from drivers.roomba.oi import DEFAULT_BAUD_BPS, DEFAULT_STREAM_IDS
 
-__all__ = ["RoombaOptions"]
+__all__ = ["SERIAL_LATENCY_TOLERANCE_S", "RoombaOptions"]
+
+#: The stream clock's latency tolerance on a serial device [s]: an FTDI adapter delivers
+#: every 16 ms (its latency timer, G17), and a few milliseconds of host jitter on top.
+SERIAL_LATENCY_TOLERANCE_S = 0.02
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -75,11 +79,18 @@ class RoombaOptions:
     clock_rate : float
         Robot seconds per wall second: 1.0 for a robot, the ``speed`` of a
         faster-than-real-time virtual Roomba. Scales every robot-time window.
-    latency_tolerance_s : float
+    latency_tolerance_s : float or None
         Largest arrival latency [robot s] the stream clock does not take for a
         lost frame (covers FTDI bursts, G17); ``math.inf``: frames are counted,
-        lateness is never taken for loss (a lossless link such as a
-        pseudo-terminal to :class:`~drivers.roomba.VirtualRoomba`).
+        lateness is never taken for loss. ``None`` (the default) chooses by the
+        link: :data:`SERIAL_LATENCY_TOLERANCE_S` (0.02 s) on a serial device;
+        ``math.inf`` on a pseudo-terminal (:class:`~drivers.roomba.VirtualRoomba`):
+        the emulator never skips a frame for lateness, so there lateness is what a
+        busy host delays, in wall time and without bound (at ``clock_rate`` 10,
+        0.02 robot s was 2 ms of wall time; 0.02 s of wall time was still exceeded
+        hundreds of times a drive with the machine loaded), and frames that arrive
+        late are late, not lost. The emulator's own stalls and lost frames (its
+        faults) then leave no gap in the timestamps: give a tolerance to find them.
     mode_report_offset : int
         Subtracted from packet 35 before use: 1 for Roombas that report the
         mode off by one (G8). Values still outside 0..3 are counted and ignored.
@@ -124,7 +135,7 @@ class RoombaOptions:
     reassert_mode: bool = False
     clock: Literal["stream", "host"] = "stream"
     clock_rate: float = 1.0
-    latency_tolerance_s: float = 0.02
+    latency_tolerance_s: float | None = None
     mode_report_offset: int = 0
     cmd_source: Literal["requested", "sent"] = "requested"
     wake: bool = True
@@ -157,3 +168,6 @@ class RoombaOptions:
         v = self.read_timeout_s
         if v is not None and not (math.isfinite(v) and v > 0):
             raise ValueError(f"read_timeout_s must be a finite positive number, got {v!r}")
+        v = self.latency_tolerance_s
+        if v is not None and not v >= 0:
+            raise ValueError(f"latency_tolerance_s must be >= 0 s (math.inf: never), got {v!r}")

@@ -83,7 +83,8 @@ class EKFOptions:
     Raises
     ------
     FilterOptionError
-        For a span option that is not positive or a counter width outside 8..64
+        For a span option that is not positive, a negative ``history`` or a counter
+        width outside 8..64
         (the noise, the gate and the divergence count are checked by the filter
         that uses them).
 
@@ -119,4 +120,7 @@ class EKFOptions:
         if not self.max_jump_ticks > 0:
             raise FilterOptionError(f"max_jump_ticks must be positive, got "
                                     f"{self.max_jump_ticks!r}")
+        if not (isinstance(self.history, int) and self.history >= 0):
+            raise FilterOptionError(f"history must be an int of 0 or more (the update records "
+                                    f"kept; 0 keeps none), got {self.history!r}")
         check_counter_bits(self.counter_bits)

@@ -167,12 +167,18 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from fusion.ekf.kernel import kernel_array, predict_kernel, predict_terms_kernel
-from fusion.exceptions import FilterOptionError, MeasurementShapeError, NonFiniteInputError
+from fusion.exceptions import (
+    FilterOptionError,
+    MeasurementShapeError,
+    NonFiniteInputError,
+    NotAModelError,
+)
 from fusion.noise import GyroNoise, ScaleErrors, SlipNoise
 from fusion.range_bearing import (
     range_bearing,
@@ -304,6 +310,9 @@ class FilterModel:
     FilterOptionError
         For non-positive encoder noise or scale, or a ``slip`` whose class overrides
         :meth:`SlipNoise.stds` (the compiled step evaluates ``SlipNoise``'s own law).
+    NotAModelError
+        If ``model`` is not a :class:`~lti_motion.model.MotionModel` (a file's path:
+        load it with ``MotionModel.load``).
     """
 
     model: MotionModel
@@ -333,6 +342,11 @@ class FilterModel:
     def __post_init__(self) -> None:
         setf = object.__setattr__
         m = self.model
+        if not isinstance(m, MotionModel):
+            hint = (f" ({m!r}): load a model file with MotionModel.load({m!r}) and give the "
+                    "model" if isinstance(m, str | bytes | os.PathLike) else "")
+            raise NotAModelError(f"model must be a MotionModel, got a "
+                                 f"{type(m).__name__}{hint}")
         nz = m.n_states
         z0 = _Z0 + (0 if self.gyro is None else 2)
         n = nz + z0 + 2

@@ -160,7 +160,11 @@ class ModelEKF(GatedUpdates, ExtendedKalmanFilter):
     FilterOptionError, MeasurementShapeError
         For invalid options (a scale prior whose plausibility bound reaches
         the physical one, :data:`fusion.ekf.resets.MAX_SCALE_ERROR` or
-        :data:`~fusion.ekf.resets.MAX_RATIO_ERROR`, too).
+        :data:`~fusion.ekf.resets.MAX_RATIO_ERROR`, too; a negative ``history``
+        is refused by :class:`EKFOptions` itself).
+    NotAModelError
+        If ``model`` is not a :class:`~lti_motion.model.MotionModel`: a model
+        file's path is loaded with ``MotionModel.load(path)`` first.
 
     Examples
     --------

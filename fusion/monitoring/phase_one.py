@@ -26,8 +26,10 @@ ed., Wiley, section 5.3.5 (Phase I and Phase II of control chart use).
 
 from __future__ import annotations
 
+import logging
 import math
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +43,8 @@ from lti_motion.model.motion_model import MotionModel
 from lti_motion.recordings.ticks import tick_deltas
 
 __all__ = ["NominalFit", "encoder_nis", "fit_nominal"]
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -99,7 +103,8 @@ def encoder_nis(model: MotionModel, cmd_m_s: np.ndarray, ticks: np.ndarray) -> n
 
 
 def fit_nominal(model: MotionModel, drives: Sequence[tuple[np.ndarray, np.ndarray]], *,
-                gate_factor: float = 10.0, skip_s: float = 0.5) -> NominalFit:
+                gate_factor: float = 10.0, skip_s: float = 0.5,
+                progress: Callable[[str, int, int], None] | None = None) -> NominalFit:
     """Fit the dynamics null and the encoder gate on nominal drives (module notes).
 
     Parameters
@@ -117,6 +122,12 @@ def fit_nominal(model: MotionModel, drives: Sequence[tuple[np.ndarray, np.ndarra
         the start from rest in the null (with ``fit_dynamics_null``'s own 3 s,
         nominal drives raise dynamics alarms at their starts:
         ``docs/guide_alarms.md``).
+    progress : callable, optional
+        Called as ``progress(stage, done, total)``: ``("encoder NIS", i, n_drives)``
+        after each drive's filter run, then ``("dynamics null", 0, 1)`` before the
+        null's maximum-likelihood fit (the longest step: tens of seconds for 20 drives
+        of 30 s) and ``("dynamics null", 1, 1)`` after it. The same steps are logged
+        (``logging``, INFO) with their wall time.
 
     Returns
     -------
@@ -134,7 +145,12 @@ def fit_nominal(model: MotionModel, drives: Sequence[tuple[np.ndarray, np.ndarra
         raise FilterOptionError("fit_nominal needs at least one nominal drive")
     if not gate_factor >= 1.0:
         raise FilterOptionError(f"gate_factor must be >= 1, got {gate_factor}")
+    def report(stage: str, done: int, total: int) -> None:
+        if progress is not None:
+            progress(stage, done, total)
+
     runs, peak, n = [], 0.0, 0
+    started = time.perf_counter()
     for cmd, ticks in drives:
         cmd = np.asarray(cmd, float)
         ticks = np.asarray(ticks)
@@ -144,7 +160,14 @@ def fit_nominal(model: MotionModel, drives: Sequence[tuple[np.ndarray, np.ndarra
         runs.append((cmd, tick_deltas(ticks.astype(np.int64), axis=0).astype(float)))
         peak = max(peak, float(np.nanmax(encoder_nis(model, cmd, ticks), initial=0.0)))
         n += len(cmd)
+        report("encoder NIS", len(runs), len(drives))
+    _log.info("phase I: encoder NIS of %d nominal drives (%.1f s of driving) in %.1f s",
+              len(runs), n * model.dt_s, time.perf_counter() - started)
     chi2_gate = design_thresholds(MonitorOptions(dt_s=model.dt_s)).gate
-    return NominalFit(null=fit_dynamics_null(model, runs, skip_s=skip_s),
-                      encoder_gate_nis=max(chi2_gate, gate_factor * peak),
+    report("dynamics null", 0, 1)
+    started = time.perf_counter()
+    null = fit_dynamics_null(model, runs, skip_s=skip_s)
+    _log.info("phase I: dynamics null fitted in %.1f s", time.perf_counter() - started)
+    report("dynamics null", 1, 1)
+    return NominalFit(null=null, encoder_gate_nis=max(chi2_gate, gate_factor * peak),
                       max_nominal_nis=peak, duration_s=n * model.dt_s, n_drives=len(runs))

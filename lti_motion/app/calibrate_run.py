@@ -8,6 +8,10 @@ What the command promises (docs/guide_calibrate_real_robot.md):
   under way; ``--resume`` uses the logs found there instead of driving again;
 * Ctrl-C stops the wheels (leaving the driver's ``with`` block does) and ends
   with one line saying what was kept, exit code 130;
+* a drive whose analysis fails (the rotation shows no period, the robot did not
+  apply the step command) is a failed drive, not a finished one: its log is kept
+  as ``OUT/log_<stage>.failed.npz`` for inspection, and ``--resume`` drives it
+  again instead of failing on it the same way;
 * a model whose held-out fit is below the documented healthy range is not
   saved under its name unless ``--accept-unhealthy``: the drives and plots are
   kept, the reason is printed, exit code 2.
@@ -18,7 +22,7 @@ from __future__ import annotations
 import argparse
 import math
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,6 +36,7 @@ __all__ = [
     "HEALTHY_FIT_PERCENT",
     "STAGES",
     "check_writable_folder",
+    "failed_log_path",
     "health_problems",
     "nominal_wheel_base_m",
     "run_calibrate",
@@ -63,6 +68,45 @@ def nominal_wheel_base_m(args: argparse.Namespace, described: RobotParams | None
 def stage_log_path(out: Path, stage: str) -> Path:
     """Where a manoeuvre's log is kept: ``OUT/log_<stage>.npz``."""
     return Path(out) / f"log_{stage}.npz"
+
+
+def failed_log_path(out: Path, stage: str) -> Path:
+    """Where a manoeuvre's log is kept when its analysis failed: ``OUT/log_<stage>.failed.npz``
+    (``--resume`` does not read it: the manoeuvre is driven again)."""
+    return Path(out) / f"log_{stage}.failed.npz"
+
+
+class _Analysed(Mapping):
+    """The recorded logs, watched: which manoeuvre's log the calibration is analysing.
+
+    :func:`~lti_motion.calibration.calibrate` analyses each manoeuvre's log (the
+    rotation's period, the steps' timing) right after it has it (driven, then
+    ``after_stage``; or read from here on ``--resume``) and before it looks here for
+    the next manoeuvre (``stage in recorded``); the last log it had is analysed until
+    then, and the excitation's until the fits are done.
+    """
+
+    def __init__(self, logs: Mapping[str, FrameLog]) -> None:
+        self._logs = dict(logs)
+        self.analysing: str | None = None
+
+    def __getitem__(self, stage: str) -> FrameLog:
+        log = self._logs[stage]
+        self.analysing = stage
+        return log
+
+    def __bool__(self) -> bool:
+        return True                   # watched even when empty (``recorded or {}`` keeps it)
+
+    def __contains__(self, stage: object) -> bool:
+        self.analysing = None                 # on to the next manoeuvre: the last one passed
+        return stage in self._logs
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._logs)
+
+    def __len__(self) -> int:
+        return len(self._logs)
 
 
 def check_writable_folder(folder: Path, *, option: str = "--out") -> None:
@@ -115,7 +159,7 @@ def _recorded(out: Path, *, resume: bool) -> dict[str, FrameLog]:
     return {s: load_log(stage_log_path(out, s)) for s in found}
 
 
-def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, FrameLog],
+def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: _Analysed,
            after_stage: Callable[[str, FrameLog], None]) -> Calibration:
     """The manoeuvres not yet recorded, on the simulator or the robot, and the fits."""
     from drivers.sim import calibrate_simulator, floor_name, load_robot, print_progress
@@ -131,6 +175,8 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
     from drivers.roomba import Roomba, RoombaOptions
     from lti_motion.app.prompts import wait_until_placed
 
+    driving: list[Roomba] = []
+
     def before_stage(stage: str) -> None:
         where = {"rotation": "beside a wall or furniture (within 30 cm), room to turn",
                  "steps": "on open floor, 2 m clear all round",
@@ -138,6 +184,8 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
         print(f"next: {stage}. Put the robot {where}.")
         if not args.yes:
             wait_until_placed()
+        for robot in driving:       # the frames that waited meanwhile are from before it
+            robot.catch_up()
 
     options = {"wheel_base_m": nominal_wheel_base_m(args, described),
                "plan": plan, "floor": args.floor or "hard", "progress": print_progress,
@@ -147,6 +195,7 @@ def _drive(args: argparse.Namespace, plan: CalibrationPlan, recorded: dict[str, 
     print(f"calibrating the robot on {args.port} at {args.baud} baud")
     link = RoombaOptions(baud_bps=args.baud, clock_rate=args.clock_rate)
     with Roomba(args.port, options=link) as robot:
+        driving.append(robot)
         return calibrate(robot, **options)
 
 
@@ -178,16 +227,18 @@ def run_calibrate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     created = not out.exists()
     check_writable_folder(out)
-    recorded = _recorded(out, resume=args.resume)
-    if recorded:
+    recorded = _Analysed(_recorded(out, resume=args.resume))
+    if len(recorded):
         print(f"resuming: {', '.join(recorded)} recorded in {out}, not driven again")
 
     def after_stage(stage: str, log: FrameLog) -> None:
         print(f"  kept the {stage} drive in {save_log(stage_log_path(out, stage), log)}")
+        recorded.analysing = stage
 
     plan = CalibrationPlan(seed=args.seed, excitation_s=args.excitation_s)
     try:
         cal = _drive(args, plan, recorded, after_stage)
+        recorded.analysing = None
         return _save(_with_robot(cal, args), out, accept_unhealthy=args.accept_unhealthy)
     except KeyboardInterrupt:
         print(f"\nlti-motion calibrate: stopped by Ctrl-C; the wheels were commanded to "
@@ -195,8 +246,19 @@ def run_calibrate(args: argparse.Namespace) -> int:
         _remove_if_empty(out, created=created)
         return EXIT_INTERRUPTED
     except (OSError, ValueError, PassiveModeError) as exc:
+        failed = _set_aside(out, recorded.analysing)
         _remove_if_empty(out, created=created)
-        raise OSError(f"{exc}; {_kept_text(out)}") from exc
+        raise OSError(f"{exc}; {failed}{_kept_text(out)}") from exc
+
+
+def _set_aside(out: Path, stage: str | None) -> str:
+    """A manoeuvre whose analysis failed: its log renamed out of ``--resume``'s way."""
+    if stage is None or not stage_log_path(out, stage).is_file():
+        return ""
+    failed = failed_log_path(out, stage)
+    stage_log_path(out, stage).replace(failed)
+    return (f"the {stage} drive failed its analysis and was set aside as {failed.name} "
+            "(--resume drives it again); ")
 
 
 def _with_robot(cal: Calibration, args: argparse.Namespace) -> Calibration:

@@ -307,6 +307,7 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
     if args.out_bag:
         raise ValueError("--out-bag writes what monitor --bag found; give --bag")
     from lti_motion.app import monitor as live_monitor
+    from lti_motion.app.progress import StatusLine
 
     if args.fault and not args.sim:
         raise ValueError("--fault injects a simulator fault; it needs --robot (the simulator)")
@@ -337,22 +338,24 @@ def _cmd_monitor(args: argparse.Namespace) -> int:
         raise ValueError("monitor --port needs --model FILE: calibrate the robot first with "
                          f"'lti-motion calibrate --port {args.port}'")
     if args.sim:
-        live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
-                                      seed=args.seed, floor=args.floor, fault=args.fault,
-                                      fault_at_s=args.fault_at, record=args.record,
-                                      nominal_drives=args.nominal_drives, gyro=args.gyro)
+        run = live_monitor.run_on_simulator(model, robot=robot, duration_s=args.duration,
+                                            seed=args.seed, floor=args.floor, fault=args.fault,
+                                            fault_at_s=args.fault_at, record=args.record,
+                                            nominal_drives=args.nominal_drives, gyro=args.gyro,
+                                            progress=StatusLine().phase_one)
     else:
         from drivers.exceptions import PassiveModeError
 
         _check_port_robot(model, args.port)
         try:
-            live_monitor.run_on_port(model, args.port, duration_s=args.duration, baud=args.baud,
-                                     clock_rate=args.clock_rate, listen=args.listen,
-                                     seed=args.seed, record=args.record,
-                                     nominal_logs=args.nominal or ())
+            run = live_monitor.run_on_port(model, args.port, duration_s=args.duration,
+                                           baud=args.baud, clock_rate=args.clock_rate,
+                                           listen=args.listen, seed=args.seed,
+                                           record=args.record, nominal_logs=args.nominal or (),
+                                           progress=StatusLine().phase_one)
         except PassiveModeError as exc:
             raise OSError(str(exc)) from exc
-    return 0
+    return EXIT_INTERRUPTED if run.interrupted else 0     # Ctrl-C: the drive kept, still 130
 
 
 def _check_port_robot(model, port: str) -> None:
@@ -382,9 +385,12 @@ def _cmd_virtual_roomba(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     from lti_motion.app.demo import run_demo
+    from lti_motion.app.progress import StatusLine
 
+    status = StatusLine()            # the route's progress; the printed lines unchanged
     run_demo(Path(args.out), seed=args.seed, robot=load_robot(args.preset), floor=args.floor,
-             runs=args.runs, excitation_s=args.excitation_s)
+             runs=args.runs, excitation_s=args.excitation_s, print_fn=status.print,
+             progress=status.route)
     return 0
 
 
@@ -515,6 +521,24 @@ def build_parser() -> argparse.ArgumentParser:
 #: on its held-out last 30%, and the calibration-sequence plot shows its first 20 s.
 MIN_EXCITATION_S = 20.0
 
+#: Longest random excitation [s]: an hour of driving (the commands are made before the
+#: drive; 1e9 s asked numpy for 993 GiB).
+MAX_EXCITATION_S = 3600.0
+
+#: Longest ``monitor`` drive [s]: a day (its route is made before the drive).
+MAX_MONITOR_S = 86400.0
+
+#: The driver's references to the Open Interface spec and its gotchas ("(spec §1.3, G3,
+#: G15)"): the library's readers have them (drivers/roomba/oi.py); a command-line user
+#: gets the advice around them.
+_SPEC_REFERENCE = re.compile(r"\s*\((?:spec )?§[^)]*\)|\s*\(G\d+(?:, G\d+)*\)"
+                             r"|;\s*spec §[^)]*(?=\))")
+
+
+def _one_line(exc: BaseException) -> str:
+    """An error as the command line prints it: one line, without the spec references."""
+    return _SPEC_REFERENCE.sub("", " ".join(str(exc).split()))
+
 
 def _check_args(args: argparse.Namespace) -> None:
     """Refuse options that make no sense, before anything runs (cases: test_cli_nonsense.py).
@@ -535,10 +559,20 @@ def _check_args(args: argparse.Namespace) -> None:
         raise ValueError(f"--excitation-s must be a finite number of seconds, at least "
                          f"{MIN_EXCITATION_S:g} (the model's order is chosen on its last 30%), "
                          f"got {excitation_s:g}")
+    if excitation_s is not None and excitation_s > MAX_EXCITATION_S:
+        raise ValueError(f"--excitation-s {excitation_s:g} s is more driving than a "
+                         f"calibration needs: give at most {MAX_EXCITATION_S:g} s (an hour; "
+                         "180 s is the default)")
+    seed = getattr(args, "seed", None)
+    if seed is not None and seed < 0:
+        raise ValueError(f"--seed must be a whole number of 0 or more, got {seed}")
     if args.command == "calibrate":
         _check_calibrate_args(args, positive)
     elif args.command == "monitor":
         positive("--duration", args.duration)
+        if args.duration > MAX_MONITOR_S:
+            raise ValueError(f"--duration {args.duration:g} s is longer than a monitor drive "
+                             f"can be: give at most {MAX_MONITOR_S:g} s (a day)")
         positive("--clock-rate", args.clock_rate)
         if args.fault_at is not None and args.fault is None:
             raise ValueError("--fault-at is the onset of --fault; give --fault too")
@@ -633,9 +667,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MissingEncoderScaleError:
         print(f"lti-motion {args.command}: error: {_no_encoder_scale(args)}", file=sys.stderr)
         return 2
-    except (ValueError, OSError) as exc:
-        one_line = " ".join(str(exc).split())             # the README promises one line
-        print(f"lti-motion {args.command}: error: {one_line}", file=sys.stderr)
+    except (ValueError, OSError) as exc:                # the README promises one line
+        print(f"lti-motion {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         # sub-commands that drive a robot or keep a recording answer Ctrl-C themselves (what

@@ -32,7 +32,7 @@ from drivers.sim import (
     print_progress,
     summarize,
 )
-from lti_motion.app.plots import plot_calibration
+from lti_motion.app.plots import plot_calibration, save_figure
 from lti_motion.app.route import (
     ROUTE_LANDMARKS,
     ROUTE_M,
@@ -46,6 +46,7 @@ from lti_motion.app.route import (
 )
 from lti_motion.app.route_smoother import SmootherEstimator
 from lti_motion.calibration import Calibration, CalibrationPlan
+from lti_motion.persistence import atomic_write
 
 __all__ = ["PAPER_TABLE_II", "run_demo"]
 
@@ -111,7 +112,7 @@ def _plot_trajectories(results: dict[str, RouteResult], path: Path) -> None:
         ax.legend(fontsize=7, loc="center")
     fig.suptitle("The closed route, run 1: true path and the estimate it steered on")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 #: One marker shape per estimator in the closure plot.
@@ -142,7 +143,7 @@ def _plot_closure(results: dict[str, RouteResult], path: Path) -> None:
     fig.suptitle(f"Where the robots stopped ({len(next(iter(results.values())).finished)} "
                  "runs each)")
     fig.tight_layout(rect=(0, 0.12, 1, 1))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 def _table(metrics: dict) -> str:
@@ -214,12 +215,14 @@ def _write_report(path: Path, metrics: dict, table: str, plots: list[Path]) -> N
         "## Calibration", "",
         *[f"![{p.stem}]({p.name})" for p in plots], "",
     ]
-    path.write_text("\n".join(report))
+    with atomic_write(path, text=True) as f:
+        f.write("\n".join(report))
 
 
 def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create2",
              floor: str | FloorMap | None = None, runs: int = 30, excitation_s: float = 180.0,
-             print_fn: Callable[[str], object] = print) -> dict:
+             print_fn: Callable[[str], object] = print,
+             progress: Callable[[str, float, int, int], None] | None = None) -> dict:
     """Calibrate on the simulator, run the route for every estimator, write the report.
 
     Parameters
@@ -239,6 +242,11 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
         Length of the calibration's random excitation [s].
     print_fn : callable
         Where the progress lines go.
+    progress : callable, optional
+        Called while each estimator drives the route, as ``progress(label, t_s, home,
+        n)`` (:func:`~lti_motion.app.route.drive_route`'s, with the estimator's
+        label): the longest silent steps (the iSAM2 smoother's route, minutes).
+        Nothing of it goes to ``print_fn``.
 
     Returns
     -------
@@ -269,19 +277,24 @@ def run_demo(out_dir: Path, *, seed: int = 0, robot: RobotParams | str = "create
     seconds: dict[str, float] = {}
     for name, est in _estimators(cal, params.wheel_base_m).items():
         t0 = time.perf_counter()
+        label = LABELS.get(name, name)
         results[name] = drive_route(params, est, seeds=seeds, floor=floor,
                                     landmarks=ROUTE_LANDMARKS if name in USES_LANDMARKS
-                                    else None)
+                                    else None,
+                                    progress=None if progress is None else
+                                    (lambda t_s, home, n, label=label:
+                                     progress(label, t_s, home, n)))
         res = results[name]
         seconds[name] = time.perf_counter() - t0
-        print_fn(f"   {LABELS.get(name, name):34s} closure {res.closure_offset_m.mean():.3f} "
+        print_fn(f"   {label:34s} closure {res.closure_offset_m.mean():.3f} "
                  f"+- {res.closure_offset_m.std():.3f} m  ({seconds[name]:.1f} s)")
 
     metrics = _metrics(cal, results, seconds, preset=preset, floor=floor_name(floor), seed=seed,
                        runs=runs)
     _plot_trajectories(results, out_dir / "trajectories.png")
     _plot_closure(results, out_dir / "closure.png")
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    with atomic_write(out_dir / "metrics.json", text=True) as f:       # whole or not at all
+        f.write(json.dumps(metrics, indent=2) + "\n")
     table = _table(metrics)
     _write_report(out_dir / "report.md", metrics, table, plots)
     print_fn("3. closure offset, as the paper's Table II:")

@@ -213,6 +213,9 @@ class MonitorRun:
         What ran, one line each (gate, dynamics, scale).
     gyro_windows : tuple of 2 int or None
         With a gyro: its windows fused and gated by the EKF; ``None`` without.
+    interrupted : bool
+        The drive was ended by Ctrl-C (``KeyboardInterrupt``) before its last
+        frame; what came before it is summarised (and recorded) as usual.
     """
 
     frames: int = 0
@@ -225,6 +228,7 @@ class MonitorRun:
     final_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tests: list[str] = field(default_factory=list)
     gyro_windows: tuple[int, int] | None = None
+    interrupted: bool = False
 
     def summary(self) -> list[str]:
         """Lines for the end of the command's output."""
@@ -303,6 +307,8 @@ def monitor_frames(model: MotionModel,
     Returns
     -------
     MonitorRun
+        ``interrupted`` set if Ctrl-C (``KeyboardInterrupt``) ended the frames early:
+        the frames before it are summarised, nothing is raised.
 
     Raises
     ------
@@ -323,16 +329,19 @@ def monitor_frames(model: MotionModel,
                          pose_std=(0.005, 0.005, 0.005), on_alarm=relay)
     run = MonitorRun(tests=_test_lines(mf.monitor, nominal, landmarks),
                      glitch_gate_nis=mf.monitor.thresholds().gate)
-    for item in frames:
-        frame, seen = item if isinstance(item, tuple) else (item, None)
-        if on_frame is not None:
-            on_frame(frame)
-        run.frames += 1
-        if gyro is None and frame.yaw_rate_rad_s is not None:
-            frame = replace(frame, yaw_rate_rad_s=None)     # the filter has no gyro
-        result = mf.step(frame, sightings=seen)
-        if on_step is not None and mf.ekf is not None:
-            on_step(result, mf.ekf.P[:3, :3].copy())
+    try:
+        for item in frames:
+            frame, seen = item if isinstance(item, tuple) else (item, None)
+            if on_frame is not None:
+                on_frame(frame)
+            run.frames += 1
+            if gyro is None and frame.yaw_rate_rad_s is not None:
+                frame = replace(frame, yaw_rate_rad_s=None)     # the filter has no gyro
+            result = mf.step(frame, sightings=seen)
+            if on_step is not None and mf.ekf is not None:
+                on_step(result, mf.ekf.P[:3, :3].copy())
+    except KeyboardInterrupt:           # Ctrl-C ends the drive; what came before is kept
+        run.interrupted = True
     if mf.ekf is not None:
         run.duration_s = mf.ekf.t_s
         run.encoders_gated = mf.ekf.stats.count("encoders", "gated")
@@ -359,12 +368,17 @@ def _test_lines(mon: ResidualMonitor, nominal: NominalFit | None,
     else:
         dyn = mon.dynamics
         ratio = gate / nominal.max_nominal_nis if nominal.max_nominal_nis > 0 else math.inf
+        # an infinite threshold is a test the nominal drives could not set up: say it is off
+        lag = (f"lag {dyn.lag_threshold:.2f} (from the nominal drives)"
+               if math.isfinite(dyn.lag_threshold)
+               else "lag off (no window of the nominal drives carried lag information)")
+        start = (f"start {dyn.start_threshold:.2f}" if math.isfinite(dyn.start_threshold)
+                 else "start off (the nominal drives gave no start-from-rest null)")
         lines.append(f"tests: glitch gate NIS {_nis(gate)} ({ratio:.3g} x the nominal maximum "
                      f"{nominal.max_nominal_nis:.0f}) with glitch bursts, stuck encoder; "
-                     f"dynamics CUSUM thresholds: lag {dyn.lag_threshold:.2f} (from the "
-                     f"nominal drives), covariance {dyn.covariance_threshold:.1f}, start "
-                     f"{dyn.start_threshold:.2f} (null from {nominal.n_drives} nominal drives, "
-                     f"{nominal.duration_s / 60.0:.1f} min)")
+                     f"dynamics CUSUM thresholds: {lag}, covariance "
+                     f"{dyn.covariance_threshold:.1f}, {start} (null from {nominal.n_drives} "
+                     f"nominal drives, {nominal.duration_s / 60.0:.1f} min)")
     if landmarks is not None:
         lines.append(f"       scale test on {len(landmarks.ids)} landmarks at 2 Hz (threshold "
                      f"{mon.scale.threshold:.1f})")
@@ -391,7 +405,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                      floor: str | FloorMap | None = None, fault: str | None = None,
                      fault_at_s: float | None = None, record: str | None = None,
                      nominal_drives: int = 20, landmarks: bool = True, gyro: bool = False,
-                     print_fn: Callable[[str], object] = print) -> MonitorRun:
+                     print_fn: Callable[[str], object] = print,
+                     progress: Callable[[str, int, int], None] | None = None) -> MonitorRun:
     """Drive :func:`monitor_route` on the simulator, monitor it, print alarms and a summary.
 
     Parameters
@@ -419,6 +434,14 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
         hard floor with the default scale priors it can cost accuracy, ``docs/ekf.md``).
     print_fn : callable
         Where the lines go.
+    progress : callable, optional
+        Phase I's steps (:func:`~fusion.monitoring.fit_nominal`'s ``progress``).
+
+    Returns
+    -------
+    MonitorRun
+        Ctrl-C during the drive ends it: ``interrupted`` is set, the frames before
+        it are summarised and, with ``record``, written (as :func:`run_on_port`).
 
     Raises
     ------
@@ -449,7 +472,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                  f"nominal drives of {duration_s:g} s (seeds {seed + 1000}-"
                  f"{seed + 999 + nominal_drives}, no fault) ...")
         nominal = nominal_on_simulator(model, robot=params, n_drives=nominal_drives,
-                                       duration_s=duration_s, seed=seed, floor=floor)
+                                       duration_s=duration_s, seed=seed, floor=floor,
+                                       progress=progress)
     sim = Simulator(params, seed=seed, floor=floor, room=Room.empty(),
                     initial_pose=(0.0, 0.0, 0.0), faults=faults)
     commands = monitor_route(duration_s, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
@@ -462,6 +486,11 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
     print_fn(f"driving the simulated {preset} robot for {duration_s:g} s (seed {seed}, "
              f"{floor_name(floor)} floor)"
              + (f"; {fault} fault at {fault_at_s:g} s" if fault else ""))
+    own = [f for f in params.faults if f.t_s < duration_s]
+    if own:
+        print_fn(f"the robot {preset} has faults of its own in this drive (its file's "
+                 f"[[faults]], left out of Phase I): "
+                 + ", ".join(f"{f.kind} at {f.t_s:g} s" for f in own))
     sensor_rng = np.random.default_rng([seed, 0x5E45])
 
     def frames() -> Iterator[tuple[SensorFrame, RangeBearing | None]]:
@@ -491,8 +520,10 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
                          landmarks=MONITOR_LANDMARKS if landmarks else None,
                          on_alarm_line=print_fn, counter_bits=params.counter_bits,
                          gyro=noise if gyro and density is not None else None)
+    if run.interrupted:
+        print_fn(f"stopped by Ctrl-C after {run.frames} frames")
     _report(run, print_fn, fault=fault, fault_at_s=fault_at_s, expected=expected)
-    if record:
+    if record and len(rec):
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")
     return run
 
@@ -500,7 +531,8 @@ def run_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2"
 def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud: int = 115200,
                 clock_rate: float = 1.0, listen: bool = False, seed: int = 0,
                 record: str | None = None, nominal_logs: Sequence[str] = (),
-                print_fn: Callable[[str], object] = print) -> MonitorRun:
+                print_fn: Callable[[str], object] = print,
+                progress: Callable[[str, int, int], None] | None = None) -> MonitorRun:
     """Drive :func:`monitor_route` on a Roomba / Create 2 (or only listen), monitor it.
 
     Parameters
@@ -521,6 +553,17 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     nominal_logs : sequence of str
         Logs of nominal drives of this robot on this route (``--record``):
         Phase I (:func:`nominal_from_logs`); none leaves the dynamics tests off.
+    print_fn : callable
+        Where the lines go.
+    progress : callable, optional
+        Phase I's steps (:func:`~fusion.monitoring.fit_nominal`'s ``progress``).
+
+    Returns
+    -------
+    MonitorRun
+        Ctrl-C during the drive ends it (closing the port stops the wheels):
+        ``interrupted`` is set, the frames before it are summarised and, with
+        ``record``, written.
 
     Raises
     ------
@@ -538,7 +581,7 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     if nominal_logs:
         print_fn(f"phase I: fitting the dynamics null and the encoder gate on "
                  f"{len(nominal_logs)} nominal drive log(s) ...")
-        nominal = nominal_from_logs(model, nominal_logs)
+        nominal = nominal_from_logs(model, nominal_logs, progress=progress)
     commands = monitor_route(duration_s, dt_s=model.dt_s, wheel_base_m=model.wheel_base_m,
                              rng=np.random.default_rng(seed))
     rec = Recorder(meta={"source": "lti-motion monitor --port", "port": port, "listen": listen})
@@ -550,16 +593,17 @@ def run_on_port(model: MotionModel, port: str, *, duration_s: float = 30.0, baud
     with Roomba(port, options=options) as robot:
 
         def frames() -> Iterator[SensorFrame]:
-            try:
-                for cmd in commands:
-                    frame = robot.read_frame() if listen else robot.step(cmd)
-                    if record:
-                        rec.add(frame)
-                    yield frame
-            except KeyboardInterrupt:           # end the drive; closing stops the wheels
-                print_fn("stopped by Ctrl-C")
+            for cmd in commands:
+                frame = robot.read_frame() if listen else robot.step(cmd)
+                if record:
+                    rec.add(frame)
+                yield frame
 
+        # Ctrl-C ends the drive (monitor_frames keeps what came before); closing the
+        # robot stops the wheels
         run = monitor_frames(model, frames(), nominal=nominal, on_alarm_line=print_fn)
+    if run.interrupted:
+        print_fn(f"stopped by Ctrl-C after {run.frames} frames")
     _report(run, print_fn, fault=None, fault_at_s=None, expected=None)
     if record and len(rec):
         print_fn(f"wrote the drive to {rec.save(record)} (lti-motion replay reads it)")

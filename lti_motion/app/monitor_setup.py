@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -87,13 +87,15 @@ def sightings(true_pose: np.ndarray, k: int, rng: np.random.Generator, *,
 
 def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "create2",
                          n_drives: int = 20, duration_s: float = 30.0, seed: int = 0,
-                         floor: str | FloorMap | None = None) -> NominalFit:
+                         floor: str | FloorMap | None = None,
+                         progress: Callable[[str, int, int], None] | None = None) -> NominalFit:
     """Phase I on the simulator: ``n_drives`` nominal drives of :func:`monitor_route`.
 
     Seeds ``seed + 1000 .. seed + 1000 + n_drives - 1`` (route and simulator), no
     fault (the robot's own faults are left out), all in one batch, on ``floor``
     (default the robot's); ``robot`` is parameters, a preset name or a robot file.
-    Commands and counts only go to :func:`~lti_motion.app.monitor_setup.fit_nominal`.
+    Commands and counts only go to :func:`~lti_motion.app.monitor_setup.fit_nominal`,
+    which reports its steps to ``progress`` (``fit_nominal``'s).
     """
     from drivers.sim import Room, Simulator, load_robot
 
@@ -105,18 +107,20 @@ def nominal_on_simulator(model: MotionModel, *, robot: RobotParams | str = "crea
                                    rng=np.random.default_rng(s)) for s in seeds])
     log = sim.run(cmds)
     drives = [(r.cmd_m_s[1:], _unwrapped(r)) for r in (log.robot(i) for i in range(n_drives))]
-    return fit_nominal(model, drives)
+    return fit_nominal(model, drives, progress=progress)
 
 
-def nominal_from_logs(model: MotionModel, paths: Sequence[str]) -> NominalFit:
-    """Phase I from logs of nominal drives (``lti-motion monitor --record`` on the robot)."""
+def nominal_from_logs(model: MotionModel, paths: Sequence[str], *,
+                      progress: Callable[[str, int, int], None] | None = None) -> NominalFit:
+    """Phase I from logs of nominal drives (``lti-motion monitor --record`` on the robot);
+    ``progress`` as for :func:`~fusion.monitoring.fit_nominal`."""
     from lti_motion.recordings import load_log
 
     drives = []
     for path in paths:
         log = load_log(path)
         drives.append((log.cmd_m_s[1:], _unwrapped(log)))
-    return fit_nominal(model, drives)
+    return fit_nominal(model, drives, progress=progress)
 
 
 def _unwrapped(log: FrameLog) -> np.ndarray:

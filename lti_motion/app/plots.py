@@ -17,13 +17,24 @@ from matplotlib.figure import Figure
 
 from lti_motion.calibration import Calibration, speeds_from_log
 from lti_motion.model import MotionModel
+from lti_motion.persistence import atomic_write
 
 __all__ = [
     "plot_calibration",
     "plot_order_selection",
     "plot_sequence",
     "plot_step_responses",
+    "save_figure",
 ]
+
+
+def save_figure(fig: Figure, path: Path, *, dpi: int = 110, tight: bool = False) -> Path:
+    """Write ``fig`` as a PNG at ``path``, whole or not at all
+    (:func:`~lti_motion.persistence.atomic_write`: Ctrl-C or a full disk leaves no
+    truncated image); ``tight`` crops to the drawn content (a legend outside the axes)."""
+    with atomic_write(path) as f:
+        fig.savefig(f, dpi=dpi, format="png", **({"bbox_inches": "tight"} if tight else {}))
+    return path
 
 
 def plot_step_responses(fir: MotionModel, path: Path) -> None:
@@ -44,7 +55,7 @@ def plot_step_responses(fir: MotionModel, path: Path) -> None:
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
 
 
 def plot_order_selection(arx: MotionModel, path: Path) -> None:
@@ -65,7 +76,7 @@ def plot_order_selection(arx: MotionModel, path: Path) -> None:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))   # beside the curves
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    save_figure(fig, path, tight=True)
 
 
 def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> None:
@@ -86,7 +97,7 @@ def plot_sequence(cal: Calibration, path: Path, *, seconds: float = 20.0) -> Non
     axes[2].set(ylabel="w [rad/s]", xlabel="time [s]")
     axes[0].set_title("Calibration sequence: random held normal commands, encoder speeds")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
 
 
 def plot_calibration(cal: Calibration, out_dir: Path) -> list[Path]:

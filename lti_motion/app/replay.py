@@ -1,5 +1,4 @@
 """``lti-motion replay``: the estimators on a recorded log or a data set robot.
-from fusion.ekf.ekf_options import EKFOptions
 
 A *source* is what a robot reported, frame by frame: the wheel commands of
 each sensor period, the raw encoder counts (logs only), landmark sightings
@@ -28,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -51,11 +50,13 @@ from lti_motion.intrinsics import OdometryIntrinsics
 from lti_motion.kinematics import body_from_wheel, integrate_poses, wheel_from_body
 from lti_motion.metrics import ate_stats, rpe
 from lti_motion.model import MotionModel
+from lti_motion.persistence import atomic_write
 from lti_motion.recordings import tick_deltas, write_tum
 
 __all__ = [
     "ESTIMATORS",
     "MRCLAM_LANDMARK_NOISE",
+    "OUTPUT_NAMES",
     "ReplayResult",
     "ReplaySource",
     "estimate",
@@ -67,6 +68,7 @@ __all__ = [
     "source_from_log",
     "source_from_mrclam",
     "twist_counts",
+    "write_outputs",
 ]
 
 
@@ -432,23 +434,85 @@ def run_replay(source_path: str | os.PathLike | ReplaySource, model: MotionModel
                      f"see docs/ekf.md, Bounds and resets")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files = [write_tum(out / f"{name}.tum", src.t_s, p) for name, p in poses.items()]
-    if src.has_truth:
-        ok = np.all(np.isfinite(src.truth), axis=1)
-        files.append(write_tum(out / "groundtruth.tum", src.t_s[ok], src.truth[ok]))
     doc = {"source": src.name, "frames": len(src), "dt_s": src.dt_s,
            "has_truth": src.has_truth, "metrics": metrics}
-    (out / "metrics.json").write_text(json.dumps(_plain(doc), indent=2) + "\n")
-    files.append(out / "metrics.json")
-    files.append(plot_trajectories(out / "trajectories.png", src, poses))
+    writers: dict[str, Callable[[Path], object]] = {
+        f"{name}.tum": (lambda path, p=p: write_tum(path, src.t_s, p))
+        for name, p in poses.items()}
     if src.has_truth:
-        files.append(plot_errors(out / "errors.png", src, poses))
+        ok = np.all(np.isfinite(src.truth), axis=1)
+        writers["groundtruth.tum"] = lambda path: write_tum(path, src.t_s[ok], src.truth[ok])
+    writers["metrics.json"] = lambda path: _write_text(path, json.dumps(_plain(doc), indent=2)
+                                                       + "\n")
+    writers["trajectories.png"] = lambda path: plot_trajectories(path, src, poses)
+    if src.has_truth:
+        writers["errors.png"] = lambda path: plot_errors(path, src, poses)
+    files = write_outputs(out, writers)
     print_fn(f"wrote {len(files)} files to {out}/: " + ", ".join(f.name for f in files))
     if files and src.has_truth:
         print_fn(f"compare with evo: evo_ape tum {out / 'groundtruth.tum'} "
                  f"{out / names[-1]}.tum --plot")
     return ReplayResult(source=src, poses=poses, metrics=metrics, files=files, pose_covs=covs,
                         speeds=speeds)
+
+
+#: Every file name ``replay`` writes into its output folder: a previous run's are removed
+#: before a run writes its own, so the folder holds only this run's (``docs/replay.md``).
+OUTPUT_NAMES = (*(f"{name}.tum" for name in ESTIMATORS), "groundtruth.tum", "metrics.json",
+                "trajectories.png", "errors.png")
+
+
+def write_outputs(out: Path, writers: Mapping[str, Callable[[Path], object]]) -> list[Path]:
+    """Write one run's files into ``out``: all of them, or none and the folder cleared.
+
+    First every file of :data:`OUTPUT_NAMES` a previous run left is removed (another
+    source's ``ekf_landmarks.tum`` would otherwise sit beside this run's files and be read
+    by ``evo_traj tum out/*.tum``); then each writer writes its file, atomically
+    (:func:`~lti_motion.persistence.atomic_write`). If one fails (a full disk, Ctrl-C),
+    the files written so far are removed too: a run leaves all its files or none, and
+    never a truncated one.
+
+    Parameters
+    ----------
+    out : Path
+        The output folder (exists).
+    writers : mapping of str to callable
+        File name (one of :data:`OUTPUT_NAMES`) -> a function writing that file,
+        atomically, given its path.
+
+    Returns
+    -------
+    list of Path
+        The files written, in the writers' order.
+
+    Raises
+    ------
+    OSError
+        Naming the file that could not be written, and why.
+    """
+    for name in OUTPUT_NAMES:
+        (out / name).unlink(missing_ok=True)
+    written: list[Path] = []
+    try:
+        for name, write in writers.items():
+            path = out / name
+            try:
+                write(path)
+            except OSError as exc:
+                raise OSError(f"could not write {path}: {exc.strerror or exc}; nothing of "
+                              f"this run was kept in {out}") from exc
+            written.append(path)
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    return written
+
+
+def _write_text(path: Path, text: str) -> Path:
+    with atomic_write(path, text=True) as f:
+        f.write(text)
+    return path
 
 
 def _plain(value: object) -> object:

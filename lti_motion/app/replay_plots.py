@@ -13,6 +13,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from lti_motion.app.plots import save_figure
+
 if TYPE_CHECKING:
     from lti_motion.app.replay_sources import ReplaySource
 
@@ -64,5 +66,4 @@ def _finish(fig: Figure, ax: Axes, path: Path) -> Path:
     ax.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    return path
+    return save_figure(fig, path, dpi=100)

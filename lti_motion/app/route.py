@@ -315,7 +315,7 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
                 reach_m: float = 0.03, max_s: float = 150.0, faults: Sequence = (),
                 landmarks: LandmarkMap | None = None, landmark_noise: LandmarkNoise | None = None,
                 landmark_rate_hz: float = 2.0,
-                progress: Callable[[int, int], None] | None = None) -> RouteResult:
+                progress: Callable[[float, int, int], None] | None = None) -> RouteResult:
     """Drive the closed route once per seed, all robots in lock step.
 
     The follower per robot: *stop* (0.4 s at rest), *turn* in place until the
@@ -323,6 +323,10 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
     distance to the checkpoint is below ``reach_m``; then the next checkpoint. At
     the last checkpoint the robot stops for good. ``floor`` defaults to the robot's
     (:attr:`~drivers.sim.RobotParams.floor`); the robot's own faults happen too.
+    ``progress``, if given, is called every 200 periods and at the end as
+    ``progress(t_s, home, n)``: the route time driven [s] (at most ``max_s``), the
+    robots home and the robots (an estimator that is slow per step, the iSAM2
+    smoother, takes minutes of wall time for the route).
     """
     n = len(seeds)
     dt = params.period_s
@@ -368,9 +372,11 @@ def drive_route(params: RobotParams, estimator: Estimator, *, seeds: Sequence[in
             hold = np.where(turned | arrived, round(0.4 / dt), hold)
             phase = np.where(turned | arrived, 0, phase)
         if progress is not None and k % 200 == 0:
-            progress(int((phase == 3).sum()), n)
+            progress((k + 1) * dt, int((phase == 3).sum()), n)
         if (phase == 3).all():
             break
+    if progress is not None:
+        progress(len(true_log) * dt, int((phase == 3).sum()), n)
     true = np.stack(true_log, axis=1)
     est_all = np.stack(est_log, axis=1)
     offset = np.linalg.norm(true[:, -1, :2] - ROUTE_M[0], axis=1)

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from lti_motion.exceptions import NonFiniteError, ShapeError
+from lti_motion.persistence import atomic_write
 
 __all__ = ["TUM_HEADER", "poses_from_tum", "read_tum", "tum_rows", "write_tum"]
 
@@ -110,12 +111,20 @@ def write_tum(path: str | os.PathLike, t_s: np.ndarray, poses: np.ndarray) -> Pa
     Returns
     -------
     Path
-        The file written.
+        The file written, whole or not at all (:func:`~lti_motion.persistence.atomic_write`:
+        a failed write, a full disk or Ctrl-C, leaves the previous file, if any, and no
+        truncated one).
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
     """
     rows = tum_rows(t_s, poses)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savetxt(path, rows, fmt=["%.6f"] + ["%.9g"] * 7, header=TUM_HEADER, comments="# ")
+    with atomic_write(path, text=True) as f:
+        np.savetxt(f, rows, fmt=["%.6f"] + ["%.9g"] * 7, header=TUM_HEADER, comments="# ")
     return path
 
 

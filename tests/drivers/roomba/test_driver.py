@@ -223,12 +223,16 @@ def test_stream_stall_raises_and_stops_the_wheels(rng):
 
 def test_a_gap_shorter_than_the_wall_floor_is_no_stall_at_a_high_clock_rate():
     """Issue 15 item 6: at 10x the default 5 periods are 7.5 ms of wall time; a 40 ms gap
-    (a loaded host, or the virtual Roomba's thread descheduled) stopped the drive."""
+    (a loaded host, or the virtual Roomba's thread descheduled) stopped the drive. The
+    emulator's stall is found in the timestamps with a tolerance given (on a
+    pseudo-terminal the default counts frames: test_pty_clock.py); 0.2 s at 10x is
+    20 ms of wall time."""
     with VirtualRoomba(seed=2,
                        options=VirtualRoombaOptions(speed=10.0, stall_at_s=0.6,
                                                     stall_duration_s=0.4)) as vr:
         with Roomba(vr.device_path,
-                    options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0)) as robot:
+                    options=RoombaOptions(clock_rate=10.0, open_timeout_s=3.0,
+                                          latency_tolerance_s=0.2)) as robot:
             log = run_commands(robot, np.full((100, 2), 0.1))
             c = robot.counters
     assert robot.options.stall_periods == 5 and len(log) == 100 and c.stalls == 0

@@ -5,6 +5,7 @@ runs on the simulator are in ``test_ekf_montecarlo.py``.
 """
 import dataclasses
 import math
+import re
 
 import numba
 import numpy as np
@@ -614,3 +615,21 @@ def test_counters_of_any_width_wrap_where_they_wrap(model, rng, bits):
 def test_counter_width_out_of_range_is_refused(model):
     with pytest.raises(FilterOptionError, match=r"counter_bits must be an int in 8\.\.64"):
         ModelEKF(model, options=EKFOptions(counter_bits=7))
+
+
+@pytest.mark.parametrize("history", [-1, 2.5, None])
+def test_a_history_that_is_not_a_count_is_refused(history):
+    with pytest.raises(FilterOptionError, match=r"history must be an int of 0 or more .*"
+                                                rf"got {re.escape(repr(history))}"):
+        EKFOptions(history=history)
+
+
+def test_a_model_files_path_is_refused_with_how_to_load_it(tmp_path):
+    from fusion.exceptions import NotAModelError
+
+    path = str(tmp_path / "model_arx.json")
+    with pytest.raises(NotAModelError, match=r"got a str .*MotionModel\.load") as err:
+        ModelEKF(path)
+    assert isinstance(err.value, TypeError) and "\n" not in str(err.value)
+    with pytest.raises(NotAModelError, match=r"got a dict$"):
+        ModelEKF({"na": 2})

@@ -40,3 +40,24 @@ def test_fit_nominal_rejects_bad_input(model):
         fit_nominal(model, [(np.zeros((10, 2)), np.zeros((11, 2)))], gate_factor=0.5)
 
 
+
+
+def test_fit_nominal_reports_each_drive_and_the_null_fit(model, caplog):
+    import logging
+
+    from drivers.sim.config import Room
+    from drivers.sim.simulator import Simulator
+    from lti_motion.app.monitor_setup import monitor_route
+
+    drives = []
+    for seed in (1, 2):
+        sim = Simulator("create2", seed=seed, room=Room.empty(), initial_pose=(0.0, 0.0, 0.0))
+        log = sim.run(monitor_route(40.0, dt_s=sim.dt_s, wheel_base_m=model.wheel_base_m,
+                                    rng=np.random.default_rng(seed)))
+        drives.append((log.cmd_m_s[1:], np.unwrap(log.ticks, period=65536, axis=0)))
+    calls = []
+    with caplog.at_level(logging.INFO, logger="fusion.monitoring.phase_one"):
+        fit_nominal(model, drives, progress=lambda *a: calls.append(a))
+    assert calls == [("encoder NIS", 1, 2), ("encoder NIS", 2, 2), ("dynamics null", 0, 1),
+                     ("dynamics null", 1, 1)]
+    assert "dynamics null fitted in" in caplog.text

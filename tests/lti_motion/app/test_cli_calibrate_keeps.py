@@ -161,3 +161,52 @@ def test_resume_with_logs_of_another_plan_names_the_mismatch(tmp_path, capsys, b
                  bad]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert "the recorded excitation has" in line and "this plan drives" in line
+
+
+def test_a_drive_that_fails_its_analysis_is_set_aside_and_resume_drives_it_again(
+        tmp_path, capsys, monkeypatch):
+    import lti_motion.calibration.manoeuvres as manoeuvres
+    from drivers.sim.simulator import Simulator
+    from lti_motion.exceptions import CalibrationError
+
+    def no_period(*args, **kwargs):           # what a rotation cut short by a busy host gives
+        raise CalibrationError("no autocorrelation peak reaches 0.5 (best -0.14)")
+
+    out = tmp_path / "cal"
+    argv = ["calibrate", "--sim", "create2", "--excitation-s", "20", "--out", str(out)]
+    with monkeypatch.context() as m:
+        m.setattr(manoeuvres, "rotation_period_ticks", no_period)
+        assert main(argv) == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert "no autocorrelation peak" in line
+    assert "the rotation drive failed its analysis and was set aside as " \
+           "log_rotation.failed.npz (--resume drives it again)" in line
+    assert "no manoeuvre was complete, nothing kept" in line
+    assert (out / "log_rotation.failed.npz").is_file() and not (out / "log_rotation.npz").exists()
+
+    run, calls = Simulator.run, []
+    monkeypatch.setattr(Simulator, "run", lambda self, c: calls.append(len(c)) or run(self, c))
+    assert main([*argv, "--resume", "--accept-unhealthy"]) == 0
+    printed = capsys.readouterr().out
+    assert "resuming" not in printed and "kept the rotation drive" in printed
+    assert len(calls) == 3 and (out / "model_arx.json").is_file()
+
+
+def test_a_link_that_dies_in_the_steps_sets_no_drive_aside(tmp_path, capsys, monkeypatch):
+    from drivers.exceptions import PortError
+    from drivers.sim.simulator import Simulator
+
+    run, calls = Simulator.run, []
+
+    def link_dies_in_the_steps(self, cmd_m_s):
+        calls.append(len(cmd_m_s))
+        if len(calls) == 2:
+            raise PortError("read from /dev/ttyUSB0 failed: [Errno 5] Input/output error")
+        return run(self, cmd_m_s)
+
+    monkeypatch.setattr(Simulator, "run", link_dies_in_the_steps)
+    out = tmp_path / "cal"
+    assert main(["calibrate", "--sim", "create2", "--excitation-s", "20",
+                 "--out", str(out)]) == 2
+    assert "set aside" not in capsys.readouterr().err
+    assert (out / "log_rotation.npz").is_file() and not list(out.glob("*.failed.npz"))
